@@ -1,0 +1,55 @@
+"""``dstenv bench NAME``: speed benchmarks (never timed unit tests).
+
+Each benchmark lives beside the code it measures as a function
+``run(args) -> dict`` in the module named in :data:`BENCHMARKS`, prints a table,
+and reports ratios against a reference run made in the same process, so the
+figures mean something on any machine.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+from pathlib import Path
+from typing import Any
+
+__all__ = ["BENCHMARKS", "register", "run_benchmark"]
+
+#: benchmark name -> (module with ``run(args)``, one-line description)
+BENCHMARKS: dict[str, tuple[str, str]] = {
+    "fusion": ("dstenv.dst.bench", "PerceptionGridFilter.update at 64/128/256 vs plain numpy"),
+    "world": ("dstenv.sim.bench", "world step + LIDAR sweep + grids + labels at 256x256"),
+    "env": ("dstenv.envs.bench", "DSTGrid-v0 steps/s vs highway-env OccupancyGrid"),
+    "data": ("dstenv.data.bench", "labelled frames per hour and bytes per frame on disk"),
+}
+
+
+def run_benchmark(name: str, args: argparse.Namespace) -> dict[str, Any]:
+    """Run one benchmark by name and return its result dict."""
+    if name not in BENCHMARKS:
+        raise ValueError(f"unknown benchmark {name!r}; choose from {', '.join(BENCHMARKS)}")
+    module = importlib.import_module(BENCHMARKS[name][0])
+    return module.run(args)
+
+
+def _cmd(args: argparse.Namespace) -> int:
+    names = list(BENCHMARKS) if args.name == "all" else [args.name]
+    results = {}
+    for name in names:
+        print(f"== bench {name}: {BENCHMARKS[name][1]}")
+        results[name] = run_benchmark(name, args)
+    if args.json:
+        Path(args.json).write_text(json.dumps(results, indent=2, default=float))
+        print(f"wrote {args.json}")
+    return 0
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``dstenv bench`` to the CLI."""
+    p = sub.add_parser("bench", help="run a speed benchmark", description=__doc__)
+    p.add_argument("name", choices=[*BENCHMARKS, "all"], help="which benchmark")
+    p.add_argument("--repeats", type=int, default=0, help="timed repetitions (0: automatic)")
+    p.add_argument("--quick", action="store_true", help="fewer repetitions, for a smoke run")
+    p.add_argument("--json", metavar="FILE", help="also write the results as JSON")
+    p.set_defaults(func=_cmd)

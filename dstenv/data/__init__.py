@@ -1,0 +1,40 @@
+"""Labelled data: HDF5 shards, generation, manifests and PyTorch datasets.
+
+* :mod:`dstenv.data.shards`: the shard format (documented there), ``ShardWriter``,
+  ``ShardReader``, ``ShardError``;
+* :mod:`dstenv.data.manifest`: ``manifest.json`` of a dataset directory;
+* :mod:`dstenv.data.sampling`: disjoint train/val/test map seeds, frame sampling;
+* :mod:`dstenv.data.generate`: ``dstenv generate`` (processes or Ray);
+* :mod:`dstenv.data.datasets`: ``ShardDataset`` and ``StreamingDataset`` (PyTorch).
+
+Names are imported lazily so that ``import dstenv.data`` does not import torch.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+__all__ = [
+    "ShardWriter", "ShardReader", "ShardError",
+    "ManifestError", "load_manifest", "write_manifest",
+    "GenerateSpec", "generate",
+    "ShardDataset", "StreamingDataset",
+]
+
+_WHERE = {
+    "ShardWriter": "shards", "ShardReader": "shards", "ShardError": "shards",
+    "ManifestError": "manifest", "load_manifest": "manifest", "write_manifest": "manifest",
+    "GenerateSpec": "generate", "generate": "generate",
+    "ShardDataset": "datasets", "StreamingDataset": "datasets",
+}
+
+
+def __getattr__(name: str) -> Any:
+    if name in _WHERE:
+        return getattr(importlib.import_module(f"dstenv.data.{_WHERE[name]}"), name)
+    raise AttributeError(f"module 'dstenv.data' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(__all__)

@@ -1,0 +1,224 @@
+"""PyTorch datasets: stored shards (:class:`ShardDataset`) and endless simulation
+(:class:`StreamingDataset`).
+
+Both yield ``{"x": (C, H, W) float32, "labels": (H, W) int64, "visible": (H, W) bool}``
+tensors. ``inputs`` selects ``x``:
+
+* ``"fcn10"``: the paper's FCN input, BetP at t then at t-1 (C = 10);
+* ``"pignistic"``: BetP at t (C = 5);
+* ``"masses"``: the raw DST masses (C = 32; shards generated with ``--masses``).
+
+Labels keep :data:`dstenv.frame.IGNORE_INDEX` (255) for excluded cells.
+"""
+
+from __future__ import annotations
+
+import bisect
+import os
+import warnings
+from collections.abc import Iterator, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from torch.utils.data import Dataset, IterableDataset, get_worker_info
+
+from dstenv.data.manifest import MANIFEST_NAME, load_manifest, scan_shards
+from dstenv.data.sampling import episode_seeds, iter_frames, scenario_config
+from dstenv.data.shards import ShardError, ShardReader
+from dstenv.frame import Frame
+
+__all__ = ["INPUTS", "ShardDataset", "StreamingDataset", "frame_to_sample"]
+
+#: ``inputs`` name -> shard datasets stacked into ``x``
+INPUTS: dict[str, tuple[str, ...]] = {
+    "fcn10": ("pignistic", "pignistic_prev"),
+    "pignistic": ("pignistic",),
+    "masses": ("masses",),
+}
+
+
+def _check_inputs(inputs: str) -> tuple[str, ...]:
+    if inputs not in INPUTS:
+        raise ValueError(f"unknown inputs {inputs!r}; choose from {', '.join(INPUTS)}")
+    return INPUTS[inputs]
+
+
+def _sample(arrays: Mapping[str, np.ndarray], names: Sequence[str]) -> dict[str, torch.Tensor]:
+    x = np.concatenate([np.asarray(arrays[n], dtype=np.float32) for n in names], axis=0)
+    return {
+        "x": torch.from_numpy(np.ascontiguousarray(x)),
+        "labels": torch.from_numpy(np.asarray(arrays["labels"], dtype=np.int64)),
+        "visible": torch.from_numpy(np.asarray(arrays["visible"], dtype=bool)),
+    }
+
+
+def frame_to_sample(frame: Frame, inputs: str = "fcn10") -> dict[str, torch.Tensor]:
+    """A :class:`Frame` as a training sample (see the module docstring)."""
+    names = _check_inputs(inputs)
+    if inputs == "masses" and frame.masses is None:
+        raise ValueError("inputs='masses' needs frames with masses (config frame.masses = true)")
+    return _sample({n: getattr(frame, n) for n in (*names, "labels", "visible")}, names)
+
+
+def _resolve_files(root_or_files: str | Path | Sequence[str | Path], split: str | None
+                   ) -> list[tuple[Path, int | None]]:
+    """Shard files (and frame counts when a manifest knows them) of a dataset."""
+    if isinstance(root_or_files, (str, Path)):
+        root = Path(root_or_files)
+        if root.is_file():
+            return [(root, None)]
+        if (root / MANIFEST_NAME).is_file():
+            m = load_manifest(root)
+            return [(root / e["file"], int(e["frames"])) for e in m["shards"]
+                    if split is None or e["split"] == split]
+        if not root.is_dir():
+            raise FileNotFoundError(f"{root}: no such dataset directory or shard file")
+        return [(p, None) for p in scan_shards(root)]
+    return [(Path(p), None) for p in root_or_files]
+
+
+class ShardDataset(Dataset):
+    """Map-style dataset over shard files (random access; safe with DataLoader workers).
+
+    Args:
+        root_or_files: a dataset directory (its ``manifest.json`` is checked when
+            present, else ``*.h5`` files are scanned), one shard file, or a list of files.
+        split: keep only shards of this split (``attrs["split"]``); ``None`` keeps all.
+        inputs: ``"fcn10"``, ``"pignistic"`` or ``"masses"`` (module docstring).
+        on_error: ``"raise"``: a corrupt or truncated shard raises
+            :class:`~dstenv.data.shards.ShardError` naming the file; ``"skip"``: it is
+            left out with a warning naming it (at construction, or at the first failed
+            read, when the next readable frame is returned instead).
+
+    Files are opened lazily in each process (h5py handles are never shared across a
+    fork), so ``DataLoader(num_workers=K)`` works with any start method.
+    """
+
+    def __init__(self, root_or_files: str | Path | Sequence[str | Path], split: str | None = None,
+                 inputs: str = "fcn10", on_error: str = "raise") -> None:
+        self.names = _check_inputs(inputs)
+        if on_error not in ("raise", "skip"):
+            raise ValueError(f"on_error must be 'raise' or 'skip', got {on_error!r}")
+        self.inputs, self.on_error, self.split = inputs, on_error, split
+        self.files: list[Path] = []
+        lengths: list[int] = []
+        for path, _ in _resolve_files(root_or_files, split):
+            try:
+                with ShardReader(path) as r:
+                    if split is not None and r.attrs.get("split") != split:
+                        continue
+                    if inputs == "masses" and not r.has_masses:
+                        raise ShardError(f"{path}: inputs='masses' but the shard has no masses "
+                                         "(generate with --masses)")
+                    n = len(r)
+            except ShardError as exc:
+                self._fail(exc)
+                continue
+            self.files.append(path)
+            lengths.append(n)
+        self._ends = np.cumsum(lengths).tolist()
+        self._bad: set[int] = set()
+        self._readers: dict[int, ShardReader] = {}
+        self._pid = os.getpid()
+
+    def _fail(self, exc: ShardError) -> None:
+        if self.on_error == "raise":
+            raise exc
+        warnings.warn(f"skipping corrupt shard: {exc}", RuntimeWarning, stacklevel=3)
+
+    def __len__(self) -> int:
+        return self._ends[-1] if self._ends else 0
+
+    def _reader(self, k: int) -> ShardReader:
+        if self._pid != os.getpid():  # forked into a worker: never reuse the parent's handles
+            self._readers, self._pid = {}, os.getpid()
+        if k not in self._readers:
+            self._readers[k] = ShardReader(self.files[k])
+        return self._readers[k]
+
+    def locate(self, index: int) -> tuple[Path, int]:
+        """``(shard file, frame index inside it)`` of a dataset index."""
+        if not 0 <= index < len(self):
+            raise IndexError(f"index {index} out of range for {len(self)} frames")
+        k = bisect.bisect_right(self._ends, index)
+        return self.files[k], index - (self._ends[k - 1] if k else 0)
+
+    def __getitem__(self, index: int) -> dict[str, torch.Tensor]:
+        for attempt in range(len(self)):
+            i = (index + attempt) % len(self)
+            k = bisect.bisect_right(self._ends, i)
+            if k in self._bad:
+                continue
+            local = i - (self._ends[k - 1] if k else 0)
+            try:
+                arrays = self._reader(k).get(local, (*self.names, "labels", "visible"))
+            except ShardError as exc:
+                self._fail(exc)
+                self._bad.add(k)
+                continue
+            return _sample(arrays, self.names)
+        raise ShardError(f"no readable frame left in {len(self.files)} shards")
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = dict(self.__dict__)
+        state["_readers"] = {}  # open h5py files do not pickle (spawned workers)
+        return state
+
+    def __del__(self) -> None:
+        for r in getattr(self, "_readers", {}).values():
+            try:
+                r.close()
+            except Exception:  # noqa: BLE001 - interpreter shutdown
+                pass
+
+
+class StreamingDataset(IterableDataset):
+    """Endless frames simulated inside each DataLoader worker: training without disk.
+
+    Args:
+        scenario: scenario name or ``.toml`` path, a config dict (overrides of
+            :func:`dstenv.pipeline.default_config`), or ``None`` for the defaults.
+        seed: base seed. Worker ``w`` of rank ``r`` at epoch ``e`` draws its episodes
+            from the stream ``(r, w, e)``, so workers never repeat each other.
+        split: episodes come only from this split's map seeds (default ``"train"``:
+            test maps stay unseen); ``None`` for any.
+        inputs: ``"fcn10"``, ``"pignistic"`` or ``"masses"``.
+        episode_length, stride, warmup: as in ``dstenv generate`` (steps of 0.1 s).
+        max_frames: stop each worker after this many frames (``None``: forever).
+        rank: process rank for distributed training.
+    """
+
+    def __init__(self, scenario: str | Path | Mapping[str, Any] | None = None, seed: int = 0, *,
+                 split: str | None = "train", inputs: str = "fcn10", episode_length: int = 200,
+                 stride: int = 10, warmup: int | None = None, max_frames: int | None = None,
+                 rank: int = 0) -> None:
+        super().__init__()
+        self.config = scenario_config(scenario)
+        self.names = _check_inputs(inputs)
+        if inputs == "masses":
+            self.config["frame"]["masses"] = True
+        self.inputs, self.seed, self.split, self.rank = inputs, int(seed), split, int(rank)
+        self.episode_length, self.stride = episode_length, stride
+        self.warmup = stride if warmup is None else warmup
+        self.max_frames = max_frames
+        self.epoch = 0
+        episode_seeds(self.seed, split, ())  # validates the split name early
+
+    def set_epoch(self, epoch: int) -> None:
+        """Use another episode stream for this epoch (like ``DistributedSampler``)."""
+        self.epoch = int(epoch)
+
+    def __iter__(self) -> Iterator[dict[str, torch.Tensor]]:
+        from dstenv.pipeline import Pipeline
+
+        info = get_worker_info()
+        worker = 0 if info is None else info.id
+        seeds = episode_seeds(self.seed, self.split, (self.rank, worker, self.epoch))
+        frames = iter_frames(lambda: Pipeline(self.config), seeds, self.episode_length,
+                             self.stride, self.warmup)
+        for n, frame in enumerate(frames):
+            if self.max_frames is not None and n >= self.max_frames:
+                return
+            yield frame_to_sample(frame, self.inputs)

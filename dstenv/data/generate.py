@@ -1,0 +1,320 @@
+"""``dstenv generate``: labelled frames from autopilot episodes, written as shards.
+
+The work is cut into shard tasks (:func:`plan`): shard ``k`` of split ``s`` holds
+``frames_per_shard`` frames of episodes whose seeds come from
+``episode_seeds(seed, s, (k,))`` (:mod:`dstenv.data.sampling`), so every shard
+depends only on its own task and the result is the same with 1 worker, K worker
+processes or a Ray cluster. Each task writes ``DIR/<split>/shard-<k>.h5`` atomically
+(:class:`~dstenv.data.shards.ShardWriter`); a rerun of the same command skips
+shards that already exist with the same settings (resume), and refuses to mix in
+shards made with other settings. ``DIR/manifest.json`` is written last.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import dataclasses
+import json
+import multiprocessing
+import queue as queue_mod
+import sys
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from itertools import islice
+from pathlib import Path
+from typing import Any
+
+from dstenv.data.manifest import MANIFEST_NAME, scan_shards, shard_entry, write_manifest
+from dstenv.data.sampling import SPLIT_BUCKETS, SPLITS, episode_seeds, frame_steps, iter_frames
+from dstenv.data.shards import FORMAT_VERSION, ShardError, ShardReader, ShardWriter
+
+__all__ = ["GenerateError", "GenerateSpec", "ShardTask", "plan", "write_shard", "generate"]
+
+
+class GenerateError(RuntimeError):
+    """Generation cannot proceed; the one-line message says why and what was kept."""
+
+
+@dataclass(frozen=True)
+class GenerateSpec:
+    """What to generate (everything that determines the shards' content).
+
+    Attributes:
+        config: full :func:`dstenv.pipeline.default_config`-shaped configuration.
+        frames: total frames over all splits.
+        seed: base seed; episode seeds derive from it (:mod:`dstenv.data.sampling`).
+        scenario: scenario name or file, recorded for provenance.
+        split: ``"auto"`` (80/10/10 train/val/test frames) or one split name.
+        frames_per_shard: frames per shard file (the last one of a split may be short).
+        episode_length: steps per episode (one step = one LIDAR period, 0.1 s).
+        stride: keep one frame every ``stride`` steps (10 = 1 s).
+        warmup: first kept step of an episode.
+        masses: also store the raw ``(32, H, W)`` masses.
+        quantize: probabilities as uint8 (error <= 1/510) instead of float32.
+        compression: ``"gzip"``, ``"lzf"`` or ``None``; ``compression_level`` for gzip.
+    """
+
+    config: Mapping[str, Any]
+    frames: int
+    seed: int = 0
+    scenario: str = "default"
+    split: str = "auto"
+    frames_per_shard: int = 256
+    episode_length: int = 200
+    stride: int = 10
+    warmup: int = 10
+    masses: bool = False
+    quantize: bool = True
+    compression: str | None = "gzip"
+    compression_level: int = 4
+
+    def __post_init__(self) -> None:
+        if self.frames < 1:
+            raise ValueError(f"frames must be >= 1, got {self.frames}")
+        if self.frames_per_shard < 1:
+            raise ValueError(f"frames per shard must be >= 1, got {self.frames_per_shard}")
+        if self.split != "auto" and self.split not in SPLITS:
+            raise ValueError(f"unknown split {self.split!r}; choose auto, {', '.join(SPLITS)}")
+        frame_steps(self.episode_length, self.stride, self.warmup)  # validates
+
+    def meta(self) -> dict[str, Any]:
+        """The settings as plain JSON data (without the config)."""
+        d = dataclasses.asdict(self)
+        d.pop("config")
+        return d
+
+
+@dataclass(frozen=True)
+class ShardTask:
+    """One shard to produce: ``file`` (relative to the output directory) and its frames."""
+
+    spec: GenerateSpec
+    split: str
+    index: int
+    frames: int
+    file: str = field(init=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "file", f"{self.split}/shard-{self.index:05d}.h5")
+
+    def describe(self) -> dict[str, Any]:
+        """The task as stored in the shard attribute ``task`` (compared on resume)."""
+        d = self.spec.meta()
+        d.pop("frames")
+        d.update(split=self.split, index=self.index, frames=self.frames,
+                 format_version=FORMAT_VERSION)
+        return d
+
+
+def split_frames(frames: int, split: str) -> dict[str, int]:
+    """Frames per split: all in ``split``, or by the seed-space shares for ``"auto"``."""
+    if split != "auto":
+        return {split: frames}
+    counts = {s: round(frames * (hi - lo) / 100) for s, (lo, hi) in SPLIT_BUCKETS.items()}
+    counts["train"] = frames - counts["val"] - counts["test"]
+    return {s: n for s, n in counts.items() if n > 0}
+
+
+def plan(spec: GenerateSpec) -> list[ShardTask]:
+    """All shard tasks of a generation, in a fixed order."""
+    tasks = []
+    for split, n in split_frames(spec.frames, spec.split).items():
+        for k, start in enumerate(range(0, n, spec.frames_per_shard)):
+            tasks.append(ShardTask(spec, split, k, min(spec.frames_per_shard, n - start)))
+    return tasks
+
+
+def _pipeline_config(spec: GenerateSpec) -> dict[str, Any]:
+    config = json.loads(json.dumps(spec.config))
+    if spec.masses:
+        config.setdefault("frame", {})["masses"] = True
+    return config
+
+
+def write_shard(task: ShardTask, out: str | Path,
+                progress: Callable[[int], None] | None = None) -> dict[str, Any]:
+    """Simulate the task's frames and write its shard atomically.
+
+    Returns:
+        the shard's manifest entry (:func:`dstenv.data.manifest.shard_entry`).
+    """
+    from dstenv.pipeline import Pipeline
+
+    spec, out = task.spec, Path(out)
+    config = _pipeline_config(spec)
+    attrs = {"config": config, "seed": spec.seed, "split": task.split, "shard_index": task.index,
+             "scenario": spec.scenario, "task": task.describe()}
+    frames = iter_frames(lambda: Pipeline(config), episode_seeds(spec.seed, task.split,
+                         (task.index,)), spec.episode_length, spec.stride, spec.warmup)
+    with ShardWriter(out / task.file, attrs, quantize=spec.quantize, masses=spec.masses,
+                     compression=spec.compression,
+                     compression_opts=spec.compression_level) as writer:
+        for frame in islice(frames, task.frames):
+            writer.add(frame)
+            if progress is not None:
+                progress(1)
+    return shard_entry(out, out / task.file)
+
+
+# -- local worker processes ------------------------------------------------------------
+
+_QUEUE: Any = None
+
+
+def _init_worker(q: Any) -> None:
+    global _QUEUE
+    _QUEUE = q
+
+
+def _worker_task(task: ShardTask, out: str) -> dict[str, Any]:
+    return write_shard(task, out, progress=_QUEUE.put if _QUEUE is not None else None)
+
+
+def _existing(out: Path, task: ShardTask) -> dict[str, Any] | None:
+    """Manifest entry of a finished shard for ``task``, or None if it must be (re)made."""
+    path = out / task.file
+    if not path.exists():
+        return None
+    try:
+        with ShardReader(path) as r:
+            old_task, old_config = r.attrs.get("task"), r.attrs.get("config")
+    except ShardError as exc:
+        keep = path.with_name(path.name + ".corrupt")
+        path.replace(keep)
+        print(f"dstenv generate: {exc}; kept as {keep.name}, regenerating", file=sys.stderr)
+        return None
+    new_task = task.describe()
+    if old_config != _pipeline_config(task.spec):
+        raise GenerateError(f"{path} was made with another configuration; use another --out "
+                            "or remove the old shards")
+    if old_task != new_task:
+        diff = sorted(k for k in set(new_task) | set(old_task or {})
+                      if (old_task or {}).get(k) != new_task.get(k))
+        if diff == ["frames"]:
+            return None  # same episode stream, other length: regenerate this shard
+        k = diff[0]
+        raise GenerateError(f"{path} was made with other settings ({k}: "
+                            f"{(old_task or {}).get(k)!r}, now {new_task.get(k)!r}); use another "
+                            "--out or remove the old shards")
+    return shard_entry(out, path)
+
+
+def _prepare(out: Path, tasks: list[ShardTask]
+             ) -> tuple[dict[str, dict[str, Any]], list[ShardTask]]:
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        probe = out / ".dstenv-write-test.partial"
+        probe.write_bytes(b"ok")
+        probe.unlink()
+    except OSError as exc:
+        raise GenerateError(f"output directory {out} is not writable: "
+                            f"{exc.strerror or exc}") from None
+    planned = {(out / t.file).resolve() for t in tasks}
+    strays = [p for p in scan_shards(out) if p.resolve() not in planned]
+    if strays:
+        raise GenerateError(f"{out} holds shards that are not part of this run "
+                            f"({strays[0].relative_to(out)}...); use another --out")
+    done, todo = {}, []
+    for task in tasks:
+        entry = _existing(out, task)
+        if entry is None:
+            todo.append(task)
+        else:
+            done[task.file] = entry
+    return done, todo
+
+
+def generate(spec: GenerateSpec, out: str | Path, workers: int = 1, ray_address: str | None = None,
+             progress: bool = True) -> dict[str, Any]:
+    """Generate (or resume) a dataset directory and write its manifest.
+
+    Args:
+        spec: what to generate.
+        out: output directory (created if needed).
+        workers: local worker processes (spawned); with Ray, CPUs of a local Ray.
+        ray_address: ``None`` for no Ray, ``"local"`` to start a local Ray, else the
+            address of a running cluster (``"auto"``, ``"ray://head:10001"``...).
+        progress: show a tqdm bar (frames, frames/s) on stderr.
+
+    Returns:
+        the manifest.
+
+    Raises:
+        GenerateError: unwritable output, settings clash with existing shards, or a
+            failed shard (finished shards are kept; rerun to resume).
+    """
+    from tqdm import tqdm
+
+    out = Path(out)
+    if workers < 1:
+        raise ValueError(f"workers must be >= 1, got {workers}")
+    tasks = plan(spec)
+    done, todo = _prepare(out, tasks)
+    bar = tqdm(total=spec.frames, unit="frame", disable=not progress, dynamic_ncols=True,
+               desc="generate", smoothing=0.1)
+    bar.update(sum(e["frames"] for e in done.values()))
+    try:
+        if ray_address is not None:
+            from dstenv.data.ray_backend import run_ray
+
+            results = run_ray(todo, out, ray_address, workers, bar.update)
+        elif workers == 1 or len(todo) <= 1:
+            results = _run_serial(todo, out, bar.update)
+        else:
+            results = _run_pool(todo, out, workers, bar.update)
+    except GenerateError:
+        raise
+    except (OSError, ShardError) as exc:
+        n = len(scan_shards(out))
+        raise GenerateError(f"{exc}; {n} finished shards kept in {out}, rerun the same command "
+                            "to resume") from None
+    finally:
+        bar.close()
+    done.update(results)
+    return write_manifest(out, [done[t.file] for t in tasks], meta={"generate": spec.meta(),
+                                                                  "config": spec.config})
+
+
+def _run_serial(todo: list[ShardTask], out: Path, update: Callable[[int], None]
+                ) -> dict[str, dict[str, Any]]:
+    return {t.file: write_shard(t, out, update) for t in todo}
+
+
+def _run_pool(todo: list[ShardTask], out: Path, workers: int, update: Callable[[int], None]
+              ) -> dict[str, dict[str, Any]]:
+    ctx = multiprocessing.get_context("spawn")
+    q = ctx.Queue()
+    results: dict[str, dict[str, Any]] = {}
+
+    def drain() -> None:
+        n = 0
+        try:
+            while True:
+                n += q.get_nowait()
+        except queue_mod.Empty:
+            pass
+        if n:
+            update(n)
+
+    with cf.ProcessPoolExecutor(min(workers, len(todo)), mp_context=ctx,
+                                initializer=_init_worker, initargs=(q,)) as ex:
+        pending = {ex.submit(_worker_task, t, str(out)): t for t in todo}
+        try:
+            while pending:
+                finished, _ = cf.wait(pending, timeout=0.25, return_when=cf.FIRST_COMPLETED)
+                drain()
+                for fut in finished:
+                    task = pending.pop(fut)
+                    results[task.file] = fut.result()
+        except BaseException:
+            for fut in pending:
+                fut.cancel()
+            raise
+    drain()
+    return results
+
+
+def manifest_path(out: str | Path) -> Path:
+    """Where :func:`generate` writes the manifest."""
+    return Path(out) / MANIFEST_NAME
+

@@ -1,0 +1,217 @@
+"""``manifest.json``: the table of contents of a shard directory.
+
+Layout of a dataset directory (written by ``dstenv generate`` or the KITTI
+converter)::
+
+    DIR/manifest.json
+    DIR/train/shard-00000.h5 ...   DIR/val/...   DIR/test/...
+
+The manifest (JSON, written atomically) holds ``format = "dstenv-manifest"``,
+``format_version``, ``dstenv_version``, ``classes``, ``grid_shape``, ``cell_size``,
+``meta`` (the producer's settings, e.g. the generate command), ``shards`` (one
+entry per file: ``file`` relative to DIR, ``split``, ``frames``, ``bytes``,
+``sha256``, ``class_counts``), ``splits`` (per split: ``shards``, ``frames``,
+``class_counts``), ``frames``, ``class_counts`` and ``class_frequencies`` (share of
+labelled cells per class). :func:`load_manifest` checks it against the files and
+raises a one-line :class:`ManifestError` on any mismatch.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from dstenv import __version__
+from dstenv.data.shards import ShardReader, class_names
+
+__all__ = [
+    "MANIFEST_NAME",
+    "ManifestError",
+    "scan_shards",
+    "shard_entry",
+    "build_manifest",
+    "write_manifest",
+    "load_manifest",
+    "atomic_write_text",
+]
+
+MANIFEST_NAME = "manifest.json"
+MANIFEST_FORMAT = "dstenv-manifest"
+MANIFEST_VERSION = 1
+#: split name of shards that carry no ``split`` attribute
+UNSPLIT = "unsplit"
+
+
+class ManifestError(ValueError):
+    """A manifest is unreadable or does not match the shard files it lists."""
+
+
+def atomic_write_text(path: str | Path, text: str) -> None:
+    """Write ``text`` to ``path`` via a temporary file, fsync and rename."""
+    path = Path(path)
+    tmp = path.with_name(path.name + ".partial")
+    try:
+        with open(tmp, "w", encoding="utf-8") as fh:
+            fh.write(text)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def scan_shards(root: str | Path) -> list[Path]:
+    """Final shard files (``*.h5``) under ``root``, sorted; ``.partial`` files excluded."""
+    return sorted(p for p in Path(root).rglob("*.h5") if p.is_file())
+
+
+def file_sha256(path: str | Path) -> str:
+    """Hex SHA-256 of a file's bytes."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def shard_entry(root: str | Path, path: str | Path, sha256: str | None = None) -> dict[str, Any]:
+    """The manifest entry of one shard (opens and validates it).
+
+    Raises:
+        ShardError: the shard is unreadable.
+    """
+    path = Path(path)
+    with ShardReader(path) as r:
+        counts = r.class_counts()
+        entry = {
+            "file": path.relative_to(root).as_posix(),
+            "split": str(r.attrs.get("split", UNSPLIT)),
+            "frames": len(r),
+            "bytes": path.stat().st_size,
+            "sha256": sha256 or file_sha256(path),
+            "class_counts": [int(c) for c in counts],
+            "grid_shape": list(r.grid_shape),
+            "cell_size": r.cell_size,
+        }
+    return entry
+
+
+def build_manifest(entries: Iterable[Mapping[str, Any]], meta: Mapping[str, Any] | None = None
+                   ) -> dict[str, Any]:
+    """Assemble a manifest from shard entries (see :func:`shard_entry`).
+
+    Raises:
+        ManifestError: no shards, or shards of different grid shapes / cell sizes.
+    """
+    shards = sorted((dict(e) for e in entries), key=lambda e: e["file"])
+    if not shards:
+        raise ManifestError("no shards to list in a manifest")
+    shapes = {(tuple(e["grid_shape"]), float(e["cell_size"])) for e in shards}
+    if len(shapes) > 1:
+        raise ManifestError(f"shards mix grid shapes/cell sizes {sorted(shapes)}; "
+                            "keep one geometry per dataset directory")
+    (shape, cell_size), = shapes
+    names = class_names()
+    splits: dict[str, dict[str, Any]] = {}
+    total = np.zeros(len(names), dtype=np.int64)
+    for e in shards:
+        s = splits.setdefault(e["split"], {"shards": 0, "frames": 0,
+                                           "class_counts": [0] * len(names)})
+        s["shards"] += 1
+        s["frames"] += int(e["frames"])
+        s["class_counts"] = [a + int(b) for a, b in zip(s["class_counts"], e["class_counts"])]
+        total += np.asarray(e["class_counts"], dtype=np.int64)
+    labelled = max(int(total.sum()), 1)
+    return {
+        "format": MANIFEST_FORMAT,
+        "format_version": MANIFEST_VERSION,
+        "dstenv_version": __version__,
+        "classes": list(names),
+        "grid_shape": list(shape),
+        "cell_size": cell_size,
+        "meta": dict(meta or {}),
+        "frames": sum(int(e["frames"]) for e in shards),
+        "class_counts": [int(c) for c in total],
+        "class_frequencies": {n: float(c) / labelled for n, c in zip(names, total)},
+        "splits": dict(sorted(splits.items())),
+        "shards": shards,
+    }
+
+
+def write_manifest(root: str | Path, entries: Iterable[Mapping[str, Any]] | None = None,
+                   meta: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """Write ``root/manifest.json`` atomically and return it.
+
+    Args:
+        root: the dataset directory.
+        entries: shard entries; ``None`` scans ``root`` and opens every shard.
+        meta: producer settings to record (JSON-serialisable).
+    """
+    root = Path(root)
+    if entries is None:
+        entries = [shard_entry(root, p) for p in scan_shards(root)]
+    manifest = build_manifest(entries, meta)
+    atomic_write_text(root / MANIFEST_NAME, json.dumps(manifest, indent=1, sort_keys=True) + "\n")
+    return manifest
+
+
+def load_manifest(root: str | Path, verify: str = "size") -> dict[str, Any]:
+    """Read ``root/manifest.json`` and check it against the shard files.
+
+    Args:
+        root: the dataset directory.
+        verify: ``"none"`` (parse only), ``"size"`` (every listed file exists with
+            the listed byte size, no unlisted shard), ``"frames"`` (also open each
+            shard and compare frame counts) or ``"hash"`` (also compare SHA-256).
+
+    Raises:
+        ManifestError: one line naming the manifest and the first mismatch.
+    """
+    root = Path(root)
+    path = root / MANIFEST_NAME
+    levels = ("none", "size", "frames", "hash")
+    if verify not in levels:
+        raise ValueError(f"verify must be one of {', '.join(levels)}, got {verify!r}")
+    try:
+        manifest = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise ManifestError(f"{path}: no manifest (not a dataset directory?)") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ManifestError(f"{path}: unreadable manifest: {exc}") from None
+    if not isinstance(manifest, dict) or manifest.get("format") != MANIFEST_FORMAT:
+        raise ManifestError(f"{path}: not a dstenv manifest")
+    if manifest.get("format_version") != MANIFEST_VERSION:
+        raise ManifestError(f"{path}: manifest format_version {manifest.get('format_version')} "
+                            f"not supported (this dstenv reads {MANIFEST_VERSION})")
+    if verify == "none":
+        return manifest
+    hint = "the files changed after the manifest was written; rerun the command that made them"
+    listed = set()
+    for e in manifest.get("shards", []):
+        f = root / e["file"]
+        listed.add(f.resolve())
+        if not f.is_file():
+            raise ManifestError(f"{path}: lists {e['file']} but that file is missing ({hint})")
+        size = f.stat().st_size
+        if size != e["bytes"]:
+            raise ManifestError(f"{path}: {e['file']} is {size} bytes on disk, the manifest says "
+                                f"{e['bytes']} ({hint})")
+        if verify in ("frames", "hash"):
+            with ShardReader(f) as r:
+                if len(r) != e["frames"]:
+                    raise ManifestError(f"{path}: {e['file']} holds {len(r)} frames, the "
+                                        f"manifest says {e['frames']} ({hint})")
+        if verify == "hash" and file_sha256(f) != e["sha256"]:
+            raise ManifestError(f"{path}: {e['file']} content differs from its SHA-256 ({hint})")
+    for f in scan_shards(root):
+        if f.resolve() not in listed:
+            raise ManifestError(f"{path}: shard {f.relative_to(root).as_posix()} is not listed "
+                                f"({hint})")
+    return manifest

@@ -1,0 +1,97 @@
+"""Shard tasks as Ray tasks (``dstenv generate --ray [ADDRESS]``; extra ``dstenv[ray]``).
+
+Each Ray task simulates one shard into a local temporary directory on whichever node
+runs it and returns the file's bytes; the driver writes them under the final name
+atomically and checks their SHA-256. Nodes therefore need no shared file system,
+only the same dstenv installed (or a ``runtime_env``). With ``ADDRESS`` omitted a
+local Ray is started with ``--workers`` CPUs.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from dstenv.data.shards import partial_path
+
+__all__ = ["run_ray", "shard_bytes"]
+
+
+def shard_bytes(task: Any) -> tuple[bytes, dict[str, Any]]:
+    """Run one :class:`~dstenv.data.generate.ShardTask` in a scratch directory.
+
+    Returns:
+        the shard file's bytes and its manifest entry.
+    """
+    from dstenv.data.generate import write_shard
+
+    with tempfile.TemporaryDirectory(prefix="dstenv-shard-") as tmp:
+        entry = write_shard(task, tmp)
+        return (Path(tmp) / task.file).read_bytes(), entry
+
+
+def _write_atomic(path: Path, data: bytes) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = partial_path(path)
+    try:
+        with open(tmp, "wb") as fh:
+            fh.write(data)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def run_ray(todo: list[Any], out: Path, address: str, workers: int,
+            update: Callable[[int], None]) -> dict[str, dict[str, Any]]:
+    """Run shard tasks on Ray and write their files under ``out``.
+
+    Args:
+        todo: :class:`~dstenv.data.generate.ShardTask` objects.
+        out: output directory on the driver.
+        address: ``"local"`` (start a local Ray with ``workers`` CPUs) or a cluster
+            address passed to ``ray.init`` (``"auto"``, ``"ray://host:10001"``).
+        workers: CPUs of a local Ray (ignored for a cluster).
+        update: progress callback, called with the frames of each finished shard.
+
+    Returns:
+        ``{task.file: manifest entry}``.
+    """
+    try:
+        import ray
+    except ImportError:
+        from dstenv.data.generate import GenerateError
+
+        raise GenerateError("--ray needs Ray: pip install 'dstenv[ray]'") from None
+    if not todo:
+        return {}
+    started = not ray.is_initialized()
+    if started:
+        kwargs: dict[str, Any] = {"include_dashboard": False, "log_to_driver": True}
+        if address == "local":
+            ray.init(num_cpus=workers, **kwargs)
+        else:
+            ray.init(address=address, **kwargs)
+    try:
+        remote = ray.remote(num_cpus=1, max_retries=2)(shard_bytes)
+        pending = {remote.remote(t): t for t in todo}
+        results: dict[str, dict[str, Any]] = {}
+        while pending:
+            ready, _ = ray.wait(list(pending), num_returns=1)
+            task = pending.pop(ready[0])
+            data, entry = ray.get(ready[0])
+            if hashlib.sha256(data).hexdigest() != entry["sha256"]:
+                raise OSError(f"{task.file}: bytes from Ray do not match their SHA-256")
+            _write_atomic(out / task.file, data)
+            results[task.file] = entry
+            update(task.frames)
+        return results
+    finally:
+        if started:
+            ray.shutdown()

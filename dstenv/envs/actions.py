@@ -1,0 +1,130 @@
+"""Action modes of :class:`~dstenv.envs.DSTGridEnv`: a dict registry.
+
+A mode declares its space and builds a *controller* per episode that turns the
+agent's action into what the world source's ``step`` takes:
+
+* ``"discrete"``: ``Discrete(5)`` meta-actions :data:`META_ACTIONS`. On a
+  highway-env scene they are highway-env's own meta-actions (its route-following
+  ``MDPVehicle``; LEFT / RIGHT change lane). On the city they set a target speed
+  (SLOWER / FASTER step through ``target_speeds``) and the turn taken at the next
+  junction (LEFT / RIGHT; IDLE, SLOWER and FASTER keep the current choice), and the
+  world's route-following controller drives.
+* ``"continuous"``: ``Box(-1, 1, (2,), float32)`` = (acceleration, steering) as
+  fractions of ``max_accel`` [m/s^2] and ``max_steer`` [rad], positive steering to
+  the left.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import numpy as np
+from gymnasium import spaces
+
+from dstenv.config import ConfigError
+
+__all__ = ["META_ACTIONS", "ActionMode", "ACTIONS", "action_mode", "default_action_config"]
+
+#: Discrete action index -> meta-action name.
+META_ACTIONS: tuple[str, ...] = ("SLOWER", "IDLE", "FASTER", "LEFT", "RIGHT")
+_HIGHWAY_NAMES = {"SLOWER": "SLOWER", "IDLE": "IDLE", "FASTER": "FASTER",
+                  "LEFT": "LANE_LEFT", "RIGHT": "LANE_RIGHT"}
+
+
+def default_action_config() -> dict[str, Any]:
+    """The ``action`` config section (units in comments)."""
+    return {
+        "type": "discrete",  # "discrete" (meta-actions) | "continuous" (accel, steer)
+        "target_speeds": [0.0, 4.5, 9.0],  # [m/s] speeds SLOWER / FASTER step through
+        "initial_speed_index": 2,  # index into target_speeds at reset
+        "speed_gain": 1.0,  # [1/s] accel = gain * (target - speed), clipped
+        "max_accel": 3.0,  # [m/s^2] continuous-action scale and discrete accel limit
+        "max_steer": 0.5,  # [rad] continuous-action steering scale
+    }
+
+
+class Controller(Protocol):
+    def world_action(self, action: Any) -> Any: ...
+
+
+class _HighwayMeta:
+    """Discrete meta-actions passed to highway-env by name."""
+
+    def __init__(self, cfg: dict[str, Any], world: Any) -> None:
+        pass
+
+    def world_action(self, action: Any) -> str:
+        return _HIGHWAY_NAMES[META_ACTIONS[int(action)]]
+
+
+class _Continuous:
+    """(accel, steer) fractions -> physical units."""
+
+    def __init__(self, cfg: dict[str, Any], world: Any) -> None:
+        self.scale = np.array([cfg["max_accel"], cfg["max_steer"]], np.float64)
+
+    def world_action(self, action: Any) -> tuple[float, float]:
+        a = np.clip(np.asarray(action, np.float64).reshape(2), -1.0, 1.0) * self.scale
+        return float(a[0]), float(a[1])
+
+
+class _CityMeta:
+    """Meta-actions on the city: a target speed and a turn choice, route-following steering."""
+
+    def __init__(self, cfg: dict[str, Any], world: Any) -> None:
+        self.speeds = [float(v) for v in cfg["target_speeds"]]
+        self.index = int(np.clip(cfg["initial_speed_index"], 0, len(self.speeds) - 1))
+        self.gain = float(cfg["speed_gain"])
+        self.max_accel = float(cfg["max_accel"])
+        self.world = world
+
+    def world_action(self, action: Any) -> tuple[float, float]:
+        name = META_ACTIONS[int(action)]
+        if name == "SLOWER":
+            self.index = max(self.index - 1, 0)
+        elif name == "FASTER":
+            self.index = min(self.index + 1, len(self.speeds) - 1)
+        elif name in ("LEFT", "RIGHT"):
+            self.world.set_turn(name.lower())
+        target = self.speeds[self.index]
+        accel = float(np.clip(self.gain * (target - self.world.ego_speed), -self.max_accel,
+                              self.max_accel))
+        return accel, float(self.world.route_steer())
+
+
+@dataclass(frozen=True)
+class ActionMode:
+    """One action mode: its space and its controllers per world source."""
+
+    name: str
+    controllers: dict[str, type]
+
+    def space(self, cfg: dict[str, Any], source: str) -> spaces.Space:
+        """The action space (``source`` picks nothing yet: same space everywhere)."""
+        if self.name == "discrete":
+            if len(cfg["target_speeds"]) < 1:
+                raise ConfigError("config.action.target_speeds: needs at least one speed")
+            return spaces.Discrete(len(META_ACTIONS))
+        return spaces.Box(-1.0, 1.0, (2,), dtype=np.float32)
+
+    def controller(self, cfg: dict[str, Any], world: Any, source: str) -> Controller:
+        """A fresh controller for one episode on ``world`` (a ``source`` world)."""
+        if source not in self.controllers:
+            raise ConfigError(f"config.action.type: {self.name!r} has no controller for "
+                              f"source {source!r}; known: {', '.join(self.controllers)}")
+        return self.controllers[source](cfg, world)
+
+
+#: mode name -> :class:`ActionMode`
+ACTIONS: dict[str, ActionMode] = {
+    "discrete": ActionMode("discrete", {"city": _CityMeta, "highway": _HighwayMeta}),
+    "continuous": ActionMode("continuous", {"city": _Continuous, "highway": _Continuous}),
+}
+
+
+def action_mode(name: str) -> ActionMode:
+    """Look up a mode, with an error naming the known ones."""
+    if name not in ACTIONS:
+        raise ConfigError(f"config.action.type: unknown mode {name!r}; known: {', '.join(ACTIONS)}")
+    return ACTIONS[name]

@@ -1,0 +1,100 @@
+"""``dstenv bench env``: environment steps per second against highway-env.
+
+Measures, in one process, ``env.step`` throughput of
+
+* ``DSTGrid-v0`` at the paper's 256 x 256 x 0.33 m grid,
+* ``DSTGrid-RL-v0`` at the RL size (84 x 84 x 1.0 m),
+* ``DSTGrid-Highway-v0`` (highway-env's intersection driving our pipeline), and
+* the reference: highway-env ``intersection-v2`` (``-v1`` if absent) at 10 Hz
+  simulation and policy frequency (one grid per 0.1 s, like ours) with an
+  ``OccupancyGrid`` observation of the same extent and cell size as the 256 x 256
+  grid (no occlusion, no evidential fusion),
+
+and reports each as a ratio to the reference, so the figures travel across machines.
+Resets are not timed; a terminated episode is reset outside the timer.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from typing import Any
+
+import numpy as np
+
+__all__ = ["run", "time_env"]
+
+
+def time_env(env: Any, steps: int, action: Any, seed: int = 0) -> float:
+    """Steps per second of ``env.step(action)`` over ``steps`` steps (resets untimed)."""
+    env.reset(seed=seed)
+    for _ in range(5):  # warm-up: numba dispatch, caches
+        _, _, term, trunc, _ = env.step(action)
+        if term or trunc:
+            env.reset()
+    elapsed = 0.0
+    for _ in range(steps):
+        t0 = time.perf_counter()
+        _, _, term, trunc, _ = env.step(action)
+        elapsed += time.perf_counter() - t0
+        if term or trunc:
+            env.reset()
+    return steps / elapsed
+
+
+def _highway_reference(spec_hw: tuple[int, int], cell: float) -> tuple[str, Any]:
+    import gymnasium as gym
+    import highway_env  # noqa: F401  (registers the ids)
+
+    env_id = "intersection-v2" if "intersection-v2" in gym.registry else "intersection-v1"
+    h, w = spec_hw
+    half_x, half_y = h * cell / 2, w * cell / 2
+    env = gym.make(env_id, config={
+        "simulation_frequency": 10,
+        "policy_frequency": 10,
+        "observation": {
+            "type": "OccupancyGrid",
+            "grid_size": [[-half_x, half_x], [-half_y, half_y]],
+            "grid_step": [cell, cell],
+            "align_to_vehicle_axes": True,
+        },
+    })
+    return env_id, env
+
+
+def run(args: argparse.Namespace) -> dict[str, Any]:
+    """Run the benchmark; returns steps/s per env and the ratios to highway-env."""
+    import gymnasium as gym
+
+    import dstenv  # noqa: F401  (registers the ids)
+
+    quick = bool(getattr(args, "quick", False))
+    repeats = int(getattr(args, "repeats", 0) or 0)
+    steps = repeats if repeats > 0 else (40 if quick else 300)
+    results: dict[str, Any] = {"steps": steps}
+
+    env_id, ref = _highway_reference((256, 256), 0.33)
+    ref_sps = time_env(ref, max(steps // 10, 10), 1)  # IDLE
+    ref.close()
+    results[f"highway-env {env_id} OccupancyGrid 256x256"] = ref_sps
+
+    cases = [
+        ("DSTGrid-v0 256x256", "DSTGrid-v0"),
+        ("DSTGrid-RL-v0 84x84", "DSTGrid-RL-v0"),
+        ("DSTGrid-Highway-v0 84x84", "DSTGrid-Highway-v0"),
+    ]
+    for label, gid in cases:
+        env = gym.make(gid)
+        results[label] = time_env(env, steps, 1)
+        env.close()
+
+    print(f"{'environment':44s} {'steps/s':>9s} {'x highway-env':>14s}")
+    for key, sps in results.items():
+        if key == "steps":
+            continue
+        print(f"{key:44s} {sps:9.1f} {sps / ref_sps:14.1f}")
+    results["ratio_256_vs_highway"] = results["DSTGrid-v0 256x256"] / ref_sps
+    results["ratio_rl_vs_highway"] = results["DSTGrid-RL-v0 84x84"] / ref_sps
+    results["goal_met"] = bool(results["DSTGrid-v0 256x256"] >= 300
+                               and results["ratio_256_vs_highway"] >= 10)
+    return {k: (float(v) if isinstance(v, (np.floating, float)) else v) for k, v in results.items()}

@@ -1,0 +1,102 @@
+"""Observation modes of :class:`~dstenv.envs.DSTGridEnv`: a dict registry.
+
+Each mode turns a :class:`~dstenv.frame.Frame` into one array and declares its
+space. Add a mode by adding an :class:`ObservationMode` to :data:`OBSERVATIONS`.
+
+========== ======================= =========================================================
+mode       space                   content
+========== ======================= =========================================================
+pignistic  (5, H, W) float32 [0,1] BetP over ``dstenv.dst.CLASSES`` at t
+fcn10      (10, H, W) float32      BetP at t then t-1 (the paper's FCN input)
+masses     (32, H, W) float32      raw masses, index = subset bitmask (N=1 W=2 I=4 S=8 M=16)
+image      (4, H, W) uint8 [0,255] round(255 * BetP) of navigable, building, static, moving
+========== ======================= =========================================================
+
+``image`` is what stable-baselines3's ``CnnPolicy`` takes without options
+(channel-first uint8, 4 channels; grids of at least 36 x 36 for NatureCNN). It drops
+the ``non_navigable`` channel because the five BetP values sum to 1:
+``non_navigable = 1 - sum(image) / 255`` up to rounding, so nothing is lost.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from gymnasium import spaces
+
+from dstenv.dst import CLASSES, NUM_SETS
+from dstenv.frame import Frame
+
+__all__ = ["ObservationMode", "OBSERVATIONS", "IMAGE_CLASSES", "observation_mode"]
+
+#: The classes mapped to the ``image`` channels, in channel order.
+IMAGE_CLASSES: tuple[str, ...] = ("navigable", "building", "static", "moving")
+_IMAGE_INDEX = np.array([CLASSES.index(c) for c in IMAGE_CLASSES])
+
+
+@dataclass(frozen=True)
+class ObservationMode:
+    """One observation mode.
+
+    Attributes:
+        channels: number of channels C of the ``(C, H, W)`` observation.
+        dtype: numpy dtype of the observation.
+        high: upper bound of every value (lower bound 0).
+        needs_masses: the frame must carry its masses.
+        build: ``frame -> (C, H, W) array`` of ``dtype``.
+    """
+
+    channels: int
+    dtype: type
+    high: float
+    needs_masses: bool
+    build: Callable[[Frame], np.ndarray]
+
+    def space(self, shape: tuple[int, int]) -> spaces.Box:
+        """The ``Box`` of observations for an ``(H, W)`` grid."""
+        return spaces.Box(0, self.high, (self.channels, *shape), dtype=self.dtype)
+
+
+def _unit(x: np.ndarray) -> np.ndarray:
+    # float32 rounding can leave BetP a hair outside [0, 1]; the space is closed
+    return np.clip(x, 0.0, 1.0, out=np.empty(x.shape, np.float32))
+
+
+def _image(frame: Frame) -> np.ndarray:
+    betp = frame.pignistic[_IMAGE_INDEX]
+    return np.rint(np.clip(betp, 0.0, 1.0) * 255.0).astype(np.uint8)
+
+
+def _pignistic(frame: Frame) -> np.ndarray:
+    return _unit(frame.pignistic)
+
+
+def _fcn10(frame: Frame) -> np.ndarray:
+    return _unit(frame.fcn_input())
+
+
+def _masses(frame: Frame) -> np.ndarray:
+    if frame.masses is None:
+        raise RuntimeError("observation 'masses' needs frames with masses (frame.masses config)")
+    return _unit(frame.masses)
+
+
+#: mode name -> :class:`ObservationMode`
+OBSERVATIONS: dict[str, ObservationMode] = {
+    "pignistic": ObservationMode(len(CLASSES), np.float32, 1.0, False, _pignistic),
+    "fcn10": ObservationMode(2 * len(CLASSES), np.float32, 1.0, False, _fcn10),
+    "masses": ObservationMode(NUM_SETS, np.float32, 1.0, True, _masses),
+    "image": ObservationMode(len(IMAGE_CLASSES), np.uint8, 255, False, _image),
+}
+
+
+def observation_mode(name: str) -> ObservationMode:
+    """Look up a mode, with an error naming the known ones."""
+    if name not in OBSERVATIONS:
+        from dstenv.config import ConfigError
+
+        raise ConfigError(f"config.observation.type: unknown mode {name!r}; "
+                          f"known: {', '.join(OBSERVATIONS)}")
+    return OBSERVATIONS[name]

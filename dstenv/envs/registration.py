@@ -1,0 +1,50 @@
+"""Gymnasium registration of the ``DSTGrid-*`` environments (called on ``import dstenv``).
+
+Variants are plain keyword arguments of :class:`~dstenv.envs.DSTGridEnv` (Minigrid
+style: ``scenario=`` or ``preset=``, so a user's ``config=`` still merges on top)
+held in :data:`VARIANTS`; add an entry to register another. Entry points are
+strings, so registering imports nothing heavy.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+__all__ = ["ENTRY_POINT", "RL_GRID", "OCCLUDED_TASK", "VARIANTS", "register_envs"]
+
+ENTRY_POINT = "dstenv.envs.dstgrid:DSTGridEnv"
+
+#: The RL-sized grid: 84 x 84 cells of 1.0 m, the same ~84 m view as the paper's
+#: 256 x 256 x 0.33 m grid at 1/9 of the cells (and NatureCNN's native 84 x 84).
+RL_GRID: dict[str, Any] = {"height": 84, "width": 84, "cell_size": 1.0}
+
+#: World ``task`` settings of the occlusion task: traffic hidden around the ego's route.
+OCCLUDED_TASK: dict[str, Any] = {
+    "cross_traffic": 4,  # cars on the side streets of the ego's next junctions
+    "parked_near_route": 10,  # parked cars along the route (they hide pedestrians)
+    "crossing_pedestrians": 3,  # pedestrians about to step out near the route
+}
+
+#: env id -> (``DSTGridEnv`` kwargs, ``max_episode_steps`` at 0.1 s per step)
+VARIANTS: dict[str, tuple[dict[str, Any], int]] = {
+    "DSTGrid-v0": ({}, 600),
+    "DSTGrid-Dense-v0": ({"scenario": "dense"}, 600),
+    "DSTGrid-Suburb-v0": ({"scenario": "suburb"}, 600),
+    "DSTGrid-Parking-v0": ({"scenario": "parking"}, 600),
+    "DSTGrid-OSM-v0": ({"scenario": "osm"}, 600),
+    "DSTGrid-RL-v0": ({"preset": {"grid": RL_GRID}}, 400),
+    "DSTGrid-Continuous-v0": ({"preset": {"grid": RL_GRID, "action": {"type": "continuous"}}}, 400),
+    "DSTGrid-Occluded-v0": ({"preset": {"grid": RL_GRID, "world": {"task": OCCLUDED_TASK}}}, 400),
+    "DSTGrid-Highway-v0": ({"preset": {"source": "highway", "grid": RL_GRID}}, 200),
+}
+
+
+def register_envs() -> None:
+    """Register every id of :data:`VARIANTS` with Gymnasium (idempotent)."""
+    from gymnasium.envs.registration import register, registry
+
+    for env_id, (kwargs, max_steps) in VARIANTS.items():
+        if env_id in registry:
+            continue
+        register(id=env_id, entry_point=ENTRY_POINT, kwargs=kwargs,
+                 max_episode_steps=max_steps)

@@ -1,0 +1,70 @@
+"""Reward of :class:`~dstenv.envs.DSTGridEnv`: named terms, summed.
+
+Every term is reported separately in ``info["rewards"]`` (already weighted), so a
+user can re-weight them offline or train on a subset. The weights live in the
+``reward`` config section (:func:`default_reward_config`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+__all__ = ["default_reward_config", "StepOutcome", "reward_terms"]
+
+
+def default_reward_config() -> dict[str, Any]:
+    """The ``reward`` config section (units in comments)."""
+    return {
+        "progress": 0.1,  # [1/m] per metre advanced along the route
+        "speed": 0.05,  # [-] per step, times min(speed / target_speed, 1)
+        "target_speed": 9.0,  # [m/s] speed that earns the full speed term
+        "collision": -10.0,  # [-] once, on a collision (the episode ends)
+        "off_road": -5.0,  # [-] once, on leaving the road (the episode ends)
+        "hard_brake": -0.5,  # [-] per step with deceleration above the threshold
+        "hard_brake_threshold": 4.0,  # [m/s^2] deceleration counted as hard braking
+        "arrived": 1.0,  # [-] once, on reaching the end of the route (scenes that have one)
+    }
+
+
+@dataclass(frozen=True)
+class StepOutcome:
+    """What the reward looks at after one step.
+
+    Attributes:
+        progress: distance advanced along the route this step [m] (negative when
+            reversing).
+        speed: ego speed after the step [m/s].
+        decel: deceleration over the step, ``(v_prev - v) / dt`` [m/s^2].
+        collision, off_road, arrived: ego flags after the step.
+    """
+
+    progress: float
+    speed: float
+    decel: float
+    collision: bool
+    off_road: bool
+    arrived: bool = False
+
+
+def reward_terms(out: StepOutcome, cfg: dict[str, Any]) -> dict[str, float]:
+    """Weighted reward terms of one step; the reward is their sum.
+
+    Args:
+        out: the step's outcome.
+        cfg: the ``reward`` section.
+
+    Returns:
+        ``{"progress", "speed", "collision", "off_road", "hard_brake", "arrived"}``
+        -> float.
+    """
+    target = cfg["target_speed"]
+    speed_frac = min(max(out.speed, 0.0) / target, 1.0) if target > 0 else 0.0
+    return {
+        "progress": cfg["progress"] * out.progress,
+        "speed": cfg["speed"] * speed_frac,
+        "collision": cfg["collision"] * float(out.collision),
+        "off_road": cfg["off_road"] * float(out.off_road),
+        "hard_brake": cfg["hard_brake"] * float(out.decel > cfg["hard_brake_threshold"]),
+        "arrived": cfg["arrived"] * float(out.arrived),
+    }

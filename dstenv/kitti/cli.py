@@ -1,0 +1,204 @@
+"""``dstenv kitti``: convert KITTI tracking sequences to shards, render and score them.
+
+::
+
+    dstenv kitti convert --root DIR --sequences 0003,0005 [--osm FILE] [--stride K]
+                         [--label-rule paper|smoothed] [--free-label navigable|ignore]
+                         [--split test] --out DIR
+    dstenv kitti render  --root DIR --sequence 0003 --frame 25 [...] --out frame.png
+    dstenv kitti evaluate --data DIR [--checkpoint best.pt ...]
+
+``convert`` writes one shard per sequence (``DIR/<split>/kitti-SSSS.h5``, the format
+of ``dstenv generate``) and ``DIR/manifest.json``. ``evaluate`` scores the DST
+baseline (argmax of the stored BetP) and any trained checkpoint on such a
+directory with the benchmark's metrics.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+from pathlib import Path
+from typing import Any
+
+__all__ = ["register"]
+
+_NO_MAP = ("no map: GIS grid vacuous (all 0), map masses carry no information; "
+           "non-object labels are only 'seen free -> navigable' (or ignore)")
+
+
+def _overrides(args: argparse.Namespace) -> dict[str, Any]:
+    out: dict[str, Any] = {"labels": {}}
+    if args.stride is not None:
+        out["stride"] = args.stride
+    if args.label_rule is not None:
+        out["labels"]["rule"] = args.label_rule
+    if args.free_label is not None:
+        out["labels"]["free_label"] = args.free_label
+    if args.dst_preset is not None:
+        from dstenv.dst import DSTParams
+
+        out["dst"] = DSTParams.preset(args.dst_preset).to_dict()
+    return out
+
+
+def _gis(args: argparse.Namespace, seq: Any):
+    """``(gis_fn, note)``: the map lookup for a sequence, or ``None`` and the no-map note."""
+    if not args.osm:
+        return None, _NO_MAP
+    from dstenv.kitti.osm import map_lookup
+
+    fn, note = map_lookup(args.osm, seq.trajectory)
+    return fn, note
+
+
+def _sequences(text: str) -> list[str]:
+    names = [s.strip() for s in text.split(",") if s.strip()]
+    if not names:
+        raise argparse.ArgumentTypeError("expected a comma-separated list like 0003,0005")
+    return names
+
+
+def _convert(args: argparse.Namespace) -> int:
+    from dstenv.cli import CLIError
+    from dstenv.data.manifest import MANIFEST_NAME, scan_shards, shard_entry, write_manifest
+    from dstenv.data.shards import ShardWriter
+    from dstenv.kitti.sequence import KittiSequence, kitti_config, convert_sequence
+
+    out = Path(args.out)
+    cfg = kitti_config(_overrides(args))
+    targets = {out / args.split / f"kitti-{int(s):04d}.h5" for s in args.sequences
+               if s.isdigit()}
+    foreign = [p for p in scan_shards(out) if p not in targets] if out.is_dir() else []
+    if foreign:
+        raise CLIError(f"{out}: holds other shards ({foreign[0].relative_to(out)}); "
+                       "choose an empty output directory")
+    entries = []
+    for name in args.sequences:
+        seq = KittiSequence(args.root, name)
+        gis_fn, note = _gis(args, seq)
+        print(f"sequence {seq.name}: {seq.n_frames} frames, stride {cfg['stride']}, "
+              f"labels {cfg['labels']['rule']}; {note}")
+        skipped: list[str] = []
+        path = out / args.split / f"kitti-{seq.name}.h5"
+        attrs = {
+            "config": cfg, "seed": int(seq.name), "split": args.split, "source": "kitti",
+            "sequence": seq.name, "root": str(Path(args.root).resolve()),
+            "map": str(Path(args.osm).resolve()) if args.osm else "none",
+        }
+        with ShardWriter(path, attrs, masses=args.masses) as writer:
+            for frame in convert_sequence(seq, cfg, gis_fn, skipped):
+                writer.add(frame)
+            if writer.n_frames == 0:
+                raise CLIError(f"sequence {seq.name}: no usable frame ({len(skipped)} skipped)")
+        for msg in skipped:
+            print(f"  warning: {msg}")
+        entries.append(shard_entry(out, path))
+        print(f"  wrote {path} ({writer.n_frames} frames)")
+    meta = {"command": "kitti convert", "root": str(args.root), "sequences": args.sequences,
+            "osm": args.osm or None, "config": cfg}
+    write_manifest(out, entries, meta)
+    print(f"wrote {out / MANIFEST_NAME}")
+    return 0
+
+
+def _render(args: argparse.Namespace) -> int:
+    from dstenv.cli import CLIError
+    from dstenv.grid import GridSpec
+    from dstenv.kitti.render import render_frame
+    from dstenv.kitti.sequence import KittiSequence, kitti_config, convert_sequence
+
+    cfg = kitti_config(_overrides(args))
+    if args.frame % cfg["stride"]:
+        raise CLIError(f"--frame {args.frame} is not converted with stride {cfg['stride']}; "
+                       f"pick a multiple of {cfg['stride']}")
+    seq = KittiSequence(args.root, args.sequence)
+    gis_fn, note = _gis(args, seq)
+    frame = None
+    for fr in convert_sequence(seq, cfg, gis_fn):
+        if fr.step == args.frame:
+            frame = fr
+            break
+    if frame is None:
+        raise CLIError(f"sequence {seq.name}: frame {args.frame} was not converted "
+                       f"(beyond {seq.n_frames} frames, or its scan was skipped)")
+    boxes = seq.boxes.select(seq.boxes.frame == args.frame)
+    title = (f"KITTI tracking {seq.name} frame {args.frame} (stride {cfg['stride']}, "
+             f"{cfg['labels']['rule']} motion rule); {'map: ' + args.osm if args.osm else 'no map'}")
+    path = render_frame(frame, boxes, GridSpec(**cfg["grid"]), args.out, title, seq.scan(args.frame))
+    print(f"{note}\nwrote {path}")
+    return 0
+
+
+def _evaluate(args: argparse.Namespace) -> int:
+    from dstenv.cli import CLIError
+    from dstenv.data import ShardDataset
+    from dstenv.dst import CLASSES, DSTParams
+    from dstenv.segment.checkpoint import load_segmenter
+    from dstenv.segment.evaluate import batches, evaluate
+    from dstenv.segment.segmenters import DSTSegmenter
+
+    data = ShardDataset(args.data, inputs="fcn10")
+    if len(data) == 0:
+        raise CLIError(f"{args.data}: no frames")
+    segs = [DSTSegmenter(DSTParams.default(), label="dst (stored BetP)")]
+    segs += [load_segmenter(c, "cpu") for c in args.checkpoint]
+    results = {}
+    header = f"{'segmenter':<24} {'cells':<8} {'mIoU':>6} " + " ".join(f"{c[:8]:>8}" for c in CLASSES)
+    print(f"{len(data)} frames from {args.data}\n{header}")
+    for seg in segs:
+        summary = evaluate(seg, batches(data, args.batch_size)).summary(CLASSES)
+        results[seg.label] = summary
+        for cells in ("all", "visible"):
+            s = summary[cells]
+            iou = " ".join(f"{'-' if v is None else f'{v:.3f}':>8}" for v in s["iou"].values())
+            miou = "-" if s["miou"] is None else f"{s['miou']:.3f}"
+            print(f"{seg.label:<24} {cells:<8} {miou:>6} {iou}")
+    if args.json:
+        Path(args.json).write_text(json.dumps(results, indent=1, default=float) + "\n")
+        print(f"wrote {args.json}")
+    return 0
+
+
+def _common(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--root", required=True, metavar="DIR",
+                   help="KITTI tracking folder (holding training/ or velodyne/)")
+    p.add_argument("--osm", metavar="FILE",
+                   help="OpenStreetMap .osm of the drive area for the GIS grid (default: no map)")
+    p.add_argument("--stride", type=int, metavar="K",
+                   help="frames between DST updates (default 5 = 0.5 s; the paper: 10-20)")
+    p.add_argument("--label-rule", choices=("paper", "smoothed"),
+                   help="moving rule: 10 cm frame to frame (paper) or a fitted speed (default)")
+    p.add_argument("--free-label", choices=("navigable", "ignore"),
+                   help="label of seen-free cells without a map class (default navigable)")
+    p.add_argument("--dst-preset", choices=("default", "paper"), help="DST parameters")
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``dstenv kitti convert|render|evaluate`` to the CLI."""
+    k = sub.add_parser("kitti", help="KITTI tracking -> perception-grid shards",
+                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ksub = k.add_subparsers(dest="kitti_command", metavar="ACTION", required=True)
+    c = ksub.add_parser("convert", help="convert sequences to shards + manifest")
+    _common(c)
+    c.add_argument("--sequences", required=True, type=_sequences, metavar="LIST",
+                   help="comma-separated sequence numbers, e.g. 0003,0005")
+    c.add_argument("--split", default="test", help="split name stored in the shards (default test)")
+    c.add_argument("--masses", action="store_true", help="also store the raw 32 DST masses")
+    c.add_argument("--out", required=True, metavar="DIR", help="output dataset directory")
+    c.set_defaults(func=_convert)
+    r = ksub.add_parser("render", help="PNG of one converted frame")
+    _common(r)
+    r.add_argument("--sequence", required=True, help="sequence number, e.g. 0003")
+    r.add_argument("--frame", type=int, required=True, help="frame index (a multiple of the stride)")
+    r.add_argument("--out", required=True, metavar="PNG")
+    r.set_defaults(func=_render)
+    e = ksub.add_parser("evaluate", help="score DST and trained checkpoints on converted shards")
+    e.add_argument("--data", required=True, metavar="DIR", help="output of kitti convert")
+    e.add_argument("--checkpoint", action="append", default=[], metavar="PT",
+                   help="a checkpoint of dstenv train (repeatable)")
+    e.add_argument("--batch-size", type=int, default=4)
+    e.add_argument("--json", metavar="FILE", help="also write the metrics as JSON")
+    e.set_defaults(func=_evaluate)
+    logging.getLogger("dstenv.kitti").addHandler(logging.NullHandler())

@@ -1,0 +1,356 @@
+"""``dstenv benchmark``: pure DST vs FCN-DST on held-out simulated maps.
+
+Stages (each resumable: rerunning the same command reuses finished work):
+
+1. **data** -- ``dstenv.data.generate`` writes train/val/test shards whose splits
+   come from disjoint map seeds (:mod:`dstenv.data.sampling`), so the test maps
+   are never seen in training or tuning.
+2. **learned models** -- each network of ``models`` is trained on the train split
+   (validation mIoU picks ``best.pt``) and scored on the stored test frames.
+3. **DST** -- the test episodes are replayed once (:mod:`dstenv.segment.replay`),
+   the replay is checked against the stored BetP, and every DST variant runs its
+   own filter over the same inputs: ``dst`` for each preset in ``dst_presets``, and
+   ``dst-tuned`` with parameters searched on replayed *training* episodes.
+4. **report** -- ``results.json``, ``results.md`` and PNG figures in ``out``.
+
+Every segmenter is scored on exactly the same frames (same episode seeds and
+steps), over all labelled cells and over visible cells.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from dstenv.config import ConfigError, merge_config
+from dstenv.dst.frame import CLASSES
+from dstenv.dst.params import DSTParams
+from dstenv.segment import report
+from dstenv.segment.checkpoint import load_segmenter
+from dstenv.segment.evaluate import batches, evaluate
+from dstenv.segment.metrics import ConfusionMeter
+from dstenv.segment.registry import create_segmenter
+from dstenv.segment.replay import Episode, check_replay, filter_episode, record_episodes
+from dstenv.segment.train import resolve_device, train
+
+__all__ = ["PRESETS", "default_benchmark_config", "preset_config", "run_benchmark", "split_index"]
+
+
+def default_benchmark_config() -> dict[str, Any]:
+    """Every benchmark option with its default (the ``cpu`` preset overrides some)."""
+    return {
+        "data": {
+            "scenario": "",  # scenario name or .toml file; "" = default configuration
+            "frames": 1000,  # total frames, split 80/10/10 train/val/test by map seed
+            "seed": 0,
+            "grid": 128,  # [cells] side of the square grid; 0 keeps the scenario's grid
+            "episode_length": 200,  # [steps] of 0.1 s
+            "stride": 10,  # keep one frame every `stride` steps
+            "warmup": 10,  # [steps] first kept step
+            "workers": 1,  # generation processes
+            "frames_per_shard": 256,
+        },
+        "dst_presets": ["default", "paper"],  # DSTParams presets scored as `dst`
+        "tune": {
+            "enabled": True,  # add `dst-tuned`
+            "episodes": 8,  # training episodes replayed for the search
+            "budget": 30,  # parameter sets scored
+            "seed": 0,
+        },
+        "models": ["unet-light"],  # learned segmenters to train (dstenv.segment.models.MODELS)
+        "model_kwargs": {},  # model name -> builder options
+        "train": {},  # overrides of dstenv.segment.train.default_train_config()
+        "device": "auto",  # "cpu", "cuda" or "auto"
+        "eval_batch_size": 8,
+        "examples": 3,  # example grids in the figure
+    }
+
+
+#: named overrides of :func:`default_benchmark_config`
+PRESETS: dict[str, dict[str, Any]] = {
+    # seconds: the test suite's end-to-end run
+    "tiny": {
+        "data": {"frames": 40, "grid": 32, "episode_length": 24, "stride": 4, "warmup": 4,
+                 "frames_per_shard": 16},
+        "tune": {"episodes": 2, "budget": 3},
+        "models": ["unet-light"],
+        "model_kwargs": {"unet-light": {"base": 8, "depth": 2}},
+        "train": {"epochs": 1, "batch_size": 4},
+        "device": "cpu",
+        "examples": 1,
+    },
+    # <= 30 min on a 2-core CPU: the README's main job
+    "cpu": {
+        "data": {"frames": 1000, "grid": 128, "episode_length": 200, "stride": 10, "warmup": 10},
+        "tune": {"episodes": 8, "budget": 30},
+        "models": ["unet-light"],
+        "train": {"epochs": 8, "batch_size": 8, "lr": 2e-3, "crop": 96, "loss": "wce+lovasz"},
+        "device": "cpu",
+    },
+    # the full benchmark for a GPU: the paper's FCN-8s, more data, full-size grids
+    "gpu": {
+        "data": {"frames": 20000, "grid": 256, "episode_length": 200, "stride": 10, "warmup": 10,
+                 "workers": 8},
+        "tune": {"episodes": 32, "budget": 60},
+        "models": ["fcn8s-vgg16", "unet-light", "unet-temporal"],
+        "model_kwargs": {"fcn8s-vgg16": {"dropout": 0.5}},
+        "train": {"epochs": 30, "batch_size": 16, "lr": 1e-4, "loss": "wce+lovasz", "num_workers": 4},
+        "device": "auto",
+    },
+}
+
+
+def preset_config(name: str, overrides: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """The full configuration of a preset, with optional further overrides."""
+    if name not in PRESETS:
+        raise ConfigError(f"unknown benchmark preset {name!r}; choose from {', '.join(PRESETS)}")
+    cfg = merge_config(default_benchmark_config(), PRESETS[name], f"preset {name}")
+    return merge_config(cfg, overrides, "benchmark")
+
+
+def _generate(dcfg: dict[str, Any], out: Path, progress: bool) -> None:
+    from dstenv.data.generate import GenerateSpec, generate
+    from dstenv.data.sampling import scenario_config
+
+    g = int(dcfg["grid"])
+    overrides = {"grid": {"height": g, "width": g}} if g else None
+    spec = GenerateSpec(
+        config=scenario_config(dcfg["scenario"] or None, overrides), frames=int(dcfg["frames"]),
+        seed=int(dcfg["seed"]), scenario=dcfg["scenario"] or "default", split="auto",
+        frames_per_shard=int(dcfg["frames_per_shard"]), episode_length=int(dcfg["episode_length"]),
+        stride=int(dcfg["stride"]), warmup=int(dcfg["warmup"]),
+    )
+    generate(spec, out, workers=int(dcfg["workers"]), progress=progress)
+
+
+def split_index(files: list[Path]) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+    """Frames of a list of shards (e.g. ``ShardDataset.files``) with their origin.
+
+    Returns:
+        ``(frames, config)``: ``frames`` lists ``{"file", "index", "seed", "step",
+        "moving"}`` in dataset order (entry k is ``ShardDataset[k]``); ``config`` is
+        the pipeline configuration the shards were generated with.
+
+    Raises:
+        FileNotFoundError: no shard.
+        ValueError: shards made with different configurations.
+    """
+    from dstenv.data.shards import ShardReader
+
+    if not files:
+        raise FileNotFoundError("no shards for this split (run dstenv generate first)")
+    frames, config = [], None
+    for f in files:
+        with ShardReader(f) as r:
+            if config is None:
+                config = r.attrs["config"]
+            elif r.attrs["config"] != config:
+                raise ValueError(f"{f}: generated with another configuration than {files[0]}")
+            for i in range(len(r)):
+                d = r.get(i, ["seed", "step", "class_counts"])
+                frames.append({"file": str(f), "index": i, "seed": int(d["seed"]), "step": int(d["step"]),
+                               "moving": int(d["class_counts"][CLASSES.index("moving")])})
+    return frames, config
+
+
+def _targets(frames: list[dict[str, Any]], max_episodes: int | None = None) -> dict[int, list[int]]:
+    targets: dict[int, list[int]] = {}
+    for fr in frames:
+        if fr["seed"] not in targets and max_episodes is not None and len(targets) >= max_episodes:
+            continue
+        targets.setdefault(fr["seed"], []).append(fr["step"])
+    return targets
+
+
+def _stored(frames: list[dict[str, Any]], seed: int, steps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    from dstenv.data.shards import ShardReader
+
+    by_step = {fr["step"]: fr for fr in frames if fr["seed"] == seed}
+    xs, labs = [], []
+    for s in steps:
+        fr = by_step[int(s)]
+        with ShardReader(fr["file"]) as r:
+            d = r.get(fr["index"], ["pignistic", "pignistic_prev", "labels"])
+        xs.append(np.concatenate([d["pignistic"], d["pignistic_prev"]]))
+        labs.append(d["labels"])
+    return np.stack(xs), np.stack(labs)
+
+
+def _score_dst(seg: Any, episodes: list[Episode]) -> tuple[ConfusionMeter, dict[tuple[int, int], np.ndarray]]:
+    meter = ConfusionMeter(len(CLASSES))
+    preds = {}
+    for ep in episodes:
+        pred = seg.predict(torch.from_numpy(filter_episode(ep, seg.params)))
+        meter.update(pred, torch.from_numpy(ep.labels.astype(np.int64)), torch.from_numpy(ep.visible))
+        for k, s in enumerate(ep.steps):
+            preds[(ep.seed, int(s))] = pred[k].numpy()
+    return meter, preds
+
+
+def _goal(segs: dict[str, Any], kinds: dict[str, str]) -> dict[str, Any] | None:
+    def best(kind: str) -> str | None:
+        cands = [k for k in segs if kinds[k] == kind and segs[k]["all"]["miou"] is not None]
+        return max(cands, key=lambda k: segs[k]["all"]["miou"]) if cands else None
+
+    bl, bd = best("learned"), best("dst")
+    if bl is None or bd is None:
+        return None
+    m = segs[bl]["all"]
+    margin = m["miou"] - segs[bd]["all"]["miou"]
+    mov, sta = m["iou"]["moving"], m["iou"]["static"]
+    return {"best_learned": bl, "best_learned_miou": m["miou"], "best_dst": bd,
+            "best_dst_miou": segs[bd]["all"]["miou"], "margin": margin, "margin_met": margin >= 0.15,
+            "moving_iou": mov, "moving_met": mov is not None and mov >= 0.6,
+            "static_iou": sta, "static_met": sta is not None and sta >= 0.5}
+
+
+def run_benchmark(
+    config: Mapping[str, Any],
+    out: str | Path,
+    data_dir: str | Path | None = None,
+    progress: bool = True,
+    log: Callable[[str], None] = print,
+    preset: str = "custom",
+    command: str | None = None,
+) -> dict[str, Any]:
+    """Run the whole benchmark and write its report into ``out``.
+
+    Args:
+        config: overrides of :func:`default_benchmark_config` (e.g. :func:`preset_config`).
+        out: output directory (data, checkpoints, ``results.json``/``.md``, figures).
+        data_dir: use existing shards instead of generating ``out/data``.
+        progress: tqdm bars.
+        log: receives one-line messages.
+        preset: name recorded in the report.
+        command: command line recorded in the report.
+
+    Returns:
+        The JSON-compatible results (also in ``out/results.json``).
+    """
+    from dstenv.data import ShardDataset
+
+    cfg = merge_config(default_benchmark_config(), dict(config), "benchmark")
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    device = resolve_device(cfg["device"])
+    timings: dict[str, float] = {}
+    t = time.perf_counter()
+    if data_dir is None:
+        data_dir = out / "data"
+        log(f"generating {cfg['data']['frames']} frames into {data_dir}")
+        _generate(cfg["data"], data_dir, progress)
+    data_dir = Path(data_dir)
+    timings["data_s"] = time.perf_counter() - t
+
+    test_ds = ShardDataset(data_dir, split="test", inputs="fcn10")
+    train_ds = ShardDataset(data_dir, split="train", inputs="fcn10")
+    val_ds = ShardDataset(data_dir, split="val", inputs="fcn10")
+    test_frames, gen_config = split_index(test_ds.files)
+    train_frames, train_config = split_index(train_ds.files)
+    if train_config != gen_config:
+        raise ValueError(f"{data_dir}: train and test shards were generated with different configurations")
+    gen_params = DSTParams.from_dict(gen_config["dst"])
+    segs: dict[str, Any] = {}
+    kinds: dict[str, str] = {}
+    described: dict[str, Any] = {}
+    preds: dict[str, dict[tuple[int, int], np.ndarray]] = {}
+
+    # DST: replay the test episodes once, check, then one filter run per parameter set
+    t = time.perf_counter()
+    test_eps = record_episodes(gen_config, _targets(test_frames), progress)
+    for ep in test_eps[:2]:
+        check_replay(ep, *_stored(test_frames, ep.seed, ep.steps), gen_params)
+    dst_segs = [create_segmenter("dst", preset=p) for p in cfg["dst_presets"]]
+    timings["replay_test_s"] = time.perf_counter() - t
+    if cfg["tune"]["enabled"]:
+        t = time.perf_counter()
+        train_eps = record_episodes(gen_config, _targets(train_frames, cfg["tune"]["episodes"]), progress)
+        dst_segs.append(create_segmenter("dst-tuned", episodes=train_eps, budget=cfg["tune"]["budget"],
+                                         seed=cfg["tune"]["seed"], progress=progress))
+        timings["tune_s"] = time.perf_counter() - t
+        log(f"dst-tuned: train mIoU {dst_segs[-1].info['tuning']['start_miou']:.3f} (default) -> "
+            f"{dst_segs[-1].info['tuning']['best_miou']:.3f}")
+    t = time.perf_counter()
+    for seg in dst_segs:
+        meter, preds[seg.label] = _score_dst(seg, test_eps)
+        segs[seg.label], kinds[seg.label], described[seg.label] = meter.summary(CLASSES), "dst", seg.describe()
+    timings["dst_eval_s"] = time.perf_counter() - t
+
+    # learned models: train on train, select on val, score on the stored test frames
+    histories = {}
+    for name in cfg["models"]:
+        t = time.perf_counter()
+        tcfg = dict(cfg["train"])
+        tcfg.update(model=name, model_kwargs=cfg["model_kwargs"].get(name, {}), device=str(device))
+        mdir = out / "models" / name
+        _, histories[name] = train(tcfg, train_ds, val_ds if len(val_ds) else None, mdir,
+                                   progress=progress, log=log)
+        timings[f"train_{name}_s"] = time.perf_counter() - t
+        seg = load_segmenter(mdir / "best.pt", device)
+        meter = evaluate(seg, batches(test_ds, cfg["eval_batch_size"]), progress=progress)
+        segs[seg.label], kinds[seg.label], described[seg.label] = meter.summary(CLASSES), "learned", seg.describe()
+        preds[seg.label] = {}
+        for k in sorted(_example_ids(test_frames, cfg["examples"])):  # for the example figure
+            fr = test_frames[k]
+            x = torch.as_tensor(test_ds[k]["x"])[None]
+            preds[seg.label][(fr["seed"], fr["step"])] = seg.predict(x)[0].numpy()
+
+    results = {
+        "preset": preset,
+        "command": command,
+        "config": cfg,
+        "data": {"dir": str(data_dir), "train_frames": len(train_frames), "val_frames": len(val_ds),
+                 "test_frames": len(test_frames), "test_episodes": len(test_eps),
+                 "train_episodes": len({f["seed"] for f in train_frames}),
+                 "grid_shape": list(test_eps[0].sensor.shape[1:]), "cell_size": test_eps[0].cell_size,
+                 "generation_dst_params": gen_params.to_dict()},
+        "segmenters": {k: {**v, "kind": kinds[k], "describe": described[k]} for k, v in segs.items()},
+        "histories": histories,
+        "timings_s": timings,
+    }
+    results["goal"] = _goal(segs, kinds)
+    _write_report(results, out, test_frames, test_eps, preds, cfg["examples"])
+    return results
+
+
+def _example_ids(frames: list[dict[str, Any]], n: int) -> set[int]:
+    """Frames with the most moving cells, one per episode (deterministic)."""
+    order = sorted(range(len(frames)), key=lambda k: (-frames[k]["moving"], k))
+    chosen, seeds = [], set()
+    for k in order:
+        if frames[k]["seed"] not in seeds:
+            chosen.append(k)
+            seeds.add(frames[k]["seed"])
+        if len(chosen) >= n:
+            break
+    return set(chosen)
+
+
+def _write_report(results, out: Path, frames, episodes, preds, n_examples: int) -> None:
+    figs = out / "figures"
+    report.write_json(out / "results.json", results)
+    (out / "results.md").write_text(report.markdown_table(results))
+    report.plot_confusions(results, figs / "confusion_all.png", "all")
+    report.plot_confusions(results, figs / "confusion_visible.png", "visible")
+    if results["histories"]:
+        report.plot_curves(results["histories"], figs / "training_curves.png")
+    by_seed = {ep.seed: ep for ep in episodes}
+    examples = []
+    for k in sorted(_example_ids(frames, n_examples)):
+        fr = frames[k]
+        ep = by_seed[fr["seed"]]
+        j = int(np.searchsorted(ep.steps, fr["step"]))
+        gen = DSTParams.from_dict(results["data"]["generation_dst_params"])
+        betp_m = filter_episode(Episode(ep.seed, ep.sensor, ep.gis, ep.poses, ep.steps[j:j + 1],
+                                        ep.labels[j:j + 1], ep.visible[j:j + 1], ep.cell_size), gen)[0, 4]
+        examples.append({"title": f"seed {fr['seed']} step {fr['step']}", "betp_moving": betp_m,
+                         "predictions": {lab: p[(fr["seed"], fr["step"])] for lab, p in preds.items()
+                                         if (fr["seed"], fr["step"]) in p},
+                         "labels": ep.labels[j]})
+    if examples:
+        report.plot_examples(examples, figs / "examples.png")

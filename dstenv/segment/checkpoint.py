@@ -1,0 +1,75 @@
+"""Checkpoints: written atomically, read with ``torch.load(..., weights_only=True)``.
+
+A checkpoint is a dict of tensors and JSON-compatible data only (no pickled
+classes), so loading never executes code from the file::
+
+    {"format": "dstenv-segmenter", "version": 1,
+     "spec": {"model", "model_kwargs", "in_channels", "num_classes"},
+     "model": state_dict, "optimizer": state_dict | None, "epoch": int,
+     "rng": {"torch": ByteTensor}, "config": {...}, "history": {...}}
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from dstenv.segment.segmenters import TorchSegmenter
+
+__all__ = ["FORMAT", "save_checkpoint", "load_checkpoint", "load_segmenter"]
+
+FORMAT = "dstenv-segmenter"
+_VERSION = 1
+
+
+def save_checkpoint(path: str | Path, payload: dict[str, Any]) -> Path:
+    """Write ``payload`` (plus format tags) to ``path`` via a temporary file and rename.
+
+    A killed process leaves either the previous file or the new one, never half.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    try:
+        torch.save({"format": FORMAT, "version": _VERSION, **payload}, tmp)
+        with open(tmp, "rb") as fh:
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+    return path
+
+
+def load_checkpoint(path: str | Path) -> dict[str, Any]:
+    """Read a checkpoint written by :func:`save_checkpoint` (weights only, on CPU).
+
+    Raises:
+        FileNotFoundError: no such file.
+        ValueError: not a dstenv segmenter checkpoint, or unreadable.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"checkpoint not found: {path}")
+    try:
+        ckpt = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # noqa: BLE001 - torch raises many types for bad files
+        raise ValueError(f"{path}: cannot read checkpoint: {str(exc).splitlines()[0]}") from None
+    if not isinstance(ckpt, dict) or ckpt.get("format") != FORMAT:
+        raise ValueError(f"{path}: not a dstenv segmenter checkpoint")
+    if ckpt.get("version") != _VERSION:
+        raise ValueError(f"{path}: checkpoint version {ckpt.get('version')} not supported (need {_VERSION})")
+    return ckpt
+
+
+def load_segmenter(path: str | Path, device: str | torch.device = "cpu") -> TorchSegmenter:
+    """Rebuild the network of a checkpoint and load its weights (eval mode)."""
+    ckpt = load_checkpoint(path)
+    spec = ckpt["spec"]
+    seg = TorchSegmenter(spec["model"], spec["model_kwargs"], spec["in_channels"], spec["num_classes"], device)
+    seg.model.load_state_dict(ckpt["model"])
+    seg.model.eval()
+    return seg

@@ -1,0 +1,125 @@
+"""``dstenv train`` and ``dstenv benchmark``: fit a segmenter, compare all segmenters."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shlex
+from pathlib import Path
+from typing import Any
+
+__all__ = ["register"]
+
+
+def _json_arg(text: str) -> dict[str, Any]:
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise argparse.ArgumentTypeError(f"not valid JSON: {exc.msg}") from None
+    if not isinstance(value, dict):
+        raise argparse.ArgumentTypeError("expected a JSON object, e.g. '{\"base\": 16}'")
+    return value
+
+
+def _train(args: argparse.Namespace) -> int:
+    from dstenv.cli import CLIError
+    from dstenv.data import ShardDataset, StreamingDataset
+    from dstenv.segment.train import train
+
+    cfg: dict[str, Any] = {"model": args.model, "model_kwargs": args.model_kwargs, "seed": args.seed,
+                           "device": args.device}
+    for key in ("epochs", "batch_size", "lr", "loss", "crop", "num_workers"):
+        if getattr(args, key) is not None:
+            cfg[key] = getattr(args, key)
+    if args.stream is not None:
+        if not args.steps_per_epoch:
+            raise CLIError("--stream needs --steps-per-epoch (a stream has no end)")
+        if args.class_weights is None and cfg.get("loss", "wce+lovasz").startswith("wce"):
+            raise CLIError("--stream with a weighted loss needs --class-weights (or --loss lovasz/ce)")
+        train_ds = StreamingDataset(args.stream or None, seed=args.seed, split="train")
+        val_ds = ShardDataset(args.data, split="val") if args.data else None
+        cfg["max_batches"] = args.steps_per_epoch
+    else:
+        if not args.data:
+            raise CLIError("give --data DIR (shards from dstenv generate) or --stream SCENARIO")
+        train_ds = ShardDataset(args.data, split="train")
+        if len(train_ds) == 0:
+            raise CLIError(f"{args.data}: no training frames (split 'train')")
+        val_ds = ShardDataset(args.data, split="val")
+        val_ds = val_ds if len(val_ds) else None
+    if args.class_weights is not None:
+        cfg["class_weights"] = args.class_weights
+    out = Path(args.out)
+    _, history = train(cfg, train_ds, val_ds, out, resume=not args.no_resume, progress=not args.quiet,
+                       log=(lambda m: None) if args.quiet else print)
+    best = max((m for m in history["val_miou"] if m is not None), default=None)
+    print(f"checkpoints in {out} (last.pt, best.pt)" + (f"; best val mIoU {best:.3f}" if best is not None else ""))
+    return 0
+
+
+def _benchmark(args: argparse.Namespace) -> int:
+    from dstenv.data.cli import parse_set
+    from dstenv.segment.benchmark import preset_config, run_benchmark
+
+    overrides = parse_set(args.set or [])
+    cfg = preset_config(args.preset, overrides)
+    parts = ["dstenv", "benchmark", "--preset", args.preset, "--out", args.out]
+    parts += ["--data", args.data] if args.data else []
+    for item in args.set or []:
+        parts += ["--set", item]
+    command = " ".join(shlex.quote(a) for a in parts)
+    results = run_benchmark(cfg, args.out, data_dir=args.data, progress=not args.quiet,
+                            log=(lambda m: None) if args.quiet else print, preset=args.preset, command=command)
+    out = Path(args.out)
+    print((out / "results.md").read_text())
+    print(f"wrote {out / 'results.json'}, {out / 'results.md'}, {out / 'figures'}/*.png")
+    goal = results.get("goal")
+    return 0 if goal is None or not args.check_goal or (goal["margin_met"] and goal["moving_met"]
+                                                        and goal["static_met"]) else 1
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``dstenv train`` and ``dstenv benchmark`` to the CLI."""
+    from dstenv.segment.benchmark import PRESETS
+    from dstenv.segment.losses import LOSSES
+    from dstenv.segment.models import MODELS
+
+    p = sub.add_parser("train", help="train a segmentation network on shards or a stream",
+                       description="Train a segmenter (Adam, median-frequency weighted CE and/or "
+                                   "Lovasz-softmax). Checkpoints last.pt/best.pt are written "
+                                   "atomically after every epoch; rerun to resume.")
+    p.add_argument("--data", metavar="DIR", help="dataset directory from dstenv generate")
+    p.add_argument("--stream", metavar="SCENARIO", nargs="?", const="",
+                   help="train on frames simulated on the fly (no disk); optional scenario")
+    p.add_argument("--steps-per-epoch", type=int, default=0, help="batches per epoch when streaming")
+    p.add_argument("--out", required=True, metavar="DIR", help="checkpoint directory")
+    p.add_argument("--model", default="unet-light", choices=sorted(MODELS))
+    p.add_argument("--model-kwargs", type=_json_arg, default={}, metavar="JSON",
+                   help='builder options, e.g. \'{"base": 16}\' or \'{"vgg16_weights": "vgg16.pth"}\'')
+    p.add_argument("--loss", choices=LOSSES, default=None, help="default wce+lovasz")
+    p.add_argument("--class-weights", type=float, nargs=5, metavar="W",
+                   help="fixed class weights (default: median frequency of the training split)")
+    p.add_argument("--epochs", type=int)
+    p.add_argument("--batch-size", type=int)
+    p.add_argument("--lr", type=float, help="Adam learning rate (default 1e-3)")
+    p.add_argument("--crop", type=int, help="random square training crops [cells] (0: whole grids)")
+    p.add_argument("--num-workers", type=int, help="DataLoader workers")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--device", default="auto", help="cpu, cuda or auto (default)")
+    p.add_argument("--no-resume", action="store_true", help="start over even if last.pt exists")
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(func=_train)
+
+    b = sub.add_parser("benchmark", help="compare DST and FCN-DST segmenters on held-out maps",
+                       description="Generate data, train the learned segmenters, tune DST, and score every "
+                                   "segmenter on a test split of unseen map seeds. Writes results.md, "
+                                   "results.json and figures/*.png into --out. Rerun to resume.")
+    b.add_argument("--preset", default="cpu", choices=sorted(PRESETS),
+                   help="cpu: <= 30 min on a 2-core CPU (default); gpu: the full benchmark; tiny: smoke test")
+    b.add_argument("--out", default="benchmark-out", metavar="DIR", help="output directory")
+    b.add_argument("--data", metavar="DIR", help="use existing shards instead of generating")
+    b.add_argument("--set", action="append", metavar="KEY=VALUE",
+                   help="override a preset value, e.g. train.epochs=3 or data.frames=500 (repeatable)")
+    b.add_argument("--check-goal", action="store_true", help="exit 1 if the README goal is not met")
+    b.add_argument("--quiet", action="store_true")
+    b.set_defaults(func=_benchmark)

@@ -1,0 +1,110 @@
+"""Segmenters created by name: ``create_segmenter("dst", preset="paper")``.
+
+:data:`SEGMENTERS` is a plain dict others can extend with
+:func:`register_segmenter`. Each entry has a ``kind``:
+
+* ``"dst"`` -- a :class:`~dstenv.segment.segmenters.DSTSegmenter` (no training);
+* ``"learned"`` -- a :class:`~dstenv.segment.segmenters.TorchSegmenter` (an
+  untrained network; :func:`dstenv.segment.train.train` fits it).
+
+=================  =======  ==========================================================
+name               kind     what
+=================  =======  ==========================================================
+``dst``            dst      argmax BetP; ``preset="default"|"paper"`` or ``params=``
+``dst-tuned``      dst      DST parameters searched on training episodes for mIoU
+``unet-light``     learned  small U-Net (~0.48 M parameters), CPU-trainable
+``unet-temporal``  learned  U-Net with separate t and t-1 streams (paper's future work)
+``fcn8s-vgg16``    learned  the paper's FCN-8s (VGG-16 body, 10 -> 3 input conv)
+=================  =======  ==========================================================
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from dstenv.dst.params import DSTParams
+from dstenv.segment.segmenters import DSTSegmenter, Segmenter, TorchSegmenter
+
+__all__ = ["SegmenterEntry", "SEGMENTERS", "register_segmenter", "create_segmenter", "segmenter_kind"]
+
+
+@dataclass(frozen=True)
+class SegmenterEntry:
+    """A registry entry: ``factory(**kwargs) -> Segmenter``, its kind and a description."""
+
+    factory: Callable[..., Segmenter]
+    kind: str
+    description: str
+
+
+def _make_dst(preset: str = "default", params: DSTParams | dict | None = None) -> DSTSegmenter:
+    if params is not None:
+        p = params if isinstance(params, DSTParams) else DSTParams.from_dict(params)
+        return DSTSegmenter(p, "dst", "dst (custom)")
+    return DSTSegmenter(DSTParams.preset(preset), "dst", f"dst ({preset})")
+
+
+def _make_dst_tuned(
+    params: DSTParams | dict | None = None, episodes: Sequence[Any] | None = None, **search: Any
+) -> DSTSegmenter:
+    if params is not None:
+        p = params if isinstance(params, DSTParams) else DSTParams.from_dict(params)
+        return DSTSegmenter(p, "dst-tuned", "dst-tuned")
+    if not episodes:
+        raise ValueError("dst-tuned needs training episodes to tune on (episodes=...) or fixed params=")
+    from dstenv.segment.tune import tune_dst_params
+
+    best, trace = tune_dst_params(episodes, **search)
+    return DSTSegmenter(best, "dst-tuned", "dst-tuned", info={"tuning": trace})
+
+
+def _learned(model_name: str) -> Callable[..., TorchSegmenter]:
+    def factory(in_channels: int = 10, num_classes: int = 5, device: str = "cpu", **model_kwargs: Any):
+        return TorchSegmenter(model_name, model_kwargs, in_channels, num_classes, device)
+
+    return factory
+
+
+#: name -> :class:`SegmenterEntry`
+SEGMENTERS: dict[str, SegmenterEntry] = {
+    "dst": SegmenterEntry(_make_dst, "dst", "argmax of the pignistic probability (pure DST)"),
+    "dst-tuned": SegmenterEntry(_make_dst_tuned, "dst", "DST parameters tuned on the training split"),
+    "unet-light": SegmenterEntry(_learned("unet-light"), "learned", "light U-Net, trains on a CPU"),
+    "unet-temporal": SegmenterEntry(
+        _learned("unet-temporal"), "learned", "U-Net with separate t / t-1 streams"
+    ),
+    "fcn8s-vgg16": SegmenterEntry(_learned("fcn8s-vgg16"), "learned", "the paper's VGG-16 FCN-8s"),
+}
+
+
+def register_segmenter(
+    name: str, factory: Callable[..., Segmenter], kind: str, description: str = "", overwrite: bool = False
+) -> None:
+    """Add a segmenter to :data:`SEGMENTERS`.
+
+    Raises:
+        ValueError: if ``name`` exists (and not ``overwrite``) or ``kind`` is unknown.
+    """
+    if kind not in ("dst", "learned"):
+        raise ValueError(f"segmenter kind must be 'dst' or 'learned', got {kind!r}")
+    if name in SEGMENTERS and not overwrite:
+        raise ValueError(f"segmenter {name!r} is already registered")
+    SEGMENTERS[name] = SegmenterEntry(factory, kind, description)
+
+
+def segmenter_kind(name: str) -> str:
+    """``"dst"`` or ``"learned"`` for a registered name."""
+    return _entry(name).kind
+
+
+def _entry(name: str) -> SegmenterEntry:
+    if name not in SEGMENTERS:
+        raise ValueError(f"unknown segmenter {name!r}; choose from {', '.join(SEGMENTERS)}")
+    return SEGMENTERS[name]
+
+
+def create_segmenter(name: str, **kwargs: Any) -> Segmenter:
+    """Create a registered segmenter; ``kwargs`` go to its factory."""
+    return _entry(name).factory(**kwargs)

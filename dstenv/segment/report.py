@@ -1,0 +1,191 @@
+"""Benchmark outputs: a Markdown table, JSON, and PNG figures (the paper's Tables 2-3, Figs. 6-8).
+
+Everything here reads the JSON-compatible ``results`` dict built by
+:func:`dstenv.segment.benchmark.run_benchmark` (plus a few arrays for the
+example grids), so a report can be redrawn from ``results.json`` alone.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from dstenv.dst.frame import CLASSES
+from dstenv.frame import IGNORE_INDEX
+
+__all__ = ["write_json", "markdown_table", "plot_confusions", "plot_curves", "plot_examples", "CLASS_COLORS"]
+
+#: RGB colour per class (navigable, non_navigable, building, static, moving), grey = ignore
+CLASS_COLORS = np.array(
+    [[0.85, 0.85, 0.85], [0.55, 0.75, 0.45], [0.35, 0.35, 0.55], [0.95, 0.65, 0.10], [0.85, 0.10, 0.10]]
+)
+_IGNORE_COLOR = np.array([1.0, 1.0, 1.0])
+
+
+def _atomic_write(path: Path, data: bytes) -> None:
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    tmp.write_bytes(data)
+    os.replace(tmp, path)
+
+
+def write_json(path: str | Path, results: dict[str, Any]) -> Path:
+    """Write ``results`` as indented JSON, atomically."""
+    path = Path(path)
+    _atomic_write(path, (json.dumps(results, indent=2, allow_nan=False) + "\n").encode())
+    return path
+
+
+def _fmt(x: float | None) -> str:
+    return "-" if x is None else f"{x:.3f}"
+
+
+def markdown_table(results: dict[str, Any]) -> str:
+    """The benchmark's tables: per-class IoU and mIoU, then accuracy/precision/recall.
+
+    One block for all labelled cells and one for visible cells; one row per segmenter.
+    """
+    lines = [f"# Segmenter benchmark ({results.get('preset', 'custom')} preset)", ""]
+    data = results.get("data", {})
+    if data:
+        lines += [
+            f"Test split: {data.get('test_frames', '?')} frames from {data.get('test_episodes', '?')} held-out "
+            f"map seeds (never used in training); train {data.get('train_frames', '?')} frames, "
+            f"val {data.get('val_frames', '?')}; grid {data.get('grid_shape', '?')} cells of "
+            f"{data.get('cell_size', '?')} m.",
+            "",
+        ]
+    for scope, title in (("all", "all labelled cells"), ("visible", "visible cells only")):
+        lines += [f"## IoU over {title}", "", "| segmenter | " + " | ".join(CLASSES) + " | mIoU |",
+                  "|---|" + "---:|" * (len(CLASSES) + 1)]
+        for label, seg in results["segmenters"].items():
+            m = seg[scope]
+            lines.append(f"| {label} | " + " | ".join(_fmt(m["iou"][c]) for c in CLASSES)
+                         + f" | **{_fmt(m['miou'])}** |")
+        lines += ["", f"## Accuracy, precision, recall over {title} (precision/recall: class means)", "",
+                  "| segmenter | accuracy | precision | recall | "
+                  + " | ".join(f"P {c} | R {c}" for c in ("static", "moving")) + " |",
+                  "|---|---:|---:|---:|---:|---:|---:|---:|"]
+        for label, seg in results["segmenters"].items():
+            m = seg[scope]
+            lines.append(
+                f"| {label} | {_fmt(m['accuracy'])} | {_fmt(m['mean_precision'])} | {_fmt(m['mean_recall'])} | "
+                + " | ".join(f"{_fmt(m['precision'][c])} | {_fmt(m['recall'][c])}" for c in ("static", "moving"))
+                + " |"
+            )
+        lines.append("")
+    goal = results.get("goal")
+    if goal:
+        lines += ["## Goal", "",
+                  f"Best learned: **{goal['best_learned']}** mIoU {_fmt(goal['best_learned_miou'])}; "
+                  f"best DST: **{goal['best_dst']}** mIoU {_fmt(goal['best_dst_miou'])}; "
+                  f"margin {_fmt(goal['margin'])} (goal >= 0.15: {'met' if goal['margin_met'] else 'NOT met'}); "
+                  f"moving IoU {_fmt(goal['moving_iou'])} (goal >= 0.6: {'met' if goal['moving_met'] else 'NOT met'}); "
+                  f"static IoU {_fmt(goal['static_iou'])} (goal >= 0.5: {'met' if goal['static_met'] else 'NOT met'}).",
+                  ""]
+    if results.get("command"):
+        lines += ["Reproduce with:", "", "```", results["command"], "```", ""]
+    return "\n".join(lines)
+
+
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _save(fig: Any, path: Path) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.stem}.tmp-{os.getpid()}{path.suffix}")
+    fig.savefig(tmp, dpi=110, bbox_inches="tight")
+    os.replace(tmp, path)
+    _plt().close(fig)
+    return path
+
+
+def plot_confusions(results: dict[str, Any], path: str | Path, scope: str = "all") -> Path:
+    """Row-normalised confusion matrices (true rows, predicted columns), one panel per segmenter."""
+    plt = _plt()
+    segs = results["segmenters"]
+    n = len(segs)
+    fig, axes = plt.subplots(1, n, figsize=(3.4 * n, 3.4), squeeze=False)
+    short = [c[:5] for c in CLASSES]
+    for ax, (label, seg) in zip(axes[0], segs.items()):
+        cm = np.asarray(seg[scope]["confusion"], dtype=np.float64)
+        rows = cm.sum(1, keepdims=True)
+        norm = np.divide(cm, rows, out=np.zeros_like(cm), where=rows > 0)
+        ax.imshow(norm, vmin=0, vmax=1, cmap="Blues")
+        for i in range(len(CLASSES)):
+            for j in range(len(CLASSES)):
+                ax.text(j, i, f"{norm[i, j]:.2f}", ha="center", va="center", fontsize=7,
+                        color="white" if norm[i, j] > 0.6 else "black")
+        ax.set_xticks(range(len(CLASSES)), short, rotation=45, fontsize=7)
+        ax.set_yticks(range(len(CLASSES)), short, fontsize=7)
+        ax.set_title(f"{label}\nmIoU {_fmt(seg[scope]['miou'])}", fontsize=8)
+        ax.set_xlabel("predicted", fontsize=7)
+    axes[0][0].set_ylabel("true", fontsize=7)
+    fig.suptitle(f"confusion matrices ({scope} cells)", fontsize=9)
+    return _save(fig, Path(path))
+
+
+def plot_curves(histories: dict[str, dict[str, list]], path: str | Path) -> Path:
+    """Training and validation loss, and validation mIoU, per epoch (the paper's Fig. 6)."""
+    plt = _plt()
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(9, 3.4))
+    for name, h in histories.items():
+        ax1.plot(h["epoch"], h["train_loss"], "-o", ms=3, label=f"{name} train")
+        if any(v is not None for v in h["val_loss"]):
+            ax1.plot(h["epoch"], [np.nan if v is None else v for v in h["val_loss"]], "--o", ms=3,
+                     label=f"{name} val")
+            ax2.plot(h["epoch"], [np.nan if v is None else v for v in h["val_miou"]], "-o", ms=3, label=name)
+    ax1.set_xlabel("epoch")
+    ax1.set_ylabel("loss")
+    ax1.legend(fontsize=7)
+    ax2.set_xlabel("epoch")
+    ax2.set_ylabel("validation mIoU")
+    ax2.legend(fontsize=7)
+    return _save(fig, Path(path))
+
+
+def _colorize(labels: np.ndarray) -> np.ndarray:
+    lab = np.asarray(labels)
+    rgb = np.empty((*lab.shape, 3))
+    ign = lab == IGNORE_INDEX
+    rgb[~ign] = CLASS_COLORS[np.clip(lab[~ign], 0, len(CLASSES) - 1)]
+    rgb[ign] = _IGNORE_COLOR
+    return rgb
+
+
+def plot_examples(examples: list[dict[str, Any]], path: str | Path) -> Path:
+    """Example grids (the paper's Fig. 8): DST BetP(moving), predictions, ground truth.
+
+    Args:
+        examples: each ``{"title": str, "betp_moving": (H, W) float, "predictions":
+            {label: (H, W) int}, "labels": (H, W) int}``.
+    """
+    plt = _plt()
+    if not examples:
+        raise ValueError("no examples to plot")
+    names = list(examples[0]["predictions"])
+    ncol = 2 + len(names)
+    fig, axes = plt.subplots(len(examples), ncol, figsize=(2.3 * ncol, 2.4 * len(examples)), squeeze=False)
+    for row, ex in zip(axes, examples):
+        row[0].imshow(ex["betp_moving"], vmin=0, vmax=1, cmap="magma")
+        row[0].set_title(f"DST BetP(moving)\n{ex['title']}", fontsize=7)
+        for ax, name in zip(row[1:], names):
+            ax.imshow(_colorize(ex["predictions"][name]), interpolation="nearest")
+            ax.set_title(name, fontsize=7)
+        row[-1].imshow(_colorize(ex["labels"]), interpolation="nearest")
+        row[-1].set_title("ground truth", fontsize=7)
+        for ax in row:
+            ax.set_xticks([])
+            ax.set_yticks([])
+    handles = [plt.Rectangle((0, 0), 1, 1, color=CLASS_COLORS[k]) for k in range(len(CLASSES))]
+    fig.legend(handles, CLASSES, loc="lower center", ncol=len(CLASSES), fontsize=7)
+    return _save(fig, Path(path))

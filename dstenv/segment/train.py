@@ -1,0 +1,234 @@
+"""Training a learned segmenter: Adam, weighted CE / Lovasz, atomic resumable checkpoints.
+
+:func:`train` fits a network from :data:`dstenv.segment.models.MODELS` on a
+dataset of ``{"x", "labels", "visible"}`` dicts (``dstenv.data.ShardDataset`` or
+a streaming ``IterableDataset``). After every epoch it writes ``last.pt`` (model,
+optimizer, epoch, torch RNG state, history, configuration) and, when the
+validation mIoU improves, ``best.pt``; both atomically. Calling it again with the
+same output directory resumes after the last finished epoch and gives the same
+weights as an uninterrupted run (on CPU): batch order and crops come from a
+generator seeded by ``(seed, epoch)``, dropout from the restored torch RNG.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from dstenv.config import ConfigError, merge_config
+from dstenv.dst.frame import CLASSES
+from dstenv.segment.checkpoint import load_checkpoint, save_checkpoint
+from dstenv.segment.losses import LOSSES, build_loss, class_statistics, median_frequency_weights
+from dstenv.segment.metrics import ConfusionMeter, iou_per_class, mean_iou
+from dstenv.segment.models import MODELS
+from dstenv.segment.segmenters import TorchSegmenter
+
+__all__ = ["default_train_config", "train", "resolve_device"]
+
+
+def default_train_config() -> dict[str, Any]:
+    """Every training option with its default (override with :func:`dstenv.config.merge_config`)."""
+    return {
+        "model": "unet-light",  # key of dstenv.segment.models.MODELS
+        "model_kwargs": {},  # builder options, e.g. {"base": 16}
+        "loss": "wce+lovasz",  # one of dstenv.segment.losses.LOSSES
+        "class_weights": None,  # list of 5 floats; None: median frequency of the training data
+        "epochs": 10,
+        "batch_size": 8,
+        "lr": 1e-3,  # Adam learning rate (betas 0.9/0.999, eps 1e-8 as in the paper)
+        "weight_decay": 0.0,
+        "crop": 0,  # [cells] side of random square training crops; 0: whole grids
+        "max_batches": 0,  # training batches per epoch; 0: the whole dataset (required for streams)
+        "seed": 0,
+        "device": "cpu",  # "cpu", "cuda" or "auto"
+        "num_workers": 0,  # DataLoader workers
+    }
+
+
+def resolve_device(name: str) -> torch.device:
+    """``"auto"`` -> CUDA when available, else CPU; otherwise ``torch.device(name)``."""
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    if name.startswith("cuda") and not torch.cuda.is_available():
+        raise ConfigError(f"device {name!r} requested but CUDA is not available")
+    return torch.device(name)
+
+
+def _check(cfg: dict[str, Any]) -> None:
+    if cfg["model"] not in MODELS:
+        raise ConfigError(f"train.model: unknown model {cfg['model']!r}; choose from {', '.join(MODELS)}")
+    if cfg["loss"] not in LOSSES:
+        raise ConfigError(f"train.loss: unknown loss {cfg['loss']!r}; choose from {', '.join(LOSSES)}")
+    for key in ("epochs", "batch_size"):
+        if cfg[key] < 1:
+            raise ConfigError(f"train.{key}: must be >= 1, got {cfg[key]}")
+    if cfg["crop"] < 0 or cfg["max_batches"] < 0 or cfg["lr"] <= 0:
+        raise ConfigError("train.crop/max_batches must be >= 0 and train.lr > 0")
+
+
+def _class_weights(cfg: dict[str, Any], data: Any, log: Callable[[str], None]) -> list[float] | None:
+    if not cfg["loss"].startswith("wce"):
+        return None
+    if cfg["class_weights"] is not None:
+        if len(cfg["class_weights"]) != len(CLASSES):
+            raise ConfigError(f"train.class_weights: need {len(CLASSES)} values, got {len(cfg['class_weights'])}")
+        return [float(w) for w in cfg["class_weights"]]
+    if isinstance(data, torch.utils.data.IterableDataset):
+        raise ConfigError("train.class_weights must be given for a streaming dataset")
+    loader = torch.utils.data.DataLoader(data, batch_size=16, num_workers=cfg["num_workers"])
+    counts, present = class_statistics((b["labels"] for b in loader), len(CLASSES))
+    weights = median_frequency_weights(counts, present)
+    log("class weights (median frequency): " + ", ".join(f"{n} {w:.3g}" for n, w in zip(CLASSES, weights)))
+    return [float(w) for w in weights]
+
+
+def _crop(batch: dict[str, torch.Tensor], size: int, gen: torch.Generator) -> dict[str, torch.Tensor]:
+    h, w = batch["labels"].shape[-2:]
+    if size <= 0 or (size >= h and size >= w):
+        return batch
+    ch, cw = min(size, h), min(size, w)
+    i = int(torch.randint(0, h - ch + 1, (1,), generator=gen))
+    j = int(torch.randint(0, w - cw + 1, (1,), generator=gen))
+    return {k: (v[..., i : i + ch, j : j + cw] if v.dim() >= 3 else v) for k, v in batch.items()}
+
+
+def train(
+    config: Mapping[str, Any],
+    train_data: Any,
+    val_data: Any = None,
+    out_dir: str | Path | None = None,
+    resume: bool = True,
+    progress: bool = True,
+    log: Callable[[str], None] = print,
+) -> tuple[TorchSegmenter, dict[str, Any]]:
+    """Train a network.
+
+    Args:
+        config: overrides of :func:`default_train_config`.
+        train_data: map-style or iterable dataset of ``{"x": (C, H, W) float32,
+            "labels": (H, W) int64, "visible": (H, W) bool}``.
+        val_data: optional map-style dataset scored after every epoch.
+        out_dir: where ``last.pt``/``best.pt`` go; ``None`` keeps nothing on disk.
+        resume: continue from ``out_dir/last.pt`` if it exists.
+        progress: tqdm bars.
+        log: receives one-line messages.
+
+    Returns:
+        ``(segmenter, history)``: the trained network (weights of the last epoch) and
+        ``{"epoch", "train_loss", "val_loss", "val_miou", "val_iou"}`` lists.
+    """
+    cfg = merge_config(default_train_config(), dict(config), where="train")
+    _check(cfg)
+    device = resolve_device(cfg["device"])
+    streaming = isinstance(train_data, torch.utils.data.IterableDataset)
+    if streaming and cfg["max_batches"] < 1:
+        raise ConfigError("train.max_batches must be > 0 for a streaming dataset (it has no end)")
+    sample = next(iter(train_data)) if streaming else train_data[0]
+    in_channels = int(sample["x"].shape[0])
+
+    out = Path(out_dir) if out_dir is not None else None
+    last = out / "last.pt" if out else None
+    ckpt = load_checkpoint(last) if (resume and last is not None and last.exists()) else None
+    if ckpt is not None:
+        saved = {k: v for k, v in ckpt["config"].items() if k != "epochs"}
+        mine = {k: v for k, v in cfg.items() if k not in ("epochs", "class_weights")}
+        saved.pop("class_weights", None)
+        if saved != mine:
+            diff = sorted(k for k in mine if saved.get(k) != mine[k])
+            raise ConfigError(f"{last}: checkpoint was trained with other settings ({', '.join(diff)}); "
+                              "use another output directory or --no-resume")
+        cfg["class_weights"] = ckpt["config"]["class_weights"]
+    else:
+        cfg["class_weights"] = _class_weights(cfg, train_data, log)
+
+    torch.manual_seed(cfg["seed"])
+    seg = TorchSegmenter(cfg["model"], cfg["model_kwargs"], in_channels, len(CLASSES), device)
+    model = seg.model
+    weights = None if cfg["class_weights"] is None else np.asarray(cfg["class_weights"], dtype=np.float32)
+    loss_fn = build_loss(cfg["loss"], weights).to(device)
+    opt = torch.optim.Adam(model.parameters(), lr=cfg["lr"], betas=(0.9, 0.999), eps=1e-8,
+                           weight_decay=cfg["weight_decay"])
+    history: dict[str, list] = {"epoch": [], "train_loss": [], "val_loss": [], "val_miou": [], "val_iou": []}
+    start = 0
+    if ckpt is not None:
+        model.load_state_dict(ckpt["model"])
+        opt.load_state_dict(ckpt["optimizer"])
+        history = ckpt["history"]
+        start = int(ckpt["epoch"]) + 1
+        torch.set_rng_state(ckpt["rng"]["torch"])
+        log(f"resuming from {last} after epoch {start}")
+
+    best = max((m for m in history["val_miou"] if m is not None), default=-1.0)
+    for epoch in range(start, cfg["epochs"]):
+        gen = torch.Generator().manual_seed(cfg["seed"] * 100_003 + epoch)
+        if hasattr(train_data, "set_epoch"):  # streaming: a new episode stream per epoch
+            train_data.set_epoch(epoch)
+        loader = torch.utils.data.DataLoader(
+            train_data, batch_size=cfg["batch_size"], shuffle=not streaming, generator=gen,
+            num_workers=cfg["num_workers"], drop_last=False,
+        )
+        n_batches = len(loader) if not streaming else cfg["max_batches"]
+        if cfg["max_batches"]:
+            n_batches = min(n_batches, cfg["max_batches"])
+        model.train()
+        total, count = 0.0, 0
+        bar = tqdm(loader, total=n_batches, desc=f"epoch {epoch + 1}/{cfg['epochs']}", disable=not progress,
+                   leave=False)
+        for b, batch in enumerate(bar):
+            if b >= n_batches:
+                break
+            batch = _crop(batch, cfg["crop"], gen)
+            x = batch["x"].to(device).float()
+            y = batch["labels"].to(device).long()
+            loss = loss_fn(model(x), y)
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            opt.step()
+            total += float(loss.detach())
+            count += 1
+            bar.set_postfix(loss=f"{total / count:.4f}")
+        bar.close()
+        val_loss, val_miou, val_iou = _validate(model, loss_fn, val_data, cfg, device)
+        history["epoch"].append(epoch + 1)
+        history["train_loss"].append(total / max(count, 1))
+        history["val_loss"].append(val_loss)
+        history["val_miou"].append(val_miou)
+        history["val_iou"].append(val_iou)
+        log(f"epoch {epoch + 1}: train loss {total / max(count, 1):.4f}"
+            + (f", val loss {val_loss:.4f}, val mIoU {val_miou:.3f}" if val_miou is not None else ""))
+        if out is not None:
+            payload = {"spec": seg.spec(), "model": model.state_dict(), "optimizer": opt.state_dict(),
+                       "epoch": epoch, "rng": {"torch": torch.get_rng_state()}, "config": cfg,
+                       "history": history}
+            save_checkpoint(last, payload)
+            score = val_miou if val_miou is not None else -(total / max(count, 1))
+            if score > best:
+                best = score
+                save_checkpoint(out / "best.pt", payload)
+    model.eval()
+    return seg, history
+
+
+@torch.no_grad()
+def _validate(model, loss_fn, val_data, cfg, device) -> tuple[float | None, float | None, list | None]:
+    if val_data is None:
+        return None, None, None
+    model.eval()
+    meter = ConfusionMeter(len(CLASSES))
+    total, count = 0.0, 0
+    loader = torch.utils.data.DataLoader(val_data, batch_size=cfg["batch_size"], num_workers=cfg["num_workers"])
+    for batch in loader:
+        x = batch["x"].to(device).float()
+        y = batch["labels"].to(device).long()
+        logits = model(x)
+        total += float(loss_fn(logits, y))
+        count += 1
+        meter.update(logits.argmax(1).cpu(), y.cpu())
+    iou = [None if np.isnan(v) else float(v) for v in iou_per_class(meter.all)]
+    miou = mean_iou(meter.all)
+    return total / max(count, 1), (None if np.isnan(miou) else miou), iou

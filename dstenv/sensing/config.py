@@ -1,0 +1,117 @@
+"""Default configuration of the sensing subsystem (sections ``lidar``, ``gis``, ``labels``).
+
+Each section is a plain dict with units in comments (HighwayEnv style). Overrides are
+validated with :func:`dstenv.config.merge_config`: an unknown key raises
+:class:`dstenv.config.ConfigError` naming it and the allowed keys. The pipeline puts
+these sections next to ``world``, ``grid`` and ``dst`` in its own config.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+from dstenv.config import ConfigError, merge_config
+
+__all__ = [
+    "default_config",
+    "default_lidar_config",
+    "default_gis_config",
+    "default_labels_config",
+    "lidar_config",
+    "gis_config",
+    "labels_config",
+]
+
+
+def default_lidar_config() -> dict[str, Any]:
+    """The ``lidar`` section: a 2-D scanning LIDAR (a Velodyne sliced to the ground plane)."""
+    return {
+        "beams": 1800,  # number of beams per sweep [-] (0.2 deg spacing over 360 deg)
+        "fov": 360.0,  # horizontal field of view [deg], centred on ego-forward
+        "max_range": 80.0,  # [m]; beyond it a beam has no return
+        "range_noise": 0.0,  # std of additive Gaussian range noise on returns [m]
+        "dropout": 0.0,  # probability that a beam yields no measurement at all [-]
+        "mount_x": 0.0,  # sensor position ahead of the ego centre [m]
+        "mount_y": 0.0,  # sensor position left of the ego centre [m]
+        # building occlusion geometry: "polygons" (exact, WorldMap.buildings),
+        # "raster" (exact DDA over BUILDING cells of WorldMap.raster) or "auto"
+        # (polygons when the map has any, else the raster)
+        "buildings": "auto",
+    }
+
+
+def default_gis_config() -> dict[str, Any]:
+    """The ``gis`` section: errors of the map / localisation used for the GIS grid."""
+    return {
+        "offset_std": 0.0,  # std of the pose offset along ego x and ego y [m]
+        "rotation_std": 0.0,  # std of the heading error [rad]
+        "missing_building_prob": 0.0,  # probability that a building is absent from the map [-]
+    }
+
+
+def default_labels_config() -> dict[str, Any]:
+    """The ``labels`` section: how ground truth is derived."""
+    return {
+        # an agent is "moving" when its speed exceeds this (the paper's 10 cm between
+        # two 10 Hz measurements, per second), otherwise "static" [m/s]
+        "moving_threshold": 0.1,
+    }
+
+
+def default_config() -> dict[str, dict[str, Any]]:
+    """All sensing sections: ``{"lidar": ..., "gis": ..., "labels": ...}``."""
+    return {
+        "lidar": default_lidar_config(),
+        "gis": default_gis_config(),
+        "labels": default_labels_config(),
+    }
+
+
+def _nonneg(cfg: Mapping[str, Any], key: str, where: str) -> None:
+    if not cfg[key] >= 0:
+        raise ConfigError(f"{where}.{key}: must be >= 0, got {cfg[key]!r}")
+
+
+def _prob(cfg: Mapping[str, Any], key: str, where: str) -> None:
+    if not 0.0 <= cfg[key] <= 1.0:
+        raise ConfigError(f"{where}.{key}: must lie in [0, 1], got {cfg[key]!r}")
+
+
+def lidar_config(overrides: Mapping[str, Any] | None = None, where: str = "lidar") -> dict[str, Any]:
+    """Merge and validate a ``lidar`` section.
+
+    Raises:
+        ConfigError: unknown key, wrong type, or a value out of range (named).
+    """
+    cfg = merge_config(default_lidar_config(), overrides, where)
+    if cfg["beams"] < 1:
+        raise ConfigError(f"{where}.beams: must be >= 1, got {cfg['beams']!r}")
+    if not 0.0 < cfg["fov"] <= 360.0:
+        raise ConfigError(f"{where}.fov: must lie in (0, 360] deg, got {cfg['fov']!r}")
+    if not cfg["max_range"] > 0.0:
+        raise ConfigError(f"{where}.max_range: must be > 0 m, got {cfg['max_range']!r}")
+    _nonneg(cfg, "range_noise", where)
+    _prob(cfg, "dropout", where)
+    allowed = ("auto", "polygons", "raster")
+    if cfg["buildings"] not in allowed:
+        raise ConfigError(
+            f"{where}.buildings: unknown value {cfg['buildings']!r}; allowed: {', '.join(allowed)}"
+        )
+    return cfg
+
+
+def gis_config(overrides: Mapping[str, Any] | None = None, where: str = "gis") -> dict[str, Any]:
+    """Merge and validate a ``gis`` section (see :func:`lidar_config`)."""
+    cfg = merge_config(default_gis_config(), overrides, where)
+    _nonneg(cfg, "offset_std", where)
+    _nonneg(cfg, "rotation_std", where)
+    _prob(cfg, "missing_building_prob", where)
+    return cfg
+
+
+def labels_config(overrides: Mapping[str, Any] | None = None, where: str = "labels") -> dict[str, Any]:
+    """Merge and validate a ``labels`` section (see :func:`lidar_config`)."""
+    cfg = merge_config(default_labels_config(), overrides, where)
+    _nonneg(cfg, "moving_threshold", where)
+    return cfg

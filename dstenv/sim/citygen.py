@@ -1,0 +1,257 @@
+"""Seeded procedural city: a street grid with T junctions, kerbside parking and buildings.
+
+Streets run along x and y (Manhattan style) with varied spacing and 1-3 lanes
+per direction. Some interior street segments are removed, which merges two blocks
+and turns their junctions into T junctions. Each block gets, from the kerb in: a
+curb strip (parking strip or verge), a sidewalk, a setback, then a row of
+buildings of varied frontage and depth with gaps (alleys, driveways, empty lots).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from dstenv.sim.lanes import Control, NetworkBuilder
+from dstenv.sim.raster import Surface, fill_rect
+from dstenv.sim.roads import RoadEdge, add_road_lanes
+from dstenv.sim.sidewalks import LANE_OFFSET, add_block_rings
+from dstenv.sim.types import MapClass, WorldMap
+
+__all__ = ["generate_city", "SLOT_LENGTH"]
+
+SLOT_LENGTH = 6.0  # [m] length of one kerbside parking slot
+STOP_MARGIN = 4.4  # [m] stop line behind the crosswalk's outer walking line
+
+
+def generate_city(cfg: dict[str, Any], traffic: dict[str, Any],
+                  rng: np.random.Generator) -> WorldMap:
+    """Generate a city map from the ``map`` and ``traffic`` config sections.
+
+    Returns:
+        A :class:`WorldMap` with ``lanes`` a :class:`~dstenv.sim.lanes.LaneNetwork`
+        and ``meta`` keys ``surface`` (``(Hm, Wm) uint8`` :class:`Surface` codes),
+        ``parking_slots`` (``(S, 3) float64`` x, y, yaw), ``kind``.
+    """
+    lw, curb, sw = cfg["lane_width"], cfg["curb_strip_width"], cfg["sidewalk_width"]
+    margin = cfg["margin"]
+    nx, ny = cfg["blocks_x"] + 1, cfg["blocks_y"] + 1
+    if nx < 2 or ny < 2:
+        raise ValueError("map.blocks_x and map.blocks_y must be >= 1")
+    xs = margin + np.concatenate([[0], np.cumsum(rng.uniform(cfg["block_min"], cfg["block_max"], nx - 1))])
+    ys = margin + np.concatenate([[0], np.cumsum(rng.uniform(cfg["block_min"], cfg["block_max"], ny - 1))])
+    lanes_x = rng.integers(cfg["lanes_min"], cfg["lanes_max"] + 1, nx)
+    lanes_y = rng.integers(cfg["lanes_min"], cfg["lanes_max"] + 1, ny)
+    hwx, hwy = lanes_x * lw, lanes_y * lw  # half widths of the streets [m]
+
+    # street segments (True = exists) and T junctions by merging neighbouring cells
+    vseg = np.ones((nx, ny - 1), bool)  # x line i, from y_j to y_j+1
+    hseg = np.ones((nx - 1, ny), bool)  # y line j, from x_i to x_i+1
+    parent = {(i, j): (i, j) for i in range(nx - 1) for j in range(ny - 1)}
+    merged: set[tuple[int, int]] = set()
+    candidates = [("v", i, j) for i in range(1, nx - 1) for j in range(ny - 1)] + \
+                 [("h", i, j) for i in range(nx - 1) for j in range(1, ny - 1)]
+    for k in rng.permutation(len(candidates)):
+        t, i, j = candidates[k]
+        if rng.random() >= cfg["t_junction_prob"]:
+            continue
+        cells = [(i - 1, j), (i, j)] if t == "v" else [(i, j - 1), (i, j)]
+        ends = [(i, j), (i, j + 1)] if t == "v" else [(i, j), (i + 1, j)]
+        if any(c in merged for c in cells) or any(_degree(vseg, hseg, *e) <= 3 for e in ends):
+            continue
+        (vseg if t == "v" else hseg)[i, j] = False
+        merged.update(cells)
+        parent[cells[1]] = cells[0]
+    faces_cells: dict[tuple[int, int], list[tuple[int, int]]] = {}
+    for c in parent:
+        faces_cells.setdefault(parent[c], []).append(c)
+    face_of = {c: fi for fi, cs in enumerate(faces_cells.values()) for c in cs}
+    faces = []
+    for cs in faces_cells.values():
+        i0, i1 = min(c[0] for c in cs), max(c[0] for c in cs) + 1
+        j0, j1 = min(c[1] for c in cs), max(c[1] for c in cs) + 1
+        faces.append((xs[i0] + hwx[i0], xs[i1] - hwx[i1], ys[j0] + hwy[j0], ys[j1] - hwy[j1]))
+
+    # street graph -> lanes
+    node_xy = np.array([(xs[i], ys[j]) for i in range(nx) for j in range(ny)])
+    nid = lambda i, j: i * ny + j  # noqa: E731
+    hw_node = np.array([max(hwx[i], hwy[j]) for i in range(nx) for j in range(ny)])
+    reach = hw_node + curb + sw / 2  # [m] node -> middle of the crossing sidewalk
+    edges = [RoadEdge(nid(i, j), nid(i, j + 1), node_xy[[nid(i, j), nid(i, j + 1)]],
+                      int(lanes_x[i]), int(lanes_x[i])) for i, j in zip(*np.nonzero(vseg))]
+    edges += [RoadEdge(nid(i, j), nid(i + 1, j), node_xy[[nid(i, j), nid(i + 1, j)]],
+                       int(lanes_y[j]), int(lanes_y[j])) for i, j in zip(*np.nonzero(hseg))]
+    builder = NetworkBuilder()
+    degree = add_road_lanes(builder, len(node_xy), edges, reach + STOP_MARGIN, lw)
+    u = rng.random(len(node_xy))
+    p_stop, p_sig = traffic["stop_sign_prob"], traffic["signal_prob"]
+    control = np.where(u < p_stop, Control.STOP, np.where(u < p_stop + p_sig, Control.SIGNAL,
+                                                         Control.YIELD)).astype(np.uint8)
+    control[degree <= 2] = Control.NONE
+    phase = rng.uniform(0, 2 * (traffic["signal_green"] + 3.0), len(node_xy))
+
+    # crosswalks: both sides of every street leaving a junction, between the blocks it separates
+    inset = curb + sw / 2
+    crossings, zebras = [], []
+    for i in range(nx):
+        for j in range(ny):
+            n = nid(i, j)
+            if degree[n] < 3:
+                continue
+            arms = [((0, 1), vseg, (i, j), (i - 1, j), (i, j), hwx[i]),
+                    ((0, -1), vseg, (i, j - 1), (i, j - 1), (i - 1, j - 1), hwx[i]),
+                    ((1, 0), hseg, (i, j), (i, j), (i, j - 1), hwy[j]),
+                    ((-1, 0), hseg, (i - 1, j), (i - 1, j - 1), (i - 1, j), hwy[j])]
+            for d, segs, sidx, left_cell, right_cell, hw in arms:
+                if not (0 <= sidx[0] < segs.shape[0] and 0 <= sidx[1] < segs.shape[1]) \
+                        or not segs[sidx]:
+                    continue
+                if left_cell not in face_of or right_cell not in face_of:
+                    continue
+                d = np.array(d, float)
+                p = np.array([-d[1], d[0]])  # left of the arm's direction
+                lat = hw + inset - LANE_OFFSET
+                for along, a, b in ((1.9, left_cell, right_cell), (3.1, right_cell, left_cell)):
+                    base = node_xy[n] + d * (reach[n] + along)
+                    sgn = 1.0 if a == left_cell else -1.0
+                    crossings.append((face_of[a], face_of[b], base + sgn * p * lat, base - sgn * p * lat))
+                zebras.append((node_xy[n] + d * (reach[n] + 2.5), d, hw))
+    add_block_rings(builder, faces, inset, crossings)
+    network = builder.build(node_xy, control, phase, lw)
+
+    # rasters
+    res = cfg["resolution"]
+    width, height = xs[-1] + margin, ys[-1] + margin
+    shape = (int(np.ceil(height / res)), int(np.ceil(width / res)))
+    raster = np.full(shape, MapClass.INTERMEDIATE, np.uint8)
+    surface = np.full(shape, Surface.YARD, np.uint8)
+    org = (0.0, 0.0)
+    for fx0, fx1, fy0, fy1 in faces:
+        fill_rect(surface, fx0, fx1, fy0, fy1, org, res, Surface.SIDEWALK)
+        fill_rect(surface, fx0 + curb + sw, fx1 - curb - sw, fy0 + curb + sw, fy1 - curb - sw,
+                  org, res, Surface.YARD)
+    for i, j in zip(*np.nonzero(vseg)):
+        for r in (raster, surface):
+            fill_rect(r, xs[i] - hwx[i], xs[i] + hwx[i], ys[j] - hwy[j], ys[j + 1] + hwy[j + 1],
+                      org, res, MapClass.ROAD if r is raster else Surface.ROAD)
+    for i, j in zip(*np.nonzero(hseg)):
+        for r in (raster, surface):
+            fill_rect(r, xs[i] - hwx[i], xs[i + 1] + hwx[i + 1], ys[j] - hwy[j], ys[j] + hwy[j],
+                      org, res, MapClass.ROAD if r is raster else Surface.ROAD)
+    for face in faces:
+        _fillet(raster, surface, face, curb + 0.5 * sw, res)
+    for centre, d, hw in zebras:
+        _zebra(surface, centre, d, hw, res)
+    slots = []
+    for face in faces:
+        slots += _parking(surface, face, cfg, rng, res)
+    buildings = []
+    for face in faces:
+        buildings += _buildings(face, cfg, rng)
+    for b in buildings:
+        for r, v in ((raster, MapClass.BUILDING), (surface, Surface.BUILDING)):
+            fill_rect(r, b[:, 0].min(), b[:, 0].max(), b[:, 1].min(), b[:, 1].max(), org, res, v)
+    meta = {"kind": "procedural", "surface": surface,
+            "parking_slots": np.array(slots, np.float64).reshape(-1, 3), "faces": faces}
+    return WorldMap(raster=raster, origin=org, resolution=res, buildings=buildings,
+                    lanes=network, meta=meta)
+
+
+def _degree(vseg: np.ndarray, hseg: np.ndarray, i: int, j: int) -> int:
+    nx, ny = vseg.shape[0], hseg.shape[1]
+    return int(sum([j < ny - 1 and vseg[i, j], j > 0 and vseg[i, j - 1],
+                    i < nx - 1 and hseg[i, j], i > 0 and hseg[i - 1, j]]))
+
+
+def _fillet(raster, surface, face, r, res):
+    """Round the kerb at the four corners of a block (radius ``r``)."""
+    x0, x1, y0, y1 = face
+    for cx, cy, sx, sy in ((x0, y0, 1, 1), (x1, y0, -1, 1), (x0, y1, 1, -1), (x1, y1, -1, -1)):
+        c_lo, c_hi = int(np.floor(min(cx, cx + sx * r) / res)), int(np.ceil(max(cx, cx + sx * r) / res))
+        r_lo, r_hi = int(np.floor(min(cy, cy + sy * r) / res)), int(np.ceil(max(cy, cy + sy * r) / res))
+        cols, rows = np.arange(c_lo, c_hi), np.arange(r_lo, r_hi)
+        xc, yc = (cols + 0.5) * res, (rows + 0.5) * res
+        inside_x = (xc - cx) * sx >= 0
+        inside_y = (yc - cy) * sy >= 0
+        ox, oy = cx + sx * r, cy + sy * r
+        far = ((xc[None, :] - ox) ** 2 + (yc[:, None] - oy) ** 2 > r * r)
+        corner = (xc[None, :] - ox) * sx < 0
+        corner &= ((yc[:, None] - oy) * sy < 0)
+        m = far & corner & inside_x[None, :] & inside_y[:, None]
+        rr, cc = np.nonzero(m)
+        rr, cc = rows[rr], cols[cc]
+        ok = (rr >= 0) & (rr < raster.shape[0]) & (cc >= 0) & (cc < raster.shape[1])
+        raster[rr[ok], cc[ok]] = MapClass.ROAD
+        surface[rr[ok], cc[ok]] = Surface.ROAD
+
+
+def _zebra(surface, centre, d, hw, res):
+    """Paint a zebra crossing 3 m wide across a street (drawing only)."""
+    p = np.array([-d[1], d[0]])
+    for k in np.arange(-hw + 0.25, hw, 1.0):
+        a = centre + p * k - d * 1.5
+        b = centre + p * (k + 0.5) + d * 1.5
+        fill_rect(surface, min(a[0], b[0]), max(a[0], b[0]), min(a[1], b[1]), max(a[1], b[1]),
+                  (0.0, 0.0), res, Surface.CROSSWALK)
+
+
+def _sides(face):
+    """The four sides of a block: (start, direction along, inward normal, length)."""
+    x0, x1, y0, y1 = face
+    return [(np.array([x0, y0]), np.array([1.0, 0]), np.array([0, 1.0]), x1 - x0),
+            (np.array([x1, y0]), np.array([0, 1.0]), np.array([-1.0, 0]), y1 - y0),
+            (np.array([x1, y1]), np.array([-1.0, 0]), np.array([0, -1.0]), x1 - x0),
+            (np.array([x0, y1]), np.array([0, -1.0]), np.array([1.0, 0]), y1 - y0)]
+
+
+def _parking(surface, face, cfg, rng, res) -> list[tuple[float, float, float]]:
+    """Parking strips along some block sides; returns the slots (x, y, yaw)."""
+    curb, sw = cfg["curb_strip_width"], cfg["sidewalk_width"]
+    keep_clear = curb + sw + 10.0  # [m] no parking near junctions (crosswalks, turns)
+    slots = []
+    for start, along, inward, length in _sides(face):
+        n = int((length - 2 * keep_clear) // SLOT_LENGTH)
+        if n < 1 or rng.random() >= cfg["parking_prob"]:
+            continue
+        s0 = (length - n * SLOT_LENGTH) / 2
+        a = start + along * s0
+        b = start + along * (s0 + n * SLOT_LENGTH) + inward * curb
+        fill_rect(surface, min(a[0], b[0]), max(a[0], b[0]), min(a[1], b[1]), max(a[1], b[1]),
+                  (0.0, 0.0), res, Surface.PARKING)
+        yaw = float(np.arctan2(-along[1], -along[0]))  # with the adjacent traffic (right-hand)
+        for k in range(n):
+            c = start + along * (s0 + (k + 0.5) * SLOT_LENGTH) + inward * curb / 2
+            slots.append((float(c[0]), float(c[1]), yaw))
+    return slots
+
+
+def _buildings(face, cfg, rng) -> list[np.ndarray]:
+    """Rows of buildings along the four sides of a block, without overlaps."""
+    front = cfg["curb_strip_width"] + cfg["sidewalk_width"]
+    x0, x1, y0, y1 = face
+    inner = (x0 + front, x1 - front, y0 + front, y1 - front)
+    if inner[1] - inner[0] < 4 or inner[3] - inner[2] < 4:
+        return []
+    boxes: list[tuple[float, float, float, float]] = []
+    for si in rng.permutation(4):
+        start, along, inward, length = _sides(inner)[si]
+        depth_room = (inner[3] - inner[2]) if along[0] != 0 else (inner[1] - inner[0])
+        setback = rng.uniform(cfg["setback_min"], cfg["setback_max"])
+        pos = 0.0
+        while pos < length - cfg["building_width_min"]:
+            w = min(rng.uniform(cfg["building_width_min"], cfg["building_width_max"]), length - pos)
+            d = min(rng.uniform(cfg["building_depth_min"], cfg["building_depth_max"]),
+                    depth_room / 2 - setback)
+            sb = setback + rng.uniform(0, 0.6)
+            if rng.random() < cfg["building_coverage"] and d > 3.0:
+                a = start + along * pos + inward * sb
+                b = start + along * (pos + w) + inward * (sb + d)
+                box = (min(a[0], b[0]), max(a[0], b[0]), min(a[1], b[1]), max(a[1], b[1]))
+                if all(min(box[1], o[1]) - max(box[0], o[0]) <= 0.3 or
+                       min(box[3], o[3]) - max(box[2], o[2]) <= 0.3 for o in boxes):
+                    boxes.append(box)
+            pos += w
+            if rng.random() < cfg["gap_prob"]:
+                pos += rng.uniform(cfg["gap_min"], cfg["gap_max"])
+    return [np.array([[b[0], b[2]], [b[1], b[2]], [b[1], b[3]], [b[0], b[3]]]) for b in boxes]

@@ -1,0 +1,407 @@
+"""A highway-env scene as a world source for the dstenv pipeline.
+
+:class:`HighwayWorld` has the interface of :class:`dstenv.sim.World` (``reset``,
+``step``, ``map``, ``agents``, ``ego_pose``, ``ego_speed``, ``time``, ``collision``,
+``off_road``, ``progress``) but takes its road network and traffic from a
+`highway-env <https://github.com/Farama-Foundation/HighwayEnv>`_ environment:
+
+* every lane of the scene's road network is rasterised as road, the rest of the map
+  (a ``margin`` around the lanes) as intermediate space;
+* rectangular buildings are placed off-road (at least ``setback`` from any lane,
+  seeded per episode) so that the LIDAR is occluded as in a city;
+* highway-env's vehicles and obstacles become :class:`~dstenv.sim.types.Agents`;
+  the ego is highway-env's controlled vehicle and receives the actions.
+
+highway-env's coordinates are meant for a y-down screen (its traffic drives on the
+right there). The adapter mirrors them (``y -> -y``, ``yaw -> -yaw``) into the
+y-up world frame of :mod:`dstenv.grid`, so traffic drives on the right here too and
+a positive steering angle turns left.
+
+One step is 0.1 s: the scene runs with ``simulation_frequency`` and
+``policy_frequency`` of 10 Hz. highway-env is imported lazily (only when a
+:class:`HighwayWorld` is built).
+"""
+
+from __future__ import annotations
+
+import copy
+import importlib
+from typing import Any
+
+import numpy as np
+
+from dstenv.config import ConfigError, merge_config
+from dstenv.sim.types import AgentKind, Agents, MapClass, WorldMap
+
+__all__ = ["SCENES", "META_ACTIONS", "default_config", "HighwayWorld"]
+
+#: highway-env scene id -> ``"module:Class"`` of its environment. Extend it to add a
+#: scene; the class must be a highway-env ``AbstractEnv``.
+SCENES: dict[str, str] = {
+    "intersection-v0": "highway_env.envs.intersection_env:IntersectionEnv",
+    "intersection-v1": "highway_env.envs.intersection_env:ContinuousIntersectionEnv",
+    "intersection-v2": "highway_env.envs.intersection_env:ConnectedLaneIntersectionEnv",
+    "roundabout-v0": "highway_env.envs.roundabout_env:RoundaboutEnv",
+    "highway-v0": "highway_env.envs.highway_env:HighwayEnv",
+    "highway-fast-v0": "highway_env.envs.highway_env:HighwayEnvFast",
+    "merge-v0": "highway_env.envs.merge_env:MergeEnv",
+    "two-way-v0": "highway_env.envs.two_way_env:TwoWayEnv",
+}
+
+#: Meta-actions understood in ``"meta"`` action mode (highway-env's names).
+META_ACTIONS: tuple[str, ...] = ("SLOWER", "IDLE", "FASTER", "LANE_LEFT", "LANE_RIGHT")
+
+DT = 0.1  # [s] one step, the LIDAR period
+
+
+def default_config() -> dict[str, Any]:
+    """Defaults of the ``highway`` config section (units in comments)."""
+    return {
+        "scene": "intersection-v1",  # key of SCENES
+        "action_mode": "meta",  # "meta": META_ACTIONS; "continuous": (accel, steer)
+        "target_speeds": [0.0, 4.5, 9.0],  # [m/s] speeds of the meta-actions
+        "resolution": 0.25,  # [m] map raster cell
+        "margin": 40.0,  # [m] intermediate border around the lanes' bounding box
+        "max_extent": 1000.0,  # [m] half-size cap of the map around the ego start
+        "buildings": {
+            "per_hectare": 9.0,  # [1/ha] buildings per hectare of map
+            "size_min": 6.0,  # [m] footprint edge
+            "size_max": 22.0,  # [m]
+            "setback": 3.0,  # [m] minimum distance to any lane (sidewalk)
+            "gap": 2.0,  # [m] minimum distance between buildings
+        },
+        "env_config": {},  # extra highway-env config keys, passed as is
+    }
+
+
+class _NullObservation:
+    """Replaces highway-env's observation (the pipeline builds its own grids) with a
+    constant element of the env's observation space, computed once."""
+
+    def __init__(self, space: Any) -> None:
+        if hasattr(space, "low") and hasattr(space, "high"):
+            zero = np.clip(np.zeros(space.shape), space.low, space.high)
+            self.value = zero.astype(space.dtype)
+        else:
+            self.value = space.sample()
+
+    def observe(self) -> Any:
+        return self.value
+
+
+def _load_class(path: str) -> type:
+    module, name = path.split(":")
+    return getattr(importlib.import_module(module), name)
+
+
+def _mirror(xy: np.ndarray) -> np.ndarray:
+    out = np.array(xy, dtype=np.float64)
+    out[..., 1] *= -1.0
+    return out
+
+
+def _lane_points(lane: Any, s: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """World points (highway frame) of lane coordinates: ``(len(s), len(r), 2)``."""
+    from highway_env.road.lane import CircularLane, StraightLane
+
+    ss, rr = np.meshgrid(s, r, indexing="ij")
+    if type(lane) is StraightLane:
+        return (lane.start + ss[..., None] * lane.direction
+                + rr[..., None] * lane.direction_lateral)
+    if type(lane) is CircularLane:
+        phi = lane.direction * ss / lane.radius + lane.start_phase
+        rad = lane.radius - rr * lane.direction
+        return lane.center + np.stack([rad * np.cos(phi), rad * np.sin(phi)], -1)
+    pts = [lane.position(a, b) for a, b in zip(ss.ravel(), rr.ravel())]
+    return np.asarray(pts, dtype=np.float64).reshape(*ss.shape, 2)
+
+
+def _lanes_bbox(lanes: list, step: float = 2.0) -> np.ndarray:
+    """Centre-line samples of every lane, mirrored: ``(P, 2) float64``."""
+    pts = []
+    for lane in lanes:
+        n = max(2, int(np.ceil(lane.length / step)) + 1)
+        pts.append(_lane_points(lane, np.linspace(0.0, lane.length, n), np.zeros(1))[:, 0])
+    return _mirror(np.concatenate(pts, axis=0))
+
+
+def rasterise_lanes(lanes: list, bounds: tuple[float, float, float, float],
+                    resolution: float) -> np.ndarray:
+    """Road raster of highway-env lanes (mirrored into the y-up frame).
+
+    Args:
+        lanes: highway-env ``AbstractLane`` objects.
+        bounds: ``(x_min, x_max, y_min, y_max)`` [m] of the raster (y-up frame).
+        resolution: cell size [m].
+
+    Returns:
+        ``(Hm, Wm) uint8`` raster: ``MapClass.ROAD`` on lanes, ``INTERMEDIATE`` elsewhere.
+    """
+    x0, x1, y0, y1 = bounds
+    w = int(np.ceil((x1 - x0) / resolution))
+    h = int(np.ceil((y1 - y0) / resolution))
+    raster = np.full((h, w), MapClass.INTERMEDIATE, np.uint8)
+    step = resolution / 2
+    for lane in lanes:
+        # restrict long lanes to the part inside the raster before sampling densely
+        s_coarse = np.linspace(0.0, lane.length, max(2, int(np.ceil(lane.length / 2.0)) + 1))
+        c = _mirror(_lane_points(lane, s_coarse, np.zeros(1))[:, 0])
+        pad = 2.0 + lane.width_at(0.0)
+        inside = (c[:, 0] >= x0 - pad) & (c[:, 0] <= x1 + pad) & (c[:, 1] >= y0 - pad) & (
+            c[:, 1] <= y1 + pad)
+        if not inside.any():
+            continue
+        idx = np.flatnonzero(inside)
+        s_lo = s_coarse[max(idx[0] - 1, 0)]
+        s_hi = s_coarse[min(idx[-1] + 1, len(s_coarse) - 1)]
+        half = lane.width_at(0.5 * (s_lo + s_hi)) / 2
+        s = np.arange(s_lo, s_hi + step, step)
+        r = np.arange(-half + step / 2, half, step)
+        p = _mirror(_lane_points(lane, s, r)).reshape(-1, 2)
+        col = np.floor((p[:, 0] - x0) / resolution).astype(np.int64)
+        row = np.floor((p[:, 1] - y0) / resolution).astype(np.int64)
+        ok = (row >= 0) & (row < h) & (col >= 0) & (col < w)
+        raster[row[ok], col[ok]] = MapClass.ROAD
+    return raster
+
+
+def place_buildings(raster: np.ndarray, origin: tuple[float, float], resolution: float,
+                    cfg: dict[str, Any], rng: np.random.Generator) -> list[np.ndarray]:
+    """Place axis-aligned rectangular buildings off-road, in place on ``raster``.
+
+    Three candidates in four face a street: their near edge lies ``setback`` plus
+    0-6 m from a random road cell, in a random direction (buildings line the roads
+    and hide the junctions, as in a city); the rest are uniform. A candidate is kept
+    when no road cell lies within ``setback`` of it and no building within ``gap``.
+
+    Args:
+        raster: ``(Hm, Wm) uint8`` map raster, modified in place (``BUILDING`` cells).
+        origin: world ``(x0, y0)`` of the raster corner [m].
+        resolution: raster cell size [m].
+        cfg: the ``buildings`` config section.
+        rng: source of randomness.
+
+    Returns:
+        Footprints, each ``(4, 2) float64`` counter-clockwise world polygon.
+    """
+    h, w = raster.shape
+    area_ha = h * w * resolution**2 / 1e4
+    target = int(round(cfg["per_hectare"] * area_ha))
+    smin, smax = cfg["size_min"], cfg["size_max"]
+    if not 0 < smin <= smax:
+        raise ConfigError(f"highway.buildings: need 0 < size_min <= size_max, got {smin}, {smax}")
+    set_c = int(np.ceil(cfg["setback"] / resolution))
+    gap_c = int(np.ceil(cfg["gap"] / resolution))
+    road_r, road_c = np.nonzero(raster == MapClass.ROAD)
+    polys: list[np.ndarray] = []
+    for _ in range(30 * target):
+        if len(polys) >= target:
+            break
+        bw, bh = rng.uniform(smin, smax, size=2) / resolution
+        if len(road_r) and rng.random() < 0.75:
+            k = int(rng.integers(len(road_r)))
+            ang = rng.uniform(0.0, 2 * np.pi)
+            # distance from the road cell to the centre: setback + slack + half extent
+            reach = (set_c + rng.uniform(0.0, 6.0 / resolution)
+                     + 0.5 * (abs(np.cos(ang)) * bw + abs(np.sin(ang)) * bh))
+            cc = road_c[k] + reach * np.cos(ang)
+            rc = road_r[k] + reach * np.sin(ang)
+            c0, r0 = int(round(cc - bw / 2)), int(round(rc - bh / 2))
+        else:
+            c0 = int(rng.integers(0, max(1, w - int(bw))))
+            r0 = int(rng.integers(0, max(1, h - int(bh))))
+        c1, r1 = c0 + int(bw), r0 + int(bh)
+        if c0 < 0 or r0 < 0 or c1 > w or r1 > h:
+            continue
+        near = raster[max(0, r0 - set_c):r1 + set_c, max(0, c0 - set_c):c1 + set_c]
+        if (near == MapClass.ROAD).any():
+            continue
+        near = raster[max(0, r0 - gap_c):r1 + gap_c, max(0, c0 - gap_c):c1 + gap_c]
+        if (near == MapClass.BUILDING).any():
+            continue
+        raster[r0:r1, c0:c1] = MapClass.BUILDING
+        x0, y0 = origin[0] + c0 * resolution, origin[1] + r0 * resolution
+        x1, y1 = origin[0] + c1 * resolution, origin[1] + r1 * resolution
+        polys.append(np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]], np.float64))
+    return polys
+
+
+class HighwayWorld:
+    """A highway-env scene seen through the dstenv world interface.
+
+    Args:
+        config: the ``highway`` section (merged over :func:`default_config`).
+        seed: seed of the first episode (``reset`` takes a new one).
+        env: an existing highway-env environment to use instead of building one
+            from ``config["scene"]``; its configuration is left as it is.
+        external: the caller steps and resets ``env`` itself (the
+            :class:`dstenv.envs.DSTGridObservation` wrapper): :meth:`reset` only
+            rebuilds the map around the current scene and :meth:`step` only
+            advances the clock.
+
+    Attributes:
+        map: the scene's :class:`WorldMap` (rebuilt at every reset).
+        agents: every vehicle and obstacle but the ego.
+        ego_pose: ``(3,) float64`` ``(x [m], y [m], yaw [rad])``.
+        ego_speed: [m/s]. time: [s] since reset. collision, off_road: ego flags.
+        progress: distance [m] the ego advanced along its lane in the last step.
+    """
+
+    def __init__(self, config: dict[str, Any] | None = None, seed: int = 0,
+                 env: Any = None, external: bool = False) -> None:
+        self.config = merge_config(default_config(), config, "highway")
+        mode = self.config["action_mode"]
+        if mode not in ("meta", "continuous"):
+            raise ConfigError(f"highway.action_mode: expected 'meta' or 'continuous', got {mode!r}")
+        if env is None:
+            scene = self.config["scene"]
+            if scene not in SCENES:
+                raise ConfigError(f"highway.scene: unknown scene {scene!r}; known: {', '.join(SCENES)}")
+            env = _load_class(SCENES[scene])(config=self._env_config())
+        self.env = env
+        self.external = external
+        self.dt = 1.0 / float(env.unwrapped.config["policy_frequency"])
+        self.progress = 0.0
+        self.time = 0.0
+        if not external:
+            self.reset(seed)
+
+    def _env_config(self) -> dict[str, Any]:
+        action: dict[str, Any]
+        if self.config["action_mode"] == "meta":
+            action = {"type": "DiscreteMetaAction", "longitudinal": True, "lateral": True,
+                      "target_speeds": list(self.config["target_speeds"])}
+        else:
+            action = {"type": "ContinuousAction", "longitudinal": True, "lateral": True}
+        cfg = {"simulation_frequency": round(1 / DT), "policy_frequency": round(1 / DT),
+               "action": action, "offroad_terminal": False}
+        cfg.update(copy.deepcopy(self.config["env_config"]))
+        return cfg
+
+    # -- episode ---------------------------------------------------------------------
+    def reset(self, seed: int) -> None:
+        """Start a new episode: new scene traffic and new buildings, from ``seed``."""
+        if not self.external:
+            self.env.reset(seed=int(seed))
+        self._quiet_env()
+        self.time = 0.0
+        self.progress = 0.0
+        self._build_map(np.random.default_rng([int(seed), 0x4857]))
+
+    def _quiet_env(self) -> None:
+        # highway-env rebuilds its observation at every reset; ours replaces it
+        base = self.env.unwrapped
+        if not isinstance(base.observation_type, _NullObservation):
+            base.observation_type = _NullObservation(base.observation_space)
+
+    def step(self, ego_action: Any = None) -> None:
+        """Advance 0.1 s (one highway-env policy step).
+
+        Args:
+            ego_action: ``None`` (autopilot: highway-env's ``IDLE``, which follows
+                the planned route; in continuous mode, coast straight), a meta-action
+                name from :data:`META_ACTIONS` (meta mode), or ``(accel [m/s^2],
+                steer [rad])`` with positive steering to the left.
+        """
+        if not self.external:
+            self.env.step(self._to_env_action(ego_action))
+        self.time += self.dt
+        self.progress = self._lane_progress(self.ego_vehicle, self.dt)
+
+    def _to_env_action(self, ego_action: Any) -> Any:
+        base = self.env.unwrapped
+        at = base.action_type
+        if hasattr(at, "actions_indexes"):  # discrete meta-actions
+            name = "IDLE" if ego_action is None else ego_action
+            if not isinstance(name, str):
+                raise ValueError(f"highway scene in meta mode takes a meta-action name, got {ego_action!r}")
+            if name not in at.actions_indexes:
+                raise ValueError(f"meta-action {name!r} not available; choose from {sorted(at.actions_indexes)}")
+            return at.actions_indexes[name]
+        accel, steer = (0.0, 0.0) if ego_action is None else (float(v) for v in ego_action)
+        lo_a, hi_a = at.acceleration_range
+        lo_s, hi_s = at.steering_range
+        # highway-env's steering is counter-clockwise in its (mirrored) frame
+        norm = [2 * (accel - lo_a) / (hi_a - lo_a) - 1, 2 * (-steer - lo_s) / (hi_s - lo_s) - 1]
+        return np.clip(np.asarray(norm, np.float32), -1, 1)[: at.space().shape[0]]
+
+    @staticmethod
+    def _lane_progress(vehicle: Any, dt: float) -> float:
+        """Distance [m] covered along the current lane's direction in ``dt``."""
+        lane = getattr(vehicle, "lane", None)
+        if lane is None:
+            return float(vehicle.speed * dt)
+        s, _ = lane.local_coordinates(vehicle.position)
+        return float(vehicle.speed * dt * np.cos(vehicle.heading - lane.heading_at(s)))
+
+    # -- map -------------------------------------------------------------------------
+    def _build_map(self, rng: np.random.Generator) -> None:
+        base = self.env.unwrapped
+        lanes = base.road.network.lanes_list()
+        pts = _lanes_bbox(lanes)
+        margin, res = self.config["margin"], self.config["resolution"]
+        lo = pts.min(axis=0) - margin
+        hi = pts.max(axis=0) + margin
+        ego = self.ego_pose[:2]
+        cap = self.config["max_extent"]
+        lo = np.maximum(lo, ego - cap)
+        hi = np.minimum(hi, ego + cap)
+        bounds = (float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1]))
+        raster = rasterise_lanes(lanes, bounds, res)
+        origin = (bounds[0], bounds[2])
+        buildings = place_buildings(raster, origin, res, self.config["buildings"], rng)
+        self.map = WorldMap(raster=raster, origin=origin, resolution=res, buildings=buildings,
+                            lanes=None, meta={"source": "highway-env",
+                                              "scene": type(base).__name__,
+                                              "mirrored_y": True})
+
+    # -- state -----------------------------------------------------------------------
+    @property
+    def ego_vehicle(self) -> Any:
+        """highway-env's controlled vehicle."""
+        return self.env.unwrapped.vehicle
+
+    @property
+    def ego_pose(self) -> np.ndarray:
+        v = self.ego_vehicle
+        return np.array([v.position[0], -v.position[1], -v.heading], np.float64)
+
+    @property
+    def ego_speed(self) -> float:
+        return float(self.ego_vehicle.speed)
+
+    @property
+    def collision(self) -> bool:
+        return bool(self.ego_vehicle.crashed)
+
+    @property
+    def off_road(self) -> bool:
+        return not bool(self.ego_vehicle.on_road)
+
+    @property
+    def route_done(self) -> bool:
+        """The ego reached its destination (scenes with ``has_arrived``)."""
+        base = self.env.unwrapped
+        return bool(base.has_arrived(base.vehicle)) if hasattr(base, "has_arrived") else False
+
+    @property
+    def agents(self) -> Agents:
+        base = self.env.unwrapped
+        ego = base.vehicle
+        vehicles = [v for v in base.road.vehicles if v is not ego]
+        # landmarks (goal markers) are not physical
+        objs = vehicles + [o for o in base.road.objects if getattr(o, "collidable", True)
+                           and type(o).__name__ != "Landmark"]
+        if not objs:
+            return Agents.empty()
+        n = len(objs)
+        parked = np.arange(n) >= len(vehicles)
+        return Agents(
+            xy=_mirror(np.array([o.position for o in objs], np.float64)),
+            yaw=-np.array([o.heading for o in objs], np.float64),
+            speed=np.abs(np.array([o.speed for o in objs], np.float64)),
+            length=np.array([o.LENGTH for o in objs], np.float64),
+            width=np.array([o.WIDTH for o in objs], np.float64),
+            kind=np.full(n, AgentKind.CAR, np.uint8),
+            parked=parked,
+        )

@@ -1,0 +1,288 @@
+"""The lane network: centre-lines with direction, successors and junction conflicts.
+
+Every path an agent follows is a *lane*: a directed centre-line resampled at an
+even spacing (<= 0.5 m). Road lanes run between junctions; connector lanes lead
+through a junction from an incoming lane to an outgoing one; sidewalk and crossing
+lanes carry pedestrians. ``WorldMap.lanes`` holds a :class:`LaneNetwork`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import IntEnum
+
+import numba as nb
+import numpy as np
+
+__all__ = ["LaneKind", "Control", "Turn", "LaneNetwork", "NetworkBuilder", "lane_pose",
+           "project_on_lane", "resample", "offset_polyline", "cut_polyline", "bezier"]
+
+SPACING = 0.5  # [m] largest distance between resampled lane points
+CONFLICT_DIST = 2.6  # [m] connectors closer than this somewhere conflict
+LATERAL_ACCEL = 2.5  # [m/s^2] comfortable lateral acceleration in turns
+
+
+class LaneKind(IntEnum):
+    """What moves on a lane."""
+
+    ROAD = 0  # vehicles, between junctions
+    CONNECTOR = 1  # vehicles, through a junction
+    SIDEWALK = 2  # pedestrians
+    CROSSING = 3  # pedestrians, across a road
+
+
+class Control(IntEnum):
+    """Right-of-way rule of a junction."""
+
+    NONE = 0  # no junction (bend, dead end): no request needed
+    YIELD = 1  # first come, first served
+    STOP = 2  # all-way stop: stand still before requesting
+    SIGNAL = 3  # fixed-time traffic lights, two phases
+
+
+class Turn(IntEnum):
+    """Manoeuvre of a connector."""
+
+    STRAIGHT = 0
+    LEFT = 1
+    RIGHT = 2
+    UTURN = 3
+
+
+def resample(poly: np.ndarray, spacing: float = SPACING) -> np.ndarray:
+    """Evenly spaced points along a polyline: ``(K, 2) -> (M, 2) float64``, same ends."""
+    poly = np.asarray(poly, np.float64)
+    seg = np.hypot(*np.diff(poly, axis=0).T)
+    keep = np.concatenate([[True], seg > 1e-9])
+    poly, seg = poly[keep], seg[seg > 1e-9]
+    if len(poly) < 2:
+        raise ValueError("lane polyline needs two distinct points")
+    cum = np.concatenate([[0.0], np.cumsum(seg)])
+    n = max(int(np.ceil(cum[-1] / spacing)), 1) + 1
+    t = np.linspace(0.0, cum[-1], n)
+    return np.stack([np.interp(t, cum, poly[:, 0]), np.interp(t, cum, poly[:, 1])], -1)
+
+
+def cut_polyline(poly: np.ndarray, s0: float, s1: float) -> np.ndarray:
+    """The piece of a polyline between arc lengths ``s0 < s1`` [m]."""
+    poly = np.asarray(poly, np.float64)
+    cum = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(poly, axis=0).T))])
+    inner = poly[(cum > s0) & (cum < s1)]
+    a = [np.interp(s0, cum, poly[:, 0]), np.interp(s0, cum, poly[:, 1])]
+    b = [np.interp(s1, cum, poly[:, 0]), np.interp(s1, cum, poly[:, 1])]
+    return np.vstack([a, inner, b])
+
+
+def offset_polyline(poly: np.ndarray, d: float) -> np.ndarray:
+    """Polyline shifted by ``d`` [m] to its left (negative: right), mitred joints."""
+    poly = np.asarray(poly, np.float64)
+    t = np.diff(poly, axis=0)
+    t /= np.maximum(np.hypot(t[:, 0], t[:, 1]), 1e-12)[:, None]
+    n_seg = np.stack([-t[:, 1], t[:, 0]], -1)
+    n_pt = np.vstack([n_seg[:1], n_seg[:-1] + n_seg[1:], n_seg[-1:]])
+    n_pt /= np.maximum(np.hypot(n_pt[:, 0], n_pt[:, 1]), 1e-12)[:, None]
+    cosh = np.ones(len(poly))
+    cosh[1:-1] = np.clip(np.einsum("ij,ij->i", n_pt[1:-1], n_seg[1:]), 0.5, 1.0)
+    return poly + n_pt * (d / cosh)[:, None]
+
+
+def bezier(p0, h0: float, p1, h1: float, n: int = 24, k: float = 0.42) -> np.ndarray:
+    """Cubic Bezier leaving ``p0`` at heading ``h0`` and reaching ``p1`` at ``h1``."""
+    p0, p1 = np.asarray(p0, float), np.asarray(p1, float)
+    d = k * np.hypot(*(p1 - p0))
+    c0 = p0 + d * np.array([np.cos(h0), np.sin(h0)])
+    c1 = p1 - d * np.array([np.cos(h1), np.sin(h1)])
+    t = np.linspace(0, 1, n)[:, None]
+    return (1 - t) ** 3 * p0 + 3 * (1 - t) ** 2 * t * c0 + 3 * (1 - t) * t ** 2 * c1 + t ** 3 * p1
+
+
+@dataclass
+class LaneNetwork:
+    """All lanes of a map as flat arrays (numba friendly).
+
+    Attributes:
+        pts: ``(P, 2) float64`` resampled points of all lanes, lane after lane.
+        hdg: ``(P,) float64`` heading [rad] of the segment leaving each point.
+        start, npts: ``(L,) int64`` first point and point count of each lane.
+        length, ds: ``(L,) float64`` lane length and point spacing [m].
+        kind: ``(L,) uint8`` :class:`LaneKind`.
+        node: ``(L,) int64`` junction of a connector (-1 for other lanes).
+        turn: ``(L,) uint8`` :class:`Turn` of a connector.
+        group: ``(L,) uint8`` signal phase (0/1) of a connector.
+        rightmost: ``(L,) bool`` road lane next to the kerb.
+        vmax: ``(L,) float64`` curvature speed limit [m/s].
+        succ_ptr, succ: successors of lane ``l`` are ``succ[succ_ptr[l]:succ_ptr[l+1]]``.
+        conf_ptr, conf: connectors conflicting with connector ``l`` (same CSR layout).
+        node_xy: ``(J, 2) float64`` junction positions; node_control ``(J,) uint8``
+            :class:`Control`; node_phase ``(J,) float64`` signal offset [s].
+        lane_width: [m].
+    """
+
+    pts: np.ndarray
+    hdg: np.ndarray
+    start: np.ndarray
+    npts: np.ndarray
+    length: np.ndarray
+    ds: np.ndarray
+    kind: np.ndarray
+    node: np.ndarray
+    turn: np.ndarray
+    group: np.ndarray
+    rightmost: np.ndarray
+    vmax: np.ndarray
+    succ_ptr: np.ndarray
+    succ: np.ndarray
+    conf_ptr: np.ndarray
+    conf: np.ndarray
+    node_xy: np.ndarray
+    node_control: np.ndarray
+    node_phase: np.ndarray
+    lane_width: float = 3.25
+
+    def __len__(self) -> int:
+        return int(self.start.shape[0])
+
+    def polyline(self, lane: int) -> np.ndarray:
+        """Points of one lane: ``(K, 2) float64``."""
+        return self.pts[self.start[lane]:self.start[lane] + self.npts[lane]]
+
+    def successors(self, lane: int) -> np.ndarray:
+        """Lanes that may follow ``lane``: ``(S,) int64``."""
+        return self.succ[self.succ_ptr[lane]:self.succ_ptr[lane + 1]]
+
+    def pose(self, lane: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """World position and heading at arc length ``s`` on ``lane``.
+
+        Args:
+            lane: ``(N,) int64`` lane ids; s: ``(N,) float64`` [m].
+
+        Returns:
+            ``xy (N, 2) float64`` [m] and ``yaw (N,) float64`` [rad].
+        """
+        lane, s = np.atleast_1d(lane), np.atleast_1d(s)
+        xy = np.empty((len(lane), 2))
+        yaw = np.empty(len(lane))
+        for i in range(len(lane)):
+            xy[i, 0], xy[i, 1], yaw[i] = lane_pose(self.pts, self.hdg, self.start, self.npts,
+                                                   self.ds, int(lane[i]), float(s[i]))
+        return xy, yaw
+
+
+@nb.njit(cache=True)
+def lane_pose(pts, hdg, start, npts, ds, lane, s):
+    """``(x, y, yaw)`` at arc length ``s`` on ``lane`` (clamped to the lane)."""
+    f = s / ds[lane]
+    i = int(np.floor(f))
+    if i < 0:
+        i, f = 0, 0.0
+    if i > npts[lane] - 2:
+        i = npts[lane] - 2
+        f = float(npts[lane] - 1)
+    t = f - i
+    p = start[lane] + i
+    x = pts[p, 0] + t * (pts[p + 1, 0] - pts[p, 0])
+    y = pts[p, 1] + t * (pts[p + 1, 1] - pts[p, 1])
+    return x, y, hdg[p]
+
+
+@nb.njit(cache=True)
+def project_on_lane(pts, start, npts, ds, lane, x, y, s_guess, window):
+    """Closest point of ``lane`` to ``(x, y)`` within ``s_guess +- window`` [m].
+
+    Returns ``(s, lateral, dist)``: arc length, signed offset (left +) and distance.
+    """
+    n = npts[lane]
+    lo = max(int((s_guess - window) / ds[lane]) - 1, 0)
+    hi = min(int((s_guess + window) / ds[lane]) + 1, n - 2)
+    best, bs, blat = 1e18, 0.0, 0.0
+    for i in range(lo, hi + 1):
+        p = start[lane] + i
+        ax, ay = pts[p, 0], pts[p, 1]
+        dx, dy = pts[p + 1, 0] - ax, pts[p + 1, 1] - ay
+        seg2 = dx * dx + dy * dy
+        t = ((x - ax) * dx + (y - ay) * dy) / seg2 if seg2 > 0 else 0.0
+        t = min(max(t, 0.0), 1.0)
+        qx, qy = ax + t * dx - x, ay + t * dy - y
+        d2 = qx * qx + qy * qy
+        if d2 < best:
+            best, bs = d2, (i + t) * ds[lane]
+            blat = (dx * (y - ay) - dy * (x - ax)) / np.sqrt(max(seg2, 1e-18))
+    return bs, blat, np.sqrt(best)
+
+
+class NetworkBuilder:
+    """Collects lane polylines and links, then packs them into a :class:`LaneNetwork`."""
+
+    def __init__(self) -> None:
+        self.polys: list[np.ndarray] = []
+        self.attrs: list[tuple[int, int, int, int, bool]] = []  # kind, node, turn, group, right
+        self.links: list[list[int]] = []
+
+    def add(self, poly: np.ndarray, kind: LaneKind, node: int = -1, turn: Turn = Turn.STRAIGHT,
+            group: int = 0, rightmost: bool = False) -> int:
+        """Add a lane (points in driving order) and return its id."""
+        self.polys.append(resample(poly))
+        self.attrs.append((int(kind), int(node), int(turn), int(group), bool(rightmost)))
+        self.links.append([])
+        return len(self.polys) - 1
+
+    def link(self, a: int, b: int) -> None:
+        """Allow lane ``b`` to follow lane ``a``."""
+        if b not in self.links[a]:
+            self.links[a].append(b)
+
+    def build(self, node_xy: np.ndarray, node_control: np.ndarray, node_phase: np.ndarray,
+              lane_width: float) -> LaneNetwork:
+        """Pack the lanes; computes headings, curvature limits and connector conflicts."""
+        npts = np.array([len(p) for p in self.polys], np.int64)
+        start = np.concatenate([[0], np.cumsum(npts)[:-1]]).astype(np.int64)
+        pts = np.concatenate(self.polys) if self.polys else np.zeros((0, 2))
+        hdg = np.zeros(len(pts))
+        length = np.zeros(len(npts))
+        vmax = np.full(len(npts), 30.0)
+        for i, p in enumerate(self.polys):
+            d = np.diff(p, axis=0)
+            h = np.arctan2(d[:, 1], d[:, 0])
+            hdg[start[i]:start[i] + npts[i]] = np.append(h, h[-1])
+            length[i] = float(np.hypot(d[:, 0], d[:, 1]).sum())
+            if self.attrs[i][0] == LaneKind.CONNECTOR and len(h) > 4:
+                dh = np.abs(np.angle(np.exp(1j * (h[4:] - h[:-4]))))  # over ~2 m
+                kappa = dh.max() / (4 * length[i] / len(h))
+                vmax[i] = min(30.0, np.sqrt(LATERAL_ACCEL / max(kappa, 1e-6)))
+        attrs = np.array(self.attrs, dtype=np.int64).reshape(-1, 5)
+        succ_ptr = np.cumsum([0] + [len(s) for s in self.links]).astype(np.int64)
+        succ = np.array([b for s in self.links for b in s], np.int64)
+        conflicts = self._conflicts(attrs)
+        conf_ptr = np.cumsum([0] + [len(c) for c in conflicts]).astype(np.int64)
+        conf = np.array([b for c in conflicts for b in c], np.int64)
+        return LaneNetwork(
+            pts=pts, hdg=hdg, start=start, npts=npts, length=length,
+            ds=length / np.maximum(npts - 1, 1), kind=attrs[:, 0].astype(np.uint8),
+            node=attrs[:, 1].copy(), turn=attrs[:, 2].astype(np.uint8),
+            group=attrs[:, 3].astype(np.uint8), rightmost=attrs[:, 4].astype(bool), vmax=vmax,
+            succ_ptr=succ_ptr, succ=succ, conf_ptr=conf_ptr, conf=conf,
+            node_xy=np.asarray(node_xy, np.float64).reshape(-1, 2),
+            node_control=np.asarray(node_control, np.uint8),
+            node_phase=np.asarray(node_phase, np.float64), lane_width=float(lane_width))
+
+    def _conflicts(self, attrs: np.ndarray) -> list[list[int]]:
+        out: list[list[int]] = [[] for _ in self.polys]
+        pred: dict[int, list[int]] = {}
+        for a, succs in enumerate(self.links):
+            for b in succs:
+                pred.setdefault(b, []).append(a)
+        conn = np.flatnonzero(attrs[:, 0] == LaneKind.CONNECTOR) if len(attrs) else []
+        by_node: dict[int, list[int]] = {}
+        for c in conn:
+            by_node.setdefault(int(attrs[c, 1]), []).append(int(c))
+        for members in by_node.values():
+            for ia, a in enumerate(members):
+                for b in members[ia + 1:]:
+                    same = (set(pred.get(a, [])) & set(pred.get(b, []))) or \
+                        (set(self.links[a]) & set(self.links[b]))
+                    pa, pb = self.polys[a][::2], self.polys[b][::2]
+                    d2 = ((pa[:, None, :] - pb[None, :, :]) ** 2).sum(-1).min()
+                    if same or d2 < CONFLICT_DIST ** 2:
+                        out[a].append(b)
+                        out[b].append(a)
+        return out

@@ -1,0 +1,104 @@
+"""Painting geometry into map rasters (row index grows with y, see ``WorldMap``)."""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+from dstenv.sim.types import MapClass, WorldMap
+
+__all__ = ["fill_polygon", "fill_rect", "lookup", "Surface"]
+
+
+class Surface:
+    """Finer surface codes kept in ``WorldMap.meta["surface"]`` (drawing only)."""
+
+    YARD = 0
+    BUILDING = 1
+    ROAD = 2
+    SIDEWALK = 3
+    PARKING = 4
+    CROSSWALK = 5
+
+
+@nb.njit(cache=True)
+def _fill_rings(raster, xs, ys, ring_ptr, x0, y0, res, value):
+    """Even-odd scanline fill of the rings ``xs/ys[ring_ptr[k]:ring_ptr[k+1]]``."""
+    h, w = raster.shape
+    ymin, ymax = ys.min(), ys.max()
+    r_lo = max(int(np.floor((ymin - y0) / res - 0.5)), 0)
+    r_hi = min(int(np.ceil((ymax - y0) / res + 0.5)), h - 1)
+    cross = np.empty(xs.shape[0], np.float64)
+    for r in range(r_lo, r_hi + 1):
+        yc = y0 + (r + 0.5) * res
+        n = 0
+        for k in range(ring_ptr.shape[0] - 1):
+            a, b = ring_ptr[k], ring_ptr[k + 1]
+            for i in range(a, b):
+                j = i + 1 if i + 1 < b else a
+                ya, yb = ys[i], ys[j]
+                if (ya <= yc) != (yb <= yc):
+                    cross[n] = xs[i] + (yc - ya) * (xs[j] - xs[i]) / (yb - ya)
+                    n += 1
+        if n < 2:
+            continue
+        c = np.sort(cross[:n])
+        for p in range(0, n - 1, 2):
+            c_lo = max(int(np.ceil((c[p] - x0) / res - 0.5)), 0)
+            c_hi = min(int(np.floor((c[p + 1] - x0) / res - 0.5)), w - 1)
+            for cc in range(c_lo, c_hi + 1):
+                raster[r, cc] = value
+
+
+def fill_polygon(raster: np.ndarray, rings: list[np.ndarray], origin: tuple[float, float],
+                 resolution: float, value: int) -> None:
+    """Set every cell whose centre lies inside a polygon (even-odd rule) to ``value``.
+
+    Args:
+        raster: ``(H, W) uint8`` raster, modified in place.
+        rings: exterior and hole rings, each ``(K, 2) float64`` (closed or not).
+        origin: ``(x0, y0)`` world coordinates of the raster corner [m].
+        resolution: cell size [m].
+        value: code to write.
+    """
+    rings = [np.asarray(r, np.float64) for r in rings if len(r) >= 3]
+    if not rings:
+        return
+    xy = np.concatenate(rings)
+    ptr = np.cumsum([0] + [len(r) for r in rings]).astype(np.int64)
+    _fill_rings(raster, np.ascontiguousarray(xy[:, 0]), np.ascontiguousarray(xy[:, 1]), ptr,
+                float(origin[0]), float(origin[1]), float(resolution), np.uint8(value))
+
+
+def fill_rect(raster: np.ndarray, x_lo: float, x_hi: float, y_lo: float, y_hi: float,
+              origin: tuple[float, float], resolution: float, value: int) -> None:
+    """Set the cells whose centres lie in the axis-aligned box to ``value`` (in place)."""
+    x0, y0 = origin
+    h, w = raster.shape
+    c_lo = max(int(np.ceil((x_lo - x0) / resolution - 0.5)), 0)
+    c_hi = min(int(np.floor((x_hi - x0) / resolution - 0.5)), w - 1)
+    r_lo = max(int(np.ceil((y_lo - y0) / resolution - 0.5)), 0)
+    r_hi = min(int(np.floor((y_hi - y0) / resolution - 0.5)), h - 1)
+    if c_hi >= c_lo and r_hi >= r_lo:
+        raster[r_lo:r_hi + 1, c_lo:c_hi + 1] = value
+
+
+def lookup(world_map: WorldMap, xy: np.ndarray) -> np.ndarray:
+    """Map classes under world points; :attr:`MapClass.NONE` outside the raster.
+
+    Args:
+        world_map: the map.
+        xy: ``(..., 2) float64`` world points [m].
+
+    Returns:
+        ``(...) uint8`` :class:`MapClass` codes.
+    """
+    xy = np.asarray(xy, np.float64)
+    x0, y0 = world_map.origin
+    c = np.floor((xy[..., 0] - x0) / world_map.resolution).astype(np.int64)
+    r = np.floor((xy[..., 1] - y0) / world_map.resolution).astype(np.int64)
+    h, w = world_map.raster.shape
+    ok = (r >= 0) & (r < h) & (c >= 0) & (c < w)
+    out = np.full(c.shape, MapClass.NONE, np.uint8)
+    out[ok] = world_map.raster[r[ok], c[ok]]
+    return out

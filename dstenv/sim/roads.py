@@ -1,0 +1,133 @@
+"""Street graph -> lanes: one routine shared by the city generator and the OSM loader."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from dstenv.sim.lanes import LaneKind, NetworkBuilder, Turn, bezier, cut_polyline, offset_polyline
+
+__all__ = ["RoadEdge", "add_road_lanes", "signal_group"]
+
+STRAIGHT_ANGLE = np.deg2rad(35.0)  # [rad] heading change below which a manoeuvre is straight
+
+
+@dataclass
+class RoadEdge:
+    """A street between two nodes of the street graph.
+
+    Attributes:
+        u, v: node ids at the start and end of ``poly``.
+        poly: ``(K, 2) float64`` centre-line from node ``u`` to node ``v`` [m].
+        n_fwd: lanes in the direction u -> v (>= 1).
+        n_bwd: lanes in the direction v -> u (0: one-way street).
+    """
+
+    u: int
+    v: int
+    poly: np.ndarray
+    n_fwd: int
+    n_bwd: int
+
+
+def signal_group(heading: float) -> int:
+    """Traffic-light phase (0 or 1) of an approach: axis of its heading."""
+    return int(((heading % np.pi) + np.pi / 4) // (np.pi / 2)) % 2
+
+
+def _wrap(a: float) -> float:
+    return float((a + np.pi) % (2 * np.pi) - np.pi)
+
+
+def add_road_lanes(builder: NetworkBuilder, n_nodes: int, edges: list[RoadEdge],
+                   trims: np.ndarray, lane_width: float, uturn_trim: float = 3.0) -> np.ndarray:
+    """Add the road and connector lanes of a street graph to ``builder``.
+
+    Lanes keep to the right. Road lanes stop ``trims[node]`` metres before each
+    junction (the stop line); connectors join them through the junction: straight
+    on from every lane, left turns from the innermost lane, right turns from the
+    kerb lane, U-turns only at dead ends.
+
+    Args:
+        builder: collects the lanes.
+        n_nodes: number of street-graph nodes.
+        edges: the streets.
+        trims: ``(n_nodes,) float64`` stop-line distance from each node [m].
+        lane_width: [m].
+        uturn_trim: stop-line distance at dead ends [m].
+
+    Returns:
+        ``(n_nodes,) int64`` node degrees (streets meeting at each node).
+    """
+    degree = np.zeros(n_nodes, np.int64)
+    for e in edges:
+        degree[e.u] += 1
+        degree[e.v] += 1
+    inc: list[list[tuple]] = [[] for _ in range(n_nodes)]
+    out: list[list[tuple]] = [[] for _ in range(n_nodes)]
+    for ei, e in enumerate(edges):
+        poly = np.asarray(e.poly, np.float64)
+        total = float(np.hypot(*np.diff(poly, axis=0).T).sum())
+        t_u = uturn_trim if degree[e.u] == 1 else float(trims[e.u])
+        t_v = uturn_trim if degree[e.v] == 1 else float(trims[e.v])
+        if total - t_u - t_v < 2.0:  # short street: keep at least 2 m (or 40 %) of lane
+            keep = min(2.0, 0.4 * total)
+            scale = (total - keep) / max(t_u + t_v, 1e-9)
+            t_u, t_v = t_u * scale, t_v * scale
+        centre = cut_polyline(poly, t_u, total - t_v)
+        for direction, n, line, a, b in ((0, e.n_fwd, centre, e.u, e.v),
+                                         (1, e.n_bwd, centre[::-1], e.v, e.u)):
+            for k in range(n):
+                off = -(k + 0.5) * lane_width if e.n_bwd > 0 else -(k - (n - 1) / 2) * lane_width
+                lane_poly = offset_polyline(line, off)
+                lid = builder.add(lane_poly, LaneKind.ROAD, rightmost=(k == n - 1))
+                d0, d1 = lane_poly[1] - lane_poly[0], lane_poly[-1] - lane_poly[-2]
+                out[a].append((lid, ei, k, n, float(np.arctan2(d0[1], d0[0])), lane_poly[0]))
+                inc[b].append((lid, ei, k, n, float(np.arctan2(d1[1], d1[0])), lane_poly[-1]))
+    for node in range(n_nodes):
+        by_edge: dict[int, list[tuple]] = {}
+        for o in out[node]:
+            by_edge.setdefault(o[1], []).append(o)
+        for a, ea, ka, na, ha, pa in inc[node]:
+            made = _connect(builder, node, degree[node], by_edge, a, ea, ka, na, ha, pa, False)
+            if not made:  # e.g. a middle lane at a T: let it turn anyway
+                _connect(builder, node, degree[node], by_edge, a, ea, ka, na, ha, pa, True)
+    return degree
+
+
+def _connect(builder: NetworkBuilder, node: int, deg: int, by_edge: dict, a: int, ea: int,
+             ka: int, na: int, ha: float, pa: np.ndarray, relaxed: bool) -> bool:
+    made = False
+    for eb, outs in by_edge.items():
+        if eb == ea and deg > 1:
+            continue
+        hb = outs[0][4]
+        theta = _wrap(hb - ha)
+        if eb == ea:
+            turn = Turn.UTURN
+        elif abs(theta) < STRAIGHT_ANGLE:
+            turn = Turn.STRAIGHT
+        else:
+            turn = Turn.LEFT if theta > 0 else Turn.RIGHT
+        nb_ = outs[0][3]
+        if relaxed or deg <= 2 or turn == Turn.STRAIGHT:
+            k_out = min(ka, nb_ - 1)
+        elif turn in (Turn.LEFT, Turn.UTURN):
+            if ka != 0:
+                continue
+            k_out = 0
+        else:
+            if ka != na - 1:
+                continue
+            k_out = nb_ - 1
+        b, _, _, _, hb, pb = next(o for o in outs if o[2] == k_out)
+        if np.hypot(*(pb - pa)) < 1e-6:
+            continue
+        k = 0.67 if turn == Turn.UTURN else 0.42
+        poly = bezier(pa, ha, pb, hb, n=24, k=k)
+        c = builder.add(poly, LaneKind.CONNECTOR, node=node, turn=turn, group=signal_group(ha))
+        builder.link(a, c)
+        builder.link(c, b)
+        made = True
+    return made

@@ -1,0 +1,51 @@
+"""``dstenv generate`` / ``dstenv info`` through the real command line."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from dstenv.cli import CLIError, main
+from dstenv.data.cli import parse_set
+from dstenv.data.generate import GenerateSpec, generate
+
+
+def test_parse_set():
+    assert parse_set(["world.cars=10", "lidar.fov=180.0", "source=highway", "a.b.c=true"]) == {
+        "world": {"cars": 10}, "lidar": {"fov": 180.0}, "source": "highway",
+        "a": {"b": {"c": True}}}
+    with pytest.raises(CLIError, match="expected SECTION.KEY=VALUE"):
+        parse_set(["world.cars"])
+
+
+def test_info_prints_paper_reference(tmp_path, capsys, fake_pipeline):
+    spec = GenerateSpec(config={"grid": {"height": 8, "width": 6, "cell_size": 0.5}}, frames=10,
+                        frames_per_shard=4, episode_length=5, stride=2, warmup=0)
+    generate(spec, tmp_path, progress=False)
+    assert main(["info", str(tmp_path)]) == 0
+    text = capsys.readouterr().out
+    assert "frames    10 in 4 shards: test 1 frames / 1 shards, train 8 frames / 2 shards" in text
+    assert "grid      8 x 6 cells of 0.5 m" in text
+    assert "static" in text and "0.09%" in text and "0.26%" in text
+    assert main(["info", str(tmp_path), "--json", "--verify", "hash"]) == 0
+    s = json.loads(capsys.readouterr().out)
+    assert s["frames"] == 10 and s["shards"] == 4
+    assert sum(s["class_frequencies"].values()) == pytest.approx(1.0)
+    assert s["bytes_per_frame"] == pytest.approx(s["bytes"] / 10)
+    assert main(["info", str(tmp_path / "train" / "shard-00000.h5")]) == 0
+    assert "4 in 1 shards" in capsys.readouterr().out
+
+
+def test_info_errors_are_one_line(tmp_path, capsys, fake_pipeline):
+    assert main(["info", str(tmp_path / "nope")]) == 2
+    assert capsys.readouterr().err.strip().endswith("nope: no such file or directory")
+    assert main(["info", str(tmp_path)]) == 2
+    assert "no manifest.json and no shards" in capsys.readouterr().err
+    spec = GenerateSpec(config={"grid": {"height": 8, "width": 6, "cell_size": 0.5}}, frames=4,
+                        frames_per_shard=2, episode_length=5, stride=2, warmup=0, split="val")
+    generate(spec, tmp_path, progress=False)
+    (tmp_path / "val" / "shard-00001.h5").unlink()
+    assert main(["info", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "lists val/shard-00001.h5 but that file is missing" in err

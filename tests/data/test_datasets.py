@@ -1,0 +1,76 @@
+"""ShardDataset over stored shards (DataLoader workers, corrupt files)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from torch.utils.data import DataLoader
+
+from dstenv.data.datasets import ShardDataset
+from dstenv.data.manifest import write_manifest
+from dstenv.data.shards import QUANT_MAX_ERROR, ShardError, ShardWriter
+
+
+@pytest.fixture
+def dataset_dir(tmp_path, make_frame, shard_attrs):
+    rng = np.random.default_rng(3)
+    frames = {}
+    for split, k, n in (("train", 0, 3), ("train", 1, 2), ("val", 0, 2)):
+        attrs = dict(shard_attrs, split=split)
+        path = tmp_path / split / f"shard-{k:05d}.h5"
+        with ShardWriter(path, attrs, masses=True, quantize=False) as w:
+            for i in range(n):
+                f = make_frame(rng, masses=True, step=i, seed=100 * len(frames) + i)
+                w.add(f)
+                frames[(split, path.name, i)] = f
+    write_manifest(tmp_path)
+    return tmp_path, frames
+
+
+def test_items_match_the_frames(dataset_dir):
+    root, frames = dataset_dir
+    ds = ShardDataset(root, split="train")
+    assert len(ds) == 5
+    item = ds[3]  # second shard, frame 0
+    f = frames[("train", "shard-00001.h5", 0)]
+    assert item["x"].shape == (10, 12, 10) and item["x"].dtype == torch.float32
+    np.testing.assert_array_equal(item["x"][:5].numpy(), f.pignistic)
+    np.testing.assert_array_equal(item["x"][5:].numpy(), f.pignistic_prev)
+    assert item["labels"].dtype == torch.int64 and int(item["labels"][0, 0]) == 255
+    assert item["visible"].dtype == torch.bool
+    np.testing.assert_array_equal(item["visible"].numpy(), f.visible)
+    assert ShardDataset(root, inputs="masses")[0]["x"].shape == (32, 12, 10)
+    assert len(ShardDataset(root)) == 7 and len(ShardDataset(root, split="val")) == 2
+    with pytest.raises(ValueError, match="unknown inputs 'rgb'"):
+        ShardDataset(root, inputs="rgb")
+
+
+def test_dataloader_with_two_workers(dataset_dir):
+    root, _ = dataset_dir
+    ds = ShardDataset(root, split="train", inputs="pignistic")
+    loader = DataLoader(ds, batch_size=2, num_workers=2, shuffle=False)
+    batches = list(loader)
+    x = torch.cat([b["x"] for b in batches])
+    assert x.shape == (5, 5, 12, 10)
+    for i in range(5):
+        torch.testing.assert_close(x[i], ds[i]["x"], rtol=0, atol=0)
+
+
+def test_corrupt_shard_raises_or_is_skipped(dataset_dir):
+    root, _ = dataset_dir
+    bad = root / "train" / "shard-00000.h5"
+    bad.write_bytes(bad.read_bytes()[:2000])
+    with pytest.raises(ShardError, match=r"train/shard-00000\.h5: not a readable HDF5"):
+        ShardDataset([bad, root / "train" / "shard-00001.h5"])
+    with pytest.warns(RuntimeWarning, match=r"skipping corrupt shard: .*shard-00000\.h5"):
+        ds = ShardDataset([bad, root / "train" / "shard-00001.h5"], on_error="skip")
+    assert len(ds) == 2 and ds.files == [root / "train" / "shard-00001.h5"]
+
+
+def test_quantised_shard_error_bound_through_dataset(tmp_path, make_frame, shard_attrs):
+    f = make_frame(np.random.default_rng(9))
+    with ShardWriter(tmp_path / "q.h5", shard_attrs) as w:
+        w.add(f)
+    x = ShardDataset(tmp_path / "q.h5")[0]["x"].numpy()
+    assert np.abs(x - f.fcn_input()).max() <= QUANT_MAX_ERROR + 1e-7

@@ -1,0 +1,134 @@
+"""Generation with a stand-in pipeline: determinism, resume, atomicity, splits, errors."""
+
+from __future__ import annotations
+
+import hashlib
+
+import pytest
+
+from dstenv.data import generate as gen
+from dstenv.data.manifest import ManifestError, load_manifest
+from dstenv.data.sampling import split_of_seed
+from dstenv.data.shards import ShardReader, partial_path
+
+CONFIG = {"grid": {"height": 8, "width": 6, "cell_size": 0.5}}
+
+
+@pytest.fixture(autouse=True)
+def _use_fake(fake_pipeline):
+    return fake_pipeline
+
+
+def _spec(**kw):
+    base = dict(config=CONFIG, frames=20, seed=5, frames_per_shard=4, episode_length=7,
+                stride=3, warmup=1)
+    base.update(kw)
+    return gen.GenerateSpec(**base)
+
+
+def _digests(root):
+    return {p.relative_to(root).as_posix(): hashlib.sha256(p.read_bytes()).hexdigest()
+            for p in sorted(root.rglob("*")) if p.is_file()}
+
+
+def test_plan_auto_splits():
+    tasks = gen.plan(_spec())
+    assert [(t.file, t.frames) for t in tasks] == [
+        ("train/shard-00000.h5", 4), ("train/shard-00001.h5", 4), ("train/shard-00002.h5", 4),
+        ("train/shard-00003.h5", 4), ("val/shard-00000.h5", 2), ("test/shard-00000.h5", 2)]
+    assert gen.split_frames(3, "auto") == {"train": 3}
+    assert gen.split_frames(9, "test") == {"test": 9}
+
+
+def test_generate_is_deterministic_and_splits_are_disjoint(tmp_path):
+    m1 = gen.generate(_spec(), tmp_path / "a", progress=False)
+    m2 = gen.generate(_spec(), tmp_path / "b", progress=False)
+    assert _digests(tmp_path / "a") == _digests(tmp_path / "b")
+    assert m1 == m2 and m1["frames"] == 20
+    assert {k: v["frames"] for k, v in m1["splits"].items()} == {"train": 16, "val": 2, "test": 2}
+    seen = {}
+    for e in m1["shards"]:
+        with ShardReader(tmp_path / "a" / e["file"]) as r:
+            seeds = {int(r[i].seed) for i in range(len(r))}
+            steps = [int(r[i].step) for i in range(len(r))]
+            assert set(steps) <= {1, 4}  # warmup 1, stride 3, length 7
+            assert r.attrs["task"]["split"] == e["split"] == r.attrs["split"]
+        assert all(split_of_seed(s) == e["split"] for s in seeds)
+        seen.setdefault(e["split"], set()).update(seeds)
+    assert not (seen["train"] & seen["test"]) and not (seen["train"] & seen["val"])
+    assert gen.generate(_spec(seed=6), tmp_path / "c", progress=False) != m1
+
+
+def test_resume_skips_finished_shards_and_crash_leaves_no_shard(tmp_path, monkeypatch,
+                                                                fake_pipeline):
+    fake = fake_pipeline
+    out = tmp_path / "d"
+    calls = {"n": 0}
+    real_add = gen.ShardWriter.add
+
+    def crashing_add(self, frame):
+        calls["n"] += 1
+        if calls["n"] == 11:  # third shard, third frame
+            raise OSError(28, "No space left on device")
+        real_add(self, frame)
+
+    monkeypatch.setattr(gen.ShardWriter, "add", crashing_add)
+    with pytest.raises(gen.GenerateError, match="No space left on device; 2 finished shards "
+                                                "kept .* rerun the same command to resume"):
+        gen.generate(_spec(), out, progress=False)
+    assert sorted(p.name for p in (out / "train").iterdir()) == ["shard-00000.h5",
+                                                                 "shard-00001.h5"]
+    assert not (out / "manifest.json").exists()
+    # a hard kill leaves a .partial file: the rerun overwrites it
+    partial_path(out / "train" / "shard-00002.h5").write_bytes(b"half")
+    monkeypatch.setattr(gen.ShardWriter, "add", real_add)
+    before = _digests(out)
+    fake.resets.clear()
+    m = gen.generate(_spec(), out, progress=False)
+    assert all(_digests(out)[k] == v for k, v in before.items() if k.endswith(".h5"))
+    assert not list(out.rglob("*.partial"))
+    assert len(fake.resets) == 2 * 2 + 1 + 1  # 2 train shards of 2 episodes, val, test
+    gen.generate(_spec(), tmp_path / "ref", progress=False)
+    assert _digests(out) == _digests(tmp_path / "ref")
+    assert load_manifest(out, verify="hash") == m
+
+
+def test_resume_refuses_other_settings(tmp_path, fake_pipeline):
+    fake = fake_pipeline
+    gen.generate(_spec(frames=8, split="train"), tmp_path, progress=False)
+    with pytest.raises(gen.GenerateError, match=r"shard-00000\.h5 was made with other settings "
+                                                r"\(stride: 3, now 2\)"):
+        gen.generate(_spec(frames=8, split="train", stride=2), tmp_path, progress=False)
+    with pytest.raises(gen.GenerateError, match="another configuration"):
+        gen.generate(_spec(frames=8, split="train", config={"grid": {"height": 4, "width": 4,
+                                                                     "cell_size": 0.5}}),
+                     tmp_path, progress=False)
+    with pytest.raises(gen.GenerateError, match=r"not part of this run \(train/shard-00001"):
+        gen.generate(_spec(frames=4, split="train"), tmp_path, progress=False)
+    # growing the dataset keeps the finished shards and regenerates only the short one
+    fake.resets.clear()
+    m = gen.generate(_spec(frames=10, split="train"), tmp_path, progress=False)
+    assert m["frames"] == 10 and len(fake.resets) == 1
+
+
+def test_unwritable_output_is_one_line(tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    with pytest.raises(gen.GenerateError, match=r"output directory .*file/out is not writable"):
+        gen.generate(_spec(), blocker / "out", progress=False)
+
+
+def test_manifest_mismatch_is_reported(tmp_path):
+    gen.generate(_spec(frames=8, split="val"), tmp_path, progress=False)
+    shard = tmp_path / "val" / "shard-00001.h5"
+    shard.write_bytes(shard.read_bytes() + b"\0")
+    with pytest.raises(ManifestError, match=r"manifest\.json: val/shard-00001\.h5 is \d+ bytes "
+                                            r"on disk, the manifest says \d+"):
+        load_manifest(tmp_path)
+    shard.unlink()
+    with pytest.raises(ManifestError, match="lists val/shard-00001.h5 but that file is missing"):
+        load_manifest(tmp_path)
+    (tmp_path / "val" / "extra.h5").write_bytes(b"")
+    (tmp_path / "manifest.json").write_text("{")
+    with pytest.raises(ManifestError, match="unreadable manifest"):
+        load_manifest(tmp_path)

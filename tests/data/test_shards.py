@@ -1,0 +1,147 @@
+"""ShardWriter / ShardReader: exact round trip, quantisation bound, atomicity, validation."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+
+import h5py
+import numpy as np
+import pytest
+
+from dstenv.data.shards import (
+    QUANT_MAX_ERROR, ShardError, ShardReader, ShardWriter, partial_path,
+)
+
+
+def _write(path, frames, attrs, **kw):
+    with ShardWriter(path, attrs, **kw) as w:
+        for f in frames:
+            w.add(f)
+    return path
+
+
+def test_float_round_trip_is_exact(tmp_path, frames, shard_attrs):
+    path = _write(tmp_path / "s.h5", frames, shard_attrs, quantize=False, masses=True)
+    with ShardReader(path) as r:
+        assert len(r) == 4 and r.grid_shape == (12, 10) and r.cell_size == 0.5
+        for i, f in enumerate(frames):
+            g = r[i]
+            for name in ("pignistic", "pignistic_prev", "labels", "visible", "sensor", "gis",
+                         "ego_pose", "masses"):
+                np.testing.assert_array_equal(getattr(g, name), getattr(f, name), err_msg=name)
+            assert g.visible.dtype == bool and g.labels.dtype == np.uint8
+            assert (g.seed, g.step, g.time) == (f.seed, f.step, f.time)
+        assert r.attrs["config"] == shard_attrs["config"]
+        assert r.attrs["classes"] == ["navigable", "non_navigable", "building", "static", "moving"]
+        assert r.attrs["split"] == "train" and r.attrs["seed"] == 3
+        expected = sum(np.bincount(f.labels.ravel(), minlength=256)[:5] for f in frames)
+        np.testing.assert_array_equal(r.class_counts(), expected)
+        assert r[-1].step == 3
+
+
+def test_quantised_error_bound(tmp_path, frames, shard_attrs):
+    path = _write(tmp_path / "q.h5", frames, shard_attrs, quantize=True)
+    assert QUANT_MAX_ERROR == pytest.approx(1 / 510)
+    with ShardReader(path) as r:
+        assert r.attrs["prob_dtype"] == "uint8" and not r.has_masses
+        worst = max(np.abs(r[i].pignistic - f.pignistic).max() for i, f in enumerate(frames))
+        assert worst <= QUANT_MAX_ERROR + 1e-7
+        assert worst > 0.5 * QUANT_MAX_ERROR  # really quantised: random data hit near-worst
+        # hand check: p = 0.5 -> q = 128 (rint(127.5) = 128, round half to even) -> 0.50196
+    one = frames[0]
+    one.pignistic[:, 0, 0] = [0.5, 0.25, 0.125, 0.125, 0.0]
+    _write(tmp_path / "h.h5", [one], shard_attrs, quantize=True)
+    with h5py.File(tmp_path / "h.h5") as f:  # h5py alone reads the shard
+        assert f["pignistic"][0, :, 0, 0].tolist() == [128, 64, 32, 32, 0]
+        assert f.attrs["prob_scale"] == 255
+        assert json.loads(f.attrs["config"])["grid"]["cell_size"] == 0.5
+
+
+@pytest.mark.parametrize("compression", ["gzip", "lzf", None])
+def test_same_input_gives_identical_bytes(tmp_path, frames, shard_attrs, compression):
+    digests = []
+    for name in ("a.h5", "b.h5"):
+        _write(tmp_path / name, frames, shard_attrs, compression=compression)
+        digests.append(hashlib.sha256((tmp_path / name).read_bytes()).hexdigest())
+    assert digests[0] == digests[1]
+
+
+def test_crash_mid_shard_leaves_no_final_file(tmp_path, frames, shard_attrs):
+    path = tmp_path / "s.h5"
+    with pytest.raises(RuntimeError, match="boom"):
+        with ShardWriter(path, shard_attrs) as w:
+            w.add(frames[0])
+            raise RuntimeError("boom")
+    assert not path.exists() and not partial_path(path).exists()
+    # a hard kill leaves only the .partial file, never the final name
+    w = ShardWriter(path, shard_attrs).__enter__()
+    w.add(frames[0])
+    assert partial_path(path).exists() and not path.exists()
+    w.__exit__(None, None, None)
+    assert path.exists() and not partial_path(path).exists()
+
+
+def test_bad_frames_are_rejected(tmp_path, frames, shard_attrs, make_frame):
+    rng = np.random.default_rng(1)
+    with pytest.raises(ValueError, match=r"'pignistic' has shape \(5, 13, 10\), "
+                                         r"expected \(5, 12, 10\)"):
+        with ShardWriter(tmp_path / "x.h5", shard_attrs) as w:
+            w.add(frames[0])
+            w.add(make_frame(rng, h=13))
+    frames[1].labels[2, 2] = 9
+    with pytest.raises(ValueError, match="labels hold value 9"):
+        _write(tmp_path / "y.h5", frames[1:2], shard_attrs)
+    with pytest.raises(ValueError, match="has none"):
+        frames[0].masses = None
+        _write(tmp_path / "z.h5", frames[:1], shard_attrs, masses=True)
+    with pytest.raises(ValueError, match="lack seed"):
+        ShardWriter(tmp_path / "w.h5", {"config": {}})
+    with pytest.raises(ValueError, match="no frames"):
+        _write(tmp_path / "e.h5", [], shard_attrs)
+    assert not list(tmp_path.iterdir())
+
+
+def test_truncated_shard_names_the_file(tmp_path, frames, shard_attrs):
+    path = _write(tmp_path / "t.h5", frames, shard_attrs)
+    data = path.read_bytes()
+    path.write_bytes(data[: len(data) // 2])
+    with pytest.raises(ShardError, match=r"t\.h5: not a readable HDF5 file") as info:
+        ShardReader(path)
+    assert "\n" not in str(info.value)
+    with pytest.raises(ShardError, match="no such shard file"):
+        ShardReader(tmp_path / "missing.h5")
+
+
+def test_corrupt_chunk_raises_on_read(tmp_path, frames, shard_attrs):
+    path = _write(tmp_path / "c.h5", frames, shard_attrs, compression=None)
+    with h5py.File(path) as f:
+        offset = f["pignistic"].id.get_chunk_info(2).byte_offset
+    data = bytearray(path.read_bytes())
+    data[offset + 10] ^= 0xFF
+    path.write_bytes(bytes(data))
+    with ShardReader(path) as r:
+        r.get(1, ["pignistic"])
+        with pytest.raises(ShardError, match=r"c\.h5: frame 2: cannot read 'pignistic'"):
+            r.get(2, ["pignistic"])
+        with pytest.raises(ShardError, match="frame 2"):
+            r.verify()
+
+
+def test_missing_dataset_and_wrong_shape(tmp_path, frames, shard_attrs):
+    path = _write(tmp_path / "m.h5", frames, shard_attrs)
+    with h5py.File(path, "a") as f:
+        del f["gis"]
+    with pytest.raises(ShardError, match=r"m\.h5: dataset 'gis' missing"):
+        ShardReader(path)
+    path = _write(tmp_path / "n.h5", frames, shard_attrs)
+    with h5py.File(path, "a") as f:
+        f.attrs["n_frames"] = 5
+    with pytest.raises(ShardError, match=r"dataset 'pignistic' has shape \(4, 5, 12, 10\), "
+                                         r"expected \(5, 5, 12, 10\)"):
+        ShardReader(path)
+    (tmp_path / "plain.h5").write_bytes(b"")
+    with h5py.File(tmp_path / "plain.h5", "w") as f:
+        f["x"] = 1
+    with pytest.raises(ShardError, match="not a dstenv shard"):
+        ShardReader(tmp_path / "plain.h5")

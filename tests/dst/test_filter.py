@@ -1,0 +1,169 @@
+"""PerceptionGridFilter: the temporal rule, ego motion, agreement with the reference."""
+
+import numpy as np
+import pytest
+
+from dstenv.dst import M, NUM_SETS, OMEGA, DSTParams, PerceptionGridFilter, pignistic, vacuous
+from dstenv.dst._kernel import REACHABLE
+from dstenv.dst.reference import reference_update
+from dstenv.grid import GridSpec, relative_pose
+
+FREE_CODE, OCC_CODE, ROAD = 1, 2, 2
+
+
+def full(shape, code):
+    return np.full(shape, code, np.uint8)
+
+
+def test_free_to_occupied_puts_mass_on_moving():
+    f = PerceptionGridFilter((2, 2))
+    f.update(full((2, 2), FREE_CODE), full((2, 2), ROAD))
+    before = f.masses[M].copy()
+    m = f.update(full((2, 2), OCC_CODE), full((2, 2), ROAD))
+    assert np.all(before == 0)
+    assert np.all(m[M] > 0.5)
+
+
+def test_occupied_to_free_goes_to_omega():
+    p = DSTParams(alpha=0.0)
+    f = PerceptionGridFilter((1, 1), p)
+    f.update(full((1, 1), OCC_CODE), full((1, 1), 0))
+    m_prev = f.masses[:, 0, 0].copy()
+    m = f.update(full((1, 1), FREE_CODE), full((1, 1), 0))[:, 0, 0]
+    # past O (0.8) x new F (0.8) is conflict O->F: 0.64 goes to Omega
+    assert m_prev[28] == pytest.approx(0.8, abs=1e-6)
+    assert m[OMEGA] == pytest.approx(0.64 + 0.2 * 0.2, abs=1e-5)
+    assert m[M] == 0.0
+
+
+def test_persistent_occupancy_leaves_moving():
+    f = PerceptionGridFilter((1, 1))
+    zetas, moving = [], []
+    for _ in range(6):
+        m = f.update(full((1, 1), OCC_CODE), full((1, 1), ROAD))
+        zetas.append(float(f.zeta[0, 0]))
+        moving.append(float(f.pignistic()[4, 0, 0]))
+        assert m[M, 0, 0] == 0.0  # never seen free: nothing on {M} alone
+    assert zetas[-1] == 1.0
+    assert moving[-1] < 0.06 < 0.4 < moving[0]
+    assert all(b <= a + 1e-6 for a, b in zip(moving[1:], moving[2:]))
+
+
+def test_conflict_decrements_zeta():
+    f = PerceptionGridFilter((1, 1), DSTParams(alpha=0.0))
+    for _ in range(3):
+        f.update(full((1, 1), OCC_CODE), full((1, 1), ROAD))
+    assert f.zeta[0, 0] == 1.0
+    f.update(full((1, 1), FREE_CODE), full((1, 1), ROAD))
+    assert f.zeta[0, 0] == pytest.approx(1 / 3, abs=1e-6)
+
+
+@pytest.mark.parametrize("cells", [(1, 0), (0, 3), (-2, 1)])
+def test_whole_cell_translation_shifts_exactly(cells):
+    spec = GridSpec(16, 16, 0.5)
+    rng = np.random.default_rng(0)
+    # alpha = 0 and an unreachable gamma_O make an uninformative update the identity
+    f = PerceptionGridFilter(spec.shape, DSTParams(alpha=0.0, gamma_occupied=1.0), spec.cell_size)
+    sensor = rng.integers(0, 3, spec.shape).astype(np.uint8)
+    gis = rng.integers(0, 4, spec.shape).astype(np.uint8)
+    f.update(sensor, gis)
+    before, zeta = f.masses.copy(), f.zeta.copy()
+    di, dj = cells  # the ego moves di cells forward and dj cells left
+    unknown = np.zeros(spec.shape, np.uint8)
+    no_map = np.zeros(spec.shape, np.uint8)
+    after = f.update(unknown, no_map, ego_motion=(di * spec.cell_size, dj * spec.cell_size, 0.0))
+    h, w = spec.shape
+    for i in range(h):
+        for j in range(w):
+            si, sj = i - di, j - dj  # forward motion moves content down (larger row)
+            if 0 <= si < h and 0 <= sj < w:
+                np.testing.assert_allclose(after[:, i, j], before[:, si, sj], atol=1e-6)
+                assert f.zeta[i, j] == zeta[si, sj]
+            else:
+                assert after[OMEGA, i, j] == 1.0 and f.zeta[i, j] == 0.0
+
+
+def test_rotation_by_quarter_turn():
+    f = PerceptionGridFilter((9, 9), DSTParams(alpha=0.0, gamma_occupied=1.0), cell_size=1.0)
+    sensor = np.zeros((9, 9), np.uint8)
+    sensor[2, 4] = OCC_CODE  # 2 m ahead
+    f.update(sensor, np.zeros((9, 9), np.uint8))
+    m = f.update(np.zeros((9, 9), np.uint8), np.zeros((9, 9), np.uint8), (0.0, 0.0, np.pi / 2))
+    # after turning left by 90 degrees the obstacle is 2 m to the right: row 4, column 6
+    assert m[28, 4, 6] == pytest.approx(0.8, abs=1e-6)
+    assert m[OMEGA, 2, 4] == 1.0
+
+
+def test_matches_reference_over_random_sequence():
+    rng = np.random.default_rng(7)
+    shape = (24, 20)
+    for params in (DSTParams.default(), DSTParams.paper(), DSTParams(0.7, 0.9, 0.3, 0.5, 0.2, 0.4, 0.3)):
+        f = PerceptionGridFilter(shape, params, cell_size=0.4)
+        m_ref, z_ref = vacuous(shape), np.zeros(shape, np.float32)
+        for _ in range(12):
+            sensor = rng.integers(0, 3, shape).astype(np.uint8)
+            gis = rng.integers(0, 4, shape).astype(np.uint8)
+            motion = (rng.normal(0, 0.6), rng.normal(0, 0.6), rng.normal(0, 0.2))
+            m = f.update(sensor, gis, motion)
+            m_ref, z_ref = reference_update(m_ref, z_ref, sensor, gis, params, 0.4, motion)
+            np.testing.assert_allclose(m, m_ref, atol=2e-6)
+            np.testing.assert_allclose(f.zeta, z_ref, atol=1e-6)
+            np.testing.assert_allclose(f.pignistic(), pignistic(m_ref), atol=2e-6)
+        assert np.all(m >= 0) and np.all(m[0] == 0)
+        np.testing.assert_allclose(m.sum(0), 1.0, atol=1e-5)
+        unreachable = np.setdiff1d(np.arange(NUM_SETS), REACHABLE)
+        assert np.all(m[unreachable] == 0)
+
+
+def test_reset_and_determinism():
+    rng = np.random.default_rng(3)
+    seq = [(rng.integers(0, 3, (8, 8)).astype(np.uint8), rng.integers(0, 4, (8, 8)).astype(np.uint8))
+           for _ in range(5)]
+    f = PerceptionGridFilter((8, 8))
+    first = [f.update(s, g, (0.2, 0.1, 0.05)) for s, g in seq]
+    f.reset()
+    assert np.all(f.masses[OMEGA] == 1.0) and np.all(f.zeta == 0)
+    np.testing.assert_allclose(f.pignistic(), 0.2)
+    second = [f.update(s, g, (0.2, 0.1, 0.05)) for s, g in seq]
+    for a, b in zip(first, second):
+        assert np.array_equal(a, b)
+
+
+def test_copy_semantics():
+    f = PerceptionGridFilter((4, 4))
+    a = f.update(full((4, 4), FREE_CODE), full((4, 4), ROAD))
+    view = f.update(full((4, 4), OCC_CODE), full((4, 4), ROAD), copy=False)
+    assert a.flags.writeable and a.flags.c_contiguous
+    assert not view.flags.writeable
+    assert not np.shares_memory(a, view)
+
+
+def test_relative_pose_roundtrip():
+    prev = np.array([10.0, -3.0, 0.3])
+    dx, dy, dyaw = 2.0, 0.5, 0.1
+    c, s = np.cos(prev[2]), np.sin(prev[2])
+    pose = np.array([prev[0] + c * dx - s * dy, prev[1] + s * dx + c * dy, prev[2] + dyaw])
+    np.testing.assert_allclose(relative_pose(prev, pose), (dx, dy, dyaw), atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    "sensor, gis, match",
+    [
+        (np.full((4, 4), 3, np.uint8), np.zeros((4, 4), np.uint8), "sensor_states holds code 3"),
+        (np.zeros((4, 5), np.uint8), np.zeros((4, 4), np.uint8), r"shape \(4, 4\)"),
+        (np.zeros((4, 4), np.uint8), np.full((4, 4), 7, np.uint8), "map_classes holds code 7"),
+        (np.zeros((4, 4), np.float32), np.zeros((4, 4), np.uint8), "integer codes"),
+    ],
+)
+def test_bad_inputs(sensor, gis, match):
+    with pytest.raises(ValueError, match=match):
+        PerceptionGridFilter((4, 4)).update(sensor, gis)
+
+
+def test_params_validation_and_presets():
+    assert DSTParams.paper().alpha == 0.9 and DSTParams.default().alpha == 0.1
+    with pytest.raises(ValueError, match="gamma_occupied"):
+        DSTParams(gamma_occupied=6.0)
+    with pytest.raises(ValueError, match="unknown DST parameter 'alfa'"):
+        DSTParams.from_dict({"alfa": 0.2})
+    assert DSTParams.from_dict(DSTParams.paper().to_dict()) == DSTParams.paper()

@@ -1,0 +1,29 @@
+"""Shared settings of the env tests: small grids keep every test to seconds."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import pytest
+
+#: A grid just above NatureCNN's 36 x 36 minimum.
+SMALL_GRID: dict[str, Any] = {"height": 40, "width": 40, "cell_size": 1.0}
+
+#: Small highway-env backend: coarse map raster, fewer beams.
+SMALL_HIGHWAY: dict[str, Any] = {
+    "source": "highway",
+    "grid": SMALL_GRID,
+    "lidar": {"beams": 360},
+    "highway": {"resolution": 0.5},
+}
+
+
+def city_available() -> bool:
+    try:
+        from dstenv.sim import World  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+needs_city = pytest.mark.skipif(not city_available(), reason="dstenv.sim.World not available")

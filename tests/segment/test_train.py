@@ -1,0 +1,65 @@
+import pytest
+import torch
+
+from dstenv.config import ConfigError
+from dstenv.segment.checkpoint import load_checkpoint, load_segmenter
+from dstenv.segment.evaluate import batches, evaluate
+from dstenv.segment.registry import create_segmenter
+from dstenv.segment.train import train
+
+from tests.segment.synthetic import SyntheticFrames
+
+SMALL = {"model": "unet-light", "model_kwargs": {"base": 4, "depth": 2}, "batch_size": 4, "lr": 5e-3}
+
+
+def _weights(seg):
+    return {k: v.clone() for k, v in seg.model.state_dict().items()}
+
+
+def test_same_seed_same_weights_and_resume_matches(tmp_path):
+    data, val = SyntheticFrames(8, seed=1), SyntheticFrames(4, seed=2)
+    quiet = {"progress": False, "log": lambda m: None}
+    a, ha = train({**SMALL, "epochs": 2}, data, val, tmp_path / "a", **quiet)
+    b, _ = train({**SMALL, "epochs": 2}, data, val, tmp_path / "b", **quiet)
+    wa, wb = _weights(a), _weights(b)
+    assert all(torch.equal(wa[k], wb[k]) for k in wa)
+    # one epoch, then resume for the second: same weights as straight through
+    train({**SMALL, "epochs": 1}, data, val, tmp_path / "c", **quiet)
+    c, hc = train({**SMALL, "epochs": 2}, data, val, tmp_path / "c", **quiet)
+    wc = _weights(c)
+    assert all(torch.equal(wa[k], wc[k]) for k in wa)
+    assert hc["epoch"] == [1, 2] and hc["train_loss"] == ha["train_loss"]
+    ckpt = load_checkpoint(tmp_path / "c" / "last.pt")
+    assert ckpt["epoch"] == 1 and ckpt["config"]["model_kwargs"] == {"base": 4, "depth": 2}
+    assert len(ckpt["config"]["class_weights"]) == 5
+    # a different seed gives different weights
+    d, _ = train({**SMALL, "epochs": 1, "seed": 5}, data, None, None, **quiet)
+    assert not all(torch.equal(wa[k], _weights(d)[k]) for k in wa)
+
+
+def test_resume_with_other_settings_is_refused(tmp_path):
+    data = SyntheticFrames(4, seed=1)
+    train({**SMALL, "epochs": 1}, data, None, tmp_path, progress=False, log=lambda m: None)
+    with pytest.raises(ConfigError, match="lr"):
+        train({**SMALL, "epochs": 2, "lr": 1e-2}, data, None, tmp_path, progress=False, log=lambda m: None)
+
+
+def test_bad_config_names_the_key():
+    with pytest.raises(ConfigError, match="unknown key 'epoch'"):
+        train({"epoch": 3}, SyntheticFrames(2), progress=False)
+    with pytest.raises(ConfigError, match="unknown model"):
+        train({"model": "resnet"}, SyntheticFrames(2), progress=False)
+
+
+def test_training_beats_noisy_argmax(tmp_path):
+    # the synthetic input is a noisy softmax of the labels: a trained net denoises it
+    data, test = SyntheticFrames(24, seed=3), SyntheticFrames(6, seed=4)
+    seg, hist = train({**SMALL, "model_kwargs": {"base": 8, "depth": 2}, "epochs": 6, "loss": "wce+lovasz"},
+                      data, test, tmp_path, progress=False, log=lambda m: None)
+    assert hist["train_loss"][-1] < hist["train_loss"][0]
+    best = load_segmenter(tmp_path / "best.pt")
+    learned = evaluate(best, batches(test, 6))
+    dst = evaluate(create_segmenter("dst"), batches(test, 6))
+    from dstenv.segment.metrics import mean_iou
+
+    assert mean_iou(learned.all) > mean_iou(dst.all) + 0.05

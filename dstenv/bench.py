@@ -19,6 +19,10 @@ __all__ = ["BENCHMARKS", "register", "run_benchmark"]
 #: benchmark name -> (module with ``run(args)``, one-line description)
 BENCHMARKS: dict[str, tuple[str, str]] = {
     "fusion": ("dstenv.dst.bench", "PerceptionGridFilter.update at 64/128/256 vs plain numpy"),
+    "sensing": (
+        "dstenv.sensing.bench",
+        "LIDAR sweep, sensor/GIS/label grids at 256x256 (1800 beams, 40 agents)",
+    ),
     "world": ("dstenv.sim.bench", "world step + LIDAR sweep + grids + labels at 256x256"),
     "env": ("dstenv.envs.bench", "DSTGrid-v0 steps/s vs highway-env OccupancyGrid"),
     "data": ("dstenv.data.bench", "labelled frames per hour and bytes per frame on disk"),

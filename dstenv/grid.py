@@ -16,7 +16,9 @@ Every ego-centred grid (sensor, GIS, labels, masses, probabilities) has shape
 
 with the ego cell ``(i0, j0) = (H // 2, W // 2)``. Plotting a grid with
 ``imshow`` therefore shows the scene as a driver sees it from above: forward up,
-left left. Cell ``(i, j)`` covers ``x in [x - c/2, x + c/2)`` and likewise in y.
+left left. Cell ``(i, j)`` covers ``x in (x_c - c/2, x_c + c/2]`` around its centre
+``x_c`` (the upper edge belongs to the cell, as :meth:`GridSpec.to_cell` rounds), and
+likewise in y.
 
 The paper's default is 256 x 256 cells of 0.33 m (84.5 m square), ego at the centre.
 """

@@ -53,7 +53,7 @@ class WorldSource(Protocol):
 
 
 def _city_world(config: Mapping[str, Any], seed: int) -> WorldSource:
-    from dstenv.sim import World
+    from dstenv.sim.world import World
 
     return World(config["world"], seed)
 

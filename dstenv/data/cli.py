@@ -74,6 +74,7 @@ def _generate(args: argparse.Namespace) -> int:
             warmup=args.stride if args.warmup is None else args.warmup, masses=args.masses,
             quantize=not args.float32,
             compression=None if args.compression == "none" else args.compression,
+            compression_level=args.gzip_level,
         )
         manifest = generate(spec, args.out, workers=args.workers, ray_address=args.ray,
                             progress=not args.quiet)
@@ -186,7 +187,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--masses", action="store_true", help="also store the raw (32,H,W) masses")
     p.add_argument("--float32", action="store_true",
                    help="store probabilities as float32 (default uint8, error <= 1/510)")
-    p.add_argument("--compression", default="gzip", choices=["gzip", "lzf", "none"])
+    p.add_argument("--compression", default="gzip", choices=["gzip", "lzf", "none"],
+                   help="shard compression (default gzip)")
+    p.add_argument("--gzip-level", type=int, default=6, choices=range(10), metavar="0-9",
+                   help="gzip level (default 6: ~24 KB per 256x256 frame)")
     p.add_argument("--frames-per-shard", type=int, default=256)
     p.add_argument("--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
                    help="run shards as Ray tasks; no ADDRESS starts a local Ray")

@@ -26,7 +26,7 @@ from torch.utils.data import Dataset, IterableDataset, get_worker_info
 
 from dstenv.data.manifest import MANIFEST_NAME, load_manifest, scan_shards
 from dstenv.data.sampling import episode_seeds, iter_frames, scenario_config
-from dstenv.data.shards import ShardError, ShardReader
+from dstenv.data.shards import N_CLASSES, ShardError, ShardReader
 from dstenv.frame import Frame
 
 __all__ = ["INPUTS", "ShardDataset", "StreamingDataset", "frame_to_sample"]
@@ -104,6 +104,8 @@ class ShardDataset(Dataset):
         self.inputs, self.on_error, self.split = inputs, on_error, split
         self.files: list[Path] = []
         lengths: list[int] = []
+        #: ``(5,) int64`` labelled cells per class over the kept shards (loss weights)
+        self.class_counts = np.zeros(N_CLASSES, dtype=np.int64)
         for path, _ in _resolve_files(root_or_files, split):
             try:
                 with ShardReader(path) as r:
@@ -113,11 +115,13 @@ class ShardDataset(Dataset):
                         raise ShardError(f"{path}: inputs='masses' but the shard has no masses "
                                          "(generate with --masses)")
                     n = len(r)
+                    counts = r.class_counts()
             except ShardError as exc:
                 self._fail(exc)
                 continue
             self.files.append(path)
             lengths.append(n)
+            self.class_counts += counts
         self._ends = np.cumsum(lengths).tolist()
         self._bad: set[int] = set()
         self._readers: dict[int, ShardReader] = {}

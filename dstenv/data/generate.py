@@ -66,7 +66,7 @@ class GenerateSpec:
     masses: bool = False
     quantize: bool = True
     compression: str | None = "gzip"
-    compression_level: int = 4
+    compression_level: int = 6
 
     def __post_init__(self) -> None:
         if self.frames < 1:

@@ -5,7 +5,7 @@ Format (``format = "dstenv-shard"``, ``format_version = 1``)
 One shard holds ``N`` :class:`dstenv.frame.Frame` records of one grid shape
 ``(H, W)``. Every per-frame dataset has ``N`` as its first axis and is chunked one
 frame per chunk (random access reads exactly one chunk per array), compressed
-(``gzip`` level 4 by default, or ``lzf``) and checksummed (``fletcher32``: a
+(``gzip`` level 6 by default, or ``lzf``) and checksummed (``fletcher32``: a
 corrupted chunk raises on read instead of returning wrong numbers).
 
 ===================  ======================  =========================================
@@ -26,6 +26,10 @@ dataset              shape, dtype            meaning (axes: :mod:`dstenv.grid`)
 ``masses``           (N, 32, H, W) float32   optional raw DST masses (bit layout of
                                              :mod:`dstenv.dst`), never quantised
 ===================  ======================  =========================================
+
+Measured at 256 x 256 (default city, stride 10; ``dstenv bench data``): uint8 +
+gzip 6 stores about 24 KB per frame, against 919 KB uncompressed uint8 and 2.9 MB
+as float32; gzip 4 gave 38 KB, gzip 9 22 KB at 4x the write time, lzf 67 KB.
 
 Quantisation: when ``attrs["prob_dtype"] == "uint8"`` the probabilities are stored
 as ``q = rint(255 * p)`` and read as ``p' = q / 255``, so ``|p' - p| <= 1/510``
@@ -89,6 +93,9 @@ FORMAT_VERSION = 1
 QUANT_SCALE = 255
 #: Largest absolute error of a dequantised probability.
 QUANT_MAX_ERROR = 1.0 / (2 * QUANT_SCALE)
+# frames are buffered and written in blocks (fewer HDF5 calls); chunks stay one per frame
+_BUFFER_FRAMES = 16
+_BUFFER_BYTES = 32 << 20
 N_CLASSES = NUM_CLASSES  # 5
 N_MASSES = NUM_SETS  # 32
 
@@ -156,7 +163,7 @@ class ShardWriter:
         quantize: bool = True,
         masses: bool = False,
         compression: str | None = "gzip",
-        compression_opts: int | None = 4,
+        compression_opts: int | None = 6,
     ) -> None:
         self.path = Path(path)
         self.tmp_path = partial_path(self.path)
@@ -180,6 +187,8 @@ class ShardWriter:
             self._filters["compression_opts"] = compression_opts
         self._file: h5py.File | None = None
         self._shape: tuple[int, int] | None = None
+        self._pending: list[dict[str, Any]] = []
+        self._pending_bytes = 0
         self.n_frames = 0
 
     def __enter__(self) -> ShardWriter:
@@ -215,12 +224,22 @@ class ShardWriter:
         if self._shape is None:
             self._create(h, w)
         values = self._check(frame)
-        i = self.n_frames
-        for name, value in values.items():
-            ds = self._file[name]
-            ds.resize(i + 1, axis=0)
-            ds[i] = value
+        self._pending.append(values)
+        self._pending_bytes += sum(np.asarray(v).nbytes for v in values.values())
         self.n_frames += 1
+        if len(self._pending) >= _BUFFER_FRAMES or self._pending_bytes >= _BUFFER_BYTES:
+            self._flush(self._file)
+
+    def _flush(self, f: h5py.File) -> None:
+        """Write buffered frames: one resize and one write per dataset (still 1 chunk/frame)."""
+        if not self._pending:
+            return
+        start, k = self.n_frames - len(self._pending), len(self._pending)
+        for name in self._pending[0]:
+            ds = f[name]
+            ds.resize(start + k, axis=0)
+            ds[start:start + k] = np.stack([np.asarray(v[name]) for v in self._pending])
+        self._pending, self._pending_bytes = [], 0
 
     def _check(self, frame: Frame) -> dict[str, Any]:
         h, w = self._shape  # type: ignore[misc]
@@ -291,6 +310,7 @@ class ShardWriter:
             raise ValueError(f"{self.path}: no frames added; refusing to write an empty shard")
         try:
             if exc_type is None:
+                self._flush(f)
                 self._write_attrs(f)
                 f.flush()
                 fd = f.id.get_vfd_handle()
@@ -430,6 +450,8 @@ class ShardReader:
         if not -self.n_frames <= index < self.n_frames:
             raise IndexError(f"{self.path}: frame {index} out of range (0..{self.n_frames - 1})")
         index %= self.n_frames
+        if not self._file:
+            raise ValueError(f"{self.path}: reader is closed")
         out: dict[str, np.ndarray] = {}
         for name in names:
             if name not in self._file:

@@ -3,12 +3,13 @@
 A mode declares its space and builds a *controller* per episode that turns the
 agent's action into what the world source's ``step`` takes:
 
-* ``"discrete"``: ``Discrete(5)`` meta-actions :data:`META_ACTIONS`. On a
-  highway-env scene they are highway-env's own meta-actions (its route-following
-  ``MDPVehicle``; LEFT / RIGHT change lane). On the city they set a target speed
-  (SLOWER / FASTER step through ``target_speeds``) and the turn taken at the next
-  junction (LEFT / RIGHT; IDLE, SLOWER and FASTER keep the current choice), and the
-  world's route-following controller drives.
+* ``"discrete"``: meta-actions. On a highway-env scene, ``Discrete(5)``
+  :data:`META_ACTIONS` = highway-env's own (its route-following ``MDPVehicle``;
+  LEFT / RIGHT change lane). On the city, ``Discrete(3)``
+  :data:`CITY_META_ACTIONS` (SLOWER, IDLE, FASTER) step a target speed through
+  ``target_speeds`` (a P-controller with gain ``speed_gain`` tracks it) while the
+  autopilot's route-following steering drives the planned route: the agent decides
+  when to slow, e.g. before a blind junction.
 * ``"continuous"``: ``Box(-1, 1, (2,), float32)`` = (acceleration, steering) as
   fractions of ``max_accel`` [m/s^2] and ``max_steer`` [rad], positive steering to
   the left.
@@ -24,10 +25,12 @@ from gymnasium import spaces
 
 from dstenv.config import ConfigError
 
-__all__ = ["META_ACTIONS", "ActionMode", "ACTIONS", "action_mode", "default_action_config"]
+__all__ = ["META_ACTIONS", "CITY_META_ACTIONS", "ActionMode", "ACTIONS", "action_mode", "default_action_config"]
 
-#: Discrete action index -> meta-action name.
+#: Discrete action index -> meta-action name (highway-env scenes: all five).
 META_ACTIONS: tuple[str, ...] = ("SLOWER", "IDLE", "FASTER", "LEFT", "RIGHT")
+#: The city's discrete actions: the longitudinal three (the route fixes the turns).
+CITY_META_ACTIONS: tuple[str, ...] = META_ACTIONS[:3]
 _HIGHWAY_NAMES = {"SLOWER": "SLOWER", "IDLE": "IDLE", "FASTER": "FASTER",
                   "LEFT": "LANE_LEFT", "RIGHT": "LANE_RIGHT"}
 
@@ -70,7 +73,11 @@ class _Continuous:
 
 
 class _CityMeta:
-    """Meta-actions on the city: a target speed and a turn choice, route-following steering."""
+    """Longitudinal meta-actions on the city: a target speed; the route steers.
+
+    Steering is the autopilot's rule (pure pursuit of the route point
+    ``clip(2.5 + 0.6 v, 4, 15)`` m ahead), so the agent decides only how fast to go.
+    """
 
     def __init__(self, cfg: dict[str, Any], world: Any) -> None:
         self.speeds = [float(v) for v in cfg["target_speeds"]]
@@ -80,17 +87,24 @@ class _CityMeta:
         self.world = world
 
     def world_action(self, action: Any) -> tuple[float, float]:
-        name = META_ACTIONS[int(action)]
+        from dstenv.sim.ego import pure_pursuit
+
+        name = CITY_META_ACTIONS[int(action)]
         if name == "SLOWER":
             self.index = max(self.index - 1, 0)
         elif name == "FASTER":
             self.index = min(self.index + 1, len(self.speeds) - 1)
-        elif name in ("LEFT", "RIGHT"):
-            self.world.set_turn(name.lower())
-        target = self.speeds[self.index]
-        accel = float(np.clip(self.gain * (target - self.world.ego_speed), -self.max_accel,
+        w = self.world
+        v = w.ego_speed
+        accel = float(np.clip(self.gain * (self.speeds[self.index] - v), -self.max_accel,
                               self.max_accel))
-        return accel, float(self.world.route_steer())
+        look = float(np.clip(2.5 + 0.6 * v, 4.0, 15.0))
+        target = w.route_polyline(ahead=look, spacing=look)[-1]
+        x, y, yaw = w.ego_pose
+        ego = w.config["ego"]
+        steer = pure_pursuit(x, y, yaw, (float(target[0]), float(target[1])),
+                             ego["wheelbase"], ego["max_steer"])
+        return accel, steer
 
 
 @dataclass(frozen=True)
@@ -101,11 +115,11 @@ class ActionMode:
     controllers: dict[str, type]
 
     def space(self, cfg: dict[str, Any], source: str) -> spaces.Space:
-        """The action space (``source`` picks nothing yet: same space everywhere)."""
+        """The action space for a ``source`` world."""
         if self.name == "discrete":
             if len(cfg["target_speeds"]) < 1:
                 raise ConfigError("config.action.target_speeds: needs at least one speed")
-            return spaces.Discrete(len(META_ACTIONS))
+            return spaces.Discrete(len(CITY_META_ACTIONS if source == "city" else META_ACTIONS))
         return spaces.Box(-1.0, 1.0, (2,), dtype=np.float32)
 
     def controller(self, cfg: dict[str, Any], world: Any, source: str) -> Controller:

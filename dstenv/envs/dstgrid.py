@@ -58,10 +58,11 @@ class DSTGridEnv(gym.Env):
 
     ``config["action"]["type"]`` (:mod:`dstenv.envs.actions`):
 
-    * ``"discrete"`` (default): ``Discrete(5)`` meta-actions ``0 SLOWER, 1 IDLE,
-      2 FASTER, 3 LEFT, 4 RIGHT``. SLOWER / FASTER step the target speed through
-      ``target_speeds``; LEFT / RIGHT change lane (highway-env) or pick the turn at
-      the next junction (city). Steering follows the route.
+    * ``"discrete"`` (default): meta-actions. City: ``Discrete(3)`` = ``0 SLOWER,
+      1 IDLE, 2 FASTER``, stepping a target speed through ``target_speeds``
+      (default 0, 4.5, 9 m/s) while the autopilot's route-following steering drives
+      the planned route. highway-env scenes: ``Discrete(5)``, the same three plus
+      ``3 LEFT, 4 RIGHT`` lane changes (highway-env's ``DiscreteMetaAction``).
     * ``"continuous"``: ``Box(-1, 1, (2,), float32)``, (acceleration, steering)
       scaled by ``max_accel`` [m/s^2] and ``max_steer`` [rad], positive = left.
 
@@ -222,11 +223,13 @@ class DSTGridEnv(gym.Env):
             raise RuntimeError("DSTGridEnv.step: call reset() first")
         w = self._world
         prev_pose, prev_speed, prev_time = self._frame.ego_pose, w.ego_speed, w.time
+        prev_route = getattr(w, "route_progress", None)
         world_action = self._controller.world_action(action)
         self._frame = self.pipeline.step(world_action)
         dt = max(w.time - prev_time, 1e-9)
-        progress = getattr(w, "progress", None)
-        if progress is None:  # forward displacement when the world has no route
+        if prev_route is not None:
+            progress = w.route_progress - prev_route
+        else:  # forward displacement when the world has no route
             progress = relative_pose(prev_pose, self._frame.ego_pose)[0]
         arrived = bool(getattr(w, "route_done", False))
         out = StepOutcome(float(progress), float(w.ego_speed), (prev_speed - w.ego_speed) / dt,

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from typing import Any
 
-__all__ = ["ENTRY_POINT", "RL_GRID", "OCCLUDED_TASK", "VARIANTS", "register_envs"]
+__all__ = ["ENTRY_POINT", "RL_GRID", "OCCLUDED_WORLD", "VARIANTS", "register_envs"]
 
 ENTRY_POINT = "dstenv.envs.dstgrid:DSTGridEnv"
 
@@ -18,11 +18,15 @@ ENTRY_POINT = "dstenv.envs.dstgrid:DSTGridEnv"
 #: 256 x 256 x 0.33 m grid at 1/9 of the cells (and NatureCNN's native 84 x 84).
 RL_GRID: dict[str, Any] = {"height": 84, "width": 84, "cell_size": 1.0}
 
-#: World ``task`` settings of the occlusion task: traffic hidden around the ego's route.
-OCCLUDED_TASK: dict[str, Any] = {
-    "cross_traffic": 4,  # cars on the side streets of the ego's next junctions
-    "parked_near_route": 10,  # parked cars along the route (they hide pedestrians)
-    "crossing_pedestrians": 3,  # pedestrians about to step out near the route
+#: World settings of the occlusion task: traffic hidden around the ego's route by
+#: buildings flush with the sidewalk (few gaps) and parked cars.
+OCCLUDED_WORLD: dict[str, Any] = {
+    "task": {
+        "cross_traffic": 4,  # cars on the side streets of the ego's next junctions
+        "parked_near_route": 10,  # parked cars along the route (they hide pedestrians)
+        "crossing_pedestrians": 3,  # pedestrians about to step out near the route
+    },
+    "map": {"building_coverage": 0.95, "setback_max": 1.0, "gap_prob": 0.2},
 }
 
 #: env id -> (``DSTGridEnv`` kwargs, ``max_episode_steps`` at 0.1 s per step)
@@ -34,7 +38,7 @@ VARIANTS: dict[str, tuple[dict[str, Any], int]] = {
     "DSTGrid-OSM-v0": ({"scenario": "osm"}, 600),
     "DSTGrid-RL-v0": ({"preset": {"grid": RL_GRID}}, 400),
     "DSTGrid-Continuous-v0": ({"preset": {"grid": RL_GRID, "action": {"type": "continuous"}}}, 400),
-    "DSTGrid-Occluded-v0": ({"preset": {"grid": RL_GRID, "world": {"task": OCCLUDED_TASK}}}, 400),
+    "DSTGrid-Occluded-v0": ({"preset": {"grid": RL_GRID, "world": OCCLUDED_WORLD}}, 400),
     "DSTGrid-Highway-v0": ({"preset": {"source": "highway", "grid": RL_GRID}}, 200),
 }
 

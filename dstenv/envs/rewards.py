@@ -22,7 +22,7 @@ def default_reward_config() -> dict[str, Any]:
         "collision": -10.0,  # [-] once, on a collision (the episode ends)
         "off_road": -5.0,  # [-] once, on leaving the road (the episode ends)
         "hard_brake": -0.5,  # [-] per step with deceleration above the threshold
-        "hard_brake_threshold": 4.0,  # [m/s^2] deceleration counted as hard braking
+        "hard_brake_threshold": 2.5,  # [m/s^2] deceleration above comfort counts as hard
         "arrived": 1.0,  # [-] once, on reaching the end of the route (scenes that have one)
     }
 

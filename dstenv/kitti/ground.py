@@ -10,7 +10,13 @@ Road returns must count as free space, not obstacles (as in the paper). The fit:
    ``max_tilt_deg`` from horizontal are rejected;
 3. the best plane is refit by least squares (SVD) to its inliers, twice.
 
-Every point then gets a height above that plane; :func:`classify_points`
+A global plane misreads sloping verges and dips, so :func:`ground_heights` then
+walks outwards through polar bins (1 deg x 1 m) of every azimuth sector, taking
+the lowest return of a *flat* bin (returns spanning at most ``flat_spread``; a
+bin holding a car's side spans its height) as the local ground when it rises
+less than ``step_tolerance + max_slope * distance`` (and drops less than the
+drop limits) since the last ground bin; other bins keep the last ground height.
+Every point then gets a height above that local ground; :func:`classify_points`
 splits the scan into ground (free-space rays), obstacles (a height band) and
 the rest (ignored: overhanging branches, the car's own body, curbs).
 """
@@ -41,13 +47,14 @@ def default_ground_config() -> dict[str, Any]:
         "max_obstacle_height": 2.50,  # [m] obstacle band: upper bound above ground
         "ego_radius": 2.7,  # [m] points closer than this (horizontally) are the ego car
         # local ground: per azimuth sector, walk outwards through range bins keeping
-        # the lowest return of a bin as the ground when it rises no more than
+        # the lowest return of a flat bin as the ground when it rises no more than
         # step_tolerance + max_slope * distance since the last ground bin
         "local": True,  # refine the plane by the polar walk (False: plane only)
         "sector_deg": 1.0,  # [deg] azimuth sector width
         "bin_size": 1.0,  # [m] range bin length
         "max_slope": 0.12,  # [m/m] steepest ground rise between ground bins
         "step_tolerance": 0.15,  # [m] rise always accepted between neighbouring bins
+        "flat_spread": 0.3,  # [m] a ground bin's returns span at most this height
         "max_drop_slope": 0.3,  # [m/m] steepest ground drop (ditches) between ground bins
         "drop_tolerance": 0.3,  # [m] drop always accepted between neighbouring bins
         "seed": 0,  # RANSAC generator seed (same seed, same result)
@@ -131,6 +138,10 @@ def ground_heights(
     rbin = (r / cfg["bin_size"]).astype(np.int64)
     lowest = np.full((n_sec, n_bin), np.inf)
     np.minimum.at(lowest, (sec, rbin), h)
+    highest = np.full((n_sec, n_bin), -np.inf)
+    np.maximum.at(highest, (sec, rbin), h)
+    # a bin holding a vertical surface (a car's side) spans its height: never ground
+    lowest[highest - lowest > cfg["flat_spread"]] = np.inf
     ground = np.zeros((n_sec, n_bin))
     g = np.zeros(n_sec)  # the plane is the ground next to the car
     last_r = np.full(n_sec, cfg["ego_radius"])

@@ -17,16 +17,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
+# The devkit's projection is defined once, next to the OSM loader that shares it.
+from dstenv.sim.osm import EARTH_RADIUS, latlon_to_mercator
+
 __all__ = [
     "EARTH_RADIUS",
     "lat_to_scale",
     "latlon_to_mercator",
+    "mercator_to_latlon",
     "Trajectory",
     "oxts_to_trajectory",
 ]
-
-#: Earth radius used by the KITTI devkit (equatorial WGS84) [m].
-EARTH_RADIUS: float = 6378137.0
 
 
 def lat_to_scale(lat: float) -> float:
@@ -34,15 +35,14 @@ def lat_to_scale(lat: float) -> float:
     return float(np.cos(np.deg2rad(lat)))
 
 
-def latlon_to_mercator(
-    lat: np.ndarray | float, lon: np.ndarray | float, scale: float
+def mercator_to_latlon(
+    mx: np.ndarray | float, my: np.ndarray | float, scale: float
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Scaled Mercator coordinates (x east, y north) [m] of lat/lon in degrees."""
-    lat = np.asarray(lat, dtype=np.float64)
-    lon = np.asarray(lon, dtype=np.float64)
-    mx = scale * np.deg2rad(lon) * EARTH_RADIUS
-    my = scale * EARTH_RADIUS * np.log(np.tan(np.deg2rad(90.0 + lat) / 2.0))
-    return mx, my
+    """Inverse of :func:`latlon_to_mercator`: ``(lat, lon)`` in degrees."""
+    k = scale * EARTH_RADIUS
+    lon = np.rad2deg(np.asarray(mx, dtype=np.float64) / k)
+    lat = 2.0 * np.rad2deg(np.arctan(np.exp(np.asarray(my, dtype=np.float64) / k))) - 90.0
+    return lat, lon
 
 
 def _rotation(roll: np.ndarray, pitch: np.ndarray, yaw: np.ndarray) -> np.ndarray:
@@ -86,6 +86,11 @@ class Trajectory:
         """World coordinates ``(..., 2) float64`` [m] of lat/lon in degrees."""
         mx, my = latlon_to_mercator(lat, lon, self.scale)
         return np.stack([mx - self.origin[0], my - self.origin[1]], axis=-1)
+
+    def world_to_latlon(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(lat, lon)`` in degrees of world points ``(..., 2)`` [m]."""
+        xy = np.asarray(xy, dtype=np.float64)
+        return mercator_to_latlon(xy[..., 0] + self.origin[0], xy[..., 1] + self.origin[1], self.scale)
 
     def to_world(self, frame: int, points: np.ndarray) -> np.ndarray:
         """Velodyne points ``(P, 3)`` of one frame -> world ``(P, 3) float64``."""

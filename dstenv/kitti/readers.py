@@ -142,16 +142,19 @@ def read_velodyne(path: str | Path) -> np.ndarray:
     """
     path = Path(path)
     try:
+        size = path.stat().st_size
+        if size == 0 or size % 16:
+            raise KittiError(
+                f"{path}: {size} bytes is not a positive multiple of 16 "
+                "(4 float32 per point): truncated or not a Velodyne scan"
+            )
         raw = np.fromfile(path, dtype="<f4")
     except FileNotFoundError:
         raise KittiError(f"{path}: missing Velodyne scan") from None
+    except IsADirectoryError:
+        raise KittiError(f"{path}: is a directory, not a Velodyne scan") from None
     except OSError as exc:
         raise KittiError(f"{path}: cannot read: {exc.strerror}") from None
-    if raw.size == 0 or raw.size % 4:
-        raise KittiError(
-            f"{path}: {raw.size * 4} bytes is not a positive multiple of 16 "
-            "(4 float32 per point): truncated or not a Velodyne scan"
-        )
     points = raw.reshape(-1, 4).astype(np.float32, copy=False)
     if not np.isfinite(points[:, :3]).all():
         raise KittiError(f"{path}: non-finite coordinates in the scan")

@@ -75,7 +75,8 @@ def synthetic_city(
     lane = rng.choice([-5.0, -1.7, 1.7, 5.0], n_agents)
     lane[n_cars:] = rng.choice([-road / 2 - 1.5, road / 2 + 1.5], n_agents - n_cars)
     vertical = rng.random(n_agents) < 0.5
-    xy = np.where(vertical[:, None], np.stack([mid + lane, along], 1), np.stack([along, mid + lane], 1))
+    xy = np.where(vertical[:, None], np.stack([mid + lane, along], 1),
+                  np.stack([along, mid + lane], 1))
     yaw = np.where(vertical, np.pi / 2, 0.0) + np.where(lane > 0, np.pi, 0.0)
     kind = np.full(n_agents, AgentKind.CAR, np.uint8)
     kind[n_cars:] = AgentKind.PEDESTRIAN
@@ -115,14 +116,16 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     k_hit = np.ones(60000, bool)
     cases: dict[str, Callable[[], Any]] = {
         "reference np.sin(256x256)": lambda: np.sin(ref),
-        "sweep (polygons, 1800 beams, 40 agents)": lambda: lidar_poly.sweep(world_map, agents, pose, rng),
+        "sweep (polygons, 1800 beams, 40 agents)":
+            lambda: lidar_poly.sweep(world_map, agents, pose, rng),
         "sweep (raster DDA)": lambda: lidar_raster.sweep(world_map, agents, pose, rng),
         "sensor_grid (1800 rays)": lambda: sweep.sensor_grid(spec),
         "gis_grid (exact)": lambda: gis_grid(world_map, pose, spec),
         "gis_grid (with MapError)": lambda: gis_grid(world_map, pose, spec, err),
         "label_grid (40 agents)": lambda: label_grid(world_map, agents, pose, spec),
         "visible_mask": lambda: visible_mask(sensor),
-        "sensor_grid (60k KITTI-like rays)": lambda: sensor_grid(k_angles, k_ranges, k_hit, spec, 80.0),
+        "sensor_grid (60k KITTI-like rays)":
+            lambda: sensor_grid(k_angles, k_ranges, k_hit, spec, 80.0),
     }
     results: dict[str, Any] = {}
     ref_ms = None

@@ -78,7 +78,9 @@ def _prob(cfg: Mapping[str, Any], key: str, where: str) -> None:
         raise ConfigError(f"{where}.{key}: must lie in [0, 1], got {cfg[key]!r}")
 
 
-def lidar_config(overrides: Mapping[str, Any] | None = None, where: str = "lidar") -> dict[str, Any]:
+def lidar_config(
+    overrides: Mapping[str, Any] | None = None, where: str = "lidar"
+) -> dict[str, Any]:
     """Merge and validate a ``lidar`` section.
 
     Raises:
@@ -110,7 +112,9 @@ def gis_config(overrides: Mapping[str, Any] | None = None, where: str = "gis") -
     return cfg
 
 
-def labels_config(overrides: Mapping[str, Any] | None = None, where: str = "labels") -> dict[str, Any]:
+def labels_config(
+    overrides: Mapping[str, Any] | None = None, where: str = "labels"
+) -> dict[str, Any]:
     """Merge and validate a ``labels`` section (see :func:`lidar_config`)."""
     cfg = merge_config(default_labels_config(), overrides, where)
     _nonneg(cfg, "moving_threshold", where)

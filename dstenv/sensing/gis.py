@@ -72,7 +72,9 @@ class MapError:
         if p <= 0:
             return cls(offset, rotation)
         if not world_map.buildings:
-            raise ValueError("gis.missing_building_prob > 0 needs WorldMap.buildings polygons; the map has none")
+            raise ValueError(
+                "gis.missing_building_prob > 0 needs WorldMap.buildings polygons; the map has none"
+            )
         drop = np.flatnonzero(rng.random(len(world_map.buildings)) < p)
         raster = remove_buildings(world_map, drop)
         return cls(offset, rotation, raster, tuple(int(b) for b in drop))
@@ -242,7 +244,8 @@ def _inside(px, py, poly, a, b):  # pragma: no cover - numba
 
 
 @numba.njit(cache=True)
-def _clear_polygon(out, x0, y0, res, r0, r1, c0, c1, poly, others, starts, building, repl):  # pragma: no cover
+def _clear_polygon(out, x0, y0, res, r0, r1, c0, c1, poly, others, starts,
+                   building, repl):  # pragma: no cover - numba
     n = poly.shape[0]
     for r in range(r0, r1):
         yc = y0 + (r + 0.5) * res
@@ -258,7 +261,8 @@ def _clear_polygon(out, x0, y0, res, r0, r1, c0, c1, poly, others, starts, build
                     ax, ay = poly[i - 1, 0], poly[i - 1, 1]
                     ex, ey = poly[i, 0] - ax, poly[i, 1] - ay
                     ll = ex * ex + ey * ey
-                    t = 0.0 if ll == 0 else min(max(((xc - ax) * ex + (yc - ay) * ey) / ll, 0.0), 1.0)
+                    t = 0.0 if ll == 0 else ((xc - ax) * ex + (yc - ay) * ey) / ll
+                    t = min(max(t, 0.0), 1.0)
                     qx, qy = ax + t * ex - xc, ay + t * ey - yc
                     d2 = min(d2, qx * qx + qy * qy)
                 if d2 <= res * res:

@@ -15,7 +15,7 @@ import math
 import numba
 import numpy as np
 
-from dstenv.dst.frame import CLASSES, SensorState
+from dstenv.dst import CLASSES, SensorState
 from dstenv.grid import GridSpec
 from dstenv.sensing.gis import _check_pose, _lookup
 from dstenv.sim.types import Agents, MapClass, WorldMap
@@ -75,7 +75,8 @@ def label_grid(
         rel = np.asarray(agents.xy, dtype=np.float64) - (px, py)
         ex = c * rel[:, 0] + s * rel[:, 1]
         ey = -s * rel[:, 0] + c * rel[:, 1]
-        cls = np.where(np.asarray(agents.speed) > moving_threshold, _MOVING, _STATIC).astype(np.uint8)
+        moving = np.asarray(agents.speed) > moving_threshold
+        cls = np.where(moving, _MOVING, _STATIC).astype(np.uint8)
         _paint_boxes(out, ex, ey, np.asarray(agents.yaw, dtype=np.float64) - yaw,
                      np.asarray(agents.length, dtype=np.float64) / 2,
                      np.asarray(agents.width, dtype=np.float64) / 2,

@@ -39,6 +39,9 @@ HIT_NONE: int = -1
 #: ``Sweep.hit_id`` of a beam that ended on a building.
 HIT_BUILDING: int = -2
 
+_NONE_F = np.zeros(0)
+_NONE_B = np.zeros(0, dtype=bool)
+
 
 @dataclass
 class Sweep:
@@ -97,6 +100,8 @@ class Lidar:
         self.theta0 = -fov / 2
         self.angles = self.theta0 + self.dtheta * np.arange(self.beams, dtype=np.float64)
         self.mount = np.array([c["mount_x"], c["mount_y"]], dtype=np.float64)
+        self._cos = np.cos(self.angles)  # ego-frame beam directions
+        self._sin = np.sin(self.angles)
         self._map: WorldMap | None = None
         self._edges = np.zeros((0, 4))
         self._starts = np.zeros(1, np.int64)
@@ -119,56 +124,43 @@ class Lidar:
         pose = np.asarray(pose, dtype=np.float64)
         if pose.shape != (3,) or not np.all(np.isfinite(pose)):
             raise ValueError(f"sweep: pose must be a finite (3,) array (x, y, yaw), got {pose!r}")
-        px, py, yaw = pose
+        px, py, yaw = (float(v) for v in pose)
         cy, sy = math.cos(yaw), math.sin(yaw)
         sx = px + cy * self.mount[0] - sy * self.mount[1]
         sy_ = py + sy * self.mount[0] + cy * self.mount[1]
-        world_angles = yaw + self.angles
-        dirs = np.stack([np.cos(world_angles), np.sin(world_angles)], axis=1)
         best = np.full(self.beams, np.inf)
         best_id = np.full(self.beams, HIT_NONE, dtype=np.int32)
+        geo = (sx, sy_, cy, sy, self.theta0, self.dtheta, self.periodic, self.max_range,
+               self._cos, self._sin, best, best_id)
 
         mode = self.config["buildings"]
         if mode == "auto":
             mode = "polygons" if world_map.buildings else "raster"
         if mode == "polygons":
             self._load_polygons(world_map)
-            _cast_edges(self._edges, self._starts, self._boxes, np.full(len(self._boxes), HIT_BUILDING, np.int32),
-                        sx, sy_, yaw + self.theta0, self.dtheta, self.periodic, self.max_range,
-                        dirs, best, best_id)
+            _cast_edges(self._edges, self._starts, self._boxes, *geo)
         else:
             raster = np.ascontiguousarray(world_map.raster, dtype=np.uint8)
             _cast_raster(raster, float(world_map.origin[0]), float(world_map.origin[1]),
-                         float(world_map.resolution), np.uint8(MapClass.BUILDING),
-                         sx, sy_, self.max_range, dirs, best, best_id)
+                         float(world_map.resolution), np.uint8(MapClass.BUILDING), *geo)
         if len(agents):
-            corners = agents.corners()
-            edges = np.concatenate([corners, np.roll(corners, -1, axis=1)], axis=2).reshape(-1, 4)
-            starts = np.arange(0, 4 * len(agents) + 1, 4, dtype=np.int64)
-            lo, hi = corners.min(axis=1), corners.max(axis=1)
-            boxes = np.concatenate([lo, hi], axis=1)
-            _cast_edges(np.ascontiguousarray(edges), starts, boxes, np.arange(len(agents), dtype=np.int32),
-                        sx, sy_, yaw + self.theta0, self.dtheta, self.periodic, self.max_range,
-                        dirs, best, best_id)
+            f64 = np.float64
+            _cast_boxes(np.ascontiguousarray(agents.xy, f64), np.ascontiguousarray(agents.yaw, f64),
+                        np.ascontiguousarray(agents.length, f64),
+                        np.ascontiguousarray(agents.width, f64), *geo)
         return self._measure(best, best_id, rng)
 
     def _measure(self, best: np.ndarray, best_id: np.ndarray, rng: np.random.Generator) -> Sweep:
-        c = self.config
-        hit = best <= self.max_range
-        ranges = np.where(hit, best, self.max_range)
-        best_id[~hit] = HIT_NONE
-        if c["range_noise"] > 0:
-            noise = rng.normal(0.0, c["range_noise"], self.beams)
-            ranges = np.where(hit, np.clip(ranges + noise, 0.0, self.max_range), ranges)
-        valid = np.ones(self.beams, dtype=bool)
-        if c["dropout"] > 0:
-            valid = rng.random(self.beams) >= c["dropout"]
-            hit &= valid
-            best_id[~valid] = HIT_NONE
-            ranges[~valid] = np.nan
-        pts = self.mount + ranges[:, None] * np.stack([np.cos(self.angles), np.sin(self.angles)], 1)
-        pts[~hit] = np.nan
-        return Sweep(self.angles.copy(), ranges, hit, best_id, pts, valid, self.mount.copy(),
+        c, b = self.config, self.beams
+        noise = rng.normal(0.0, c["range_noise"], b) if c["range_noise"] > 0 else _NONE_F
+        drop = rng.random(b) < c["dropout"] if c["dropout"] > 0 else _NONE_B
+        ranges = np.empty(b)
+        hit = np.empty(b, dtype=bool)
+        valid = np.empty(b, dtype=bool)
+        points = np.empty((b, 2))
+        _finish(best, best_id, self.max_range, noise, drop, self._cos, self._sin,
+                float(self.mount[0]), float(self.mount[1]), ranges, hit, valid, points)
+        return Sweep(self.angles.copy(), ranges, hit, best_id, points, valid, self.mount.copy(),
                      self.max_range)
 
     def _load_polygons(self, world_map: WorldMap) -> None:
@@ -179,7 +171,8 @@ class Lidar:
         for b, poly in enumerate(world_map.buildings):
             poly = np.asarray(poly, dtype=np.float64)
             if poly.ndim != 2 or poly.shape[1] != 2 or poly.shape[0] < 3:
-                raise ValueError(f"WorldMap.buildings[{b}]: expected a (K>=3, 2) polygon, got shape {poly.shape}")
+                raise ValueError(f"WorldMap.buildings[{b}]: expected a (K>=3, 2) polygon, "
+                                 f"got shape {poly.shape}")
             e = np.concatenate([poly, np.roll(poly, -1, axis=0)], axis=1)
             e = e[np.any(e[:, :2] != e[:, 2:], axis=1)]  # drop the closing duplicate vertex
             edges.append(e)
@@ -191,69 +184,127 @@ class Lidar:
         self._map = world_map
 
 
-@numba.njit(cache=True)
-def _cast_edges(edges, starts, boxes, ids, sx, sy, theta0, dtheta, periodic, max_range,
-                dirs, best, best_id):  # pragma: no cover - numba
-    """Nearest intersection of each beam with groups of segments (buildings or agents).
-
-    Group g owns ``edges[starts[g]:starts[g+1]]`` (rows ``x1, y1, x2, y2``), has the
-    bounding box ``boxes[g]`` (``xmin, ymin, xmax, ymax``) and the id ``ids[g]``.
-    """
-    nb = dirs.shape[0]
+@numba.njit(cache=True, inline="always")
+def _cast_segment(ax, ay, bx, by, hid, theta0, dtheta, periodic, max_range, cos_t, sin_t,
+                  best, best_id):  # pragma: no cover - numba
+    """Nearest hits of the beams with one segment given in the sensor frame."""
+    nb = cos_t.shape[0]
     two_pi = 2.0 * math.pi
     period = two_pi / dtheta  # beams per full turn (== nb when periodic)
-    for g in range(boxes.shape[0]):
-        # skip groups whose bounding box lies beyond the range
-        dx = max(boxes[g, 0] - sx, 0.0, sx - boxes[g, 2])
-        dy = max(boxes[g, 1] - sy, 0.0, sy - boxes[g, 3])
-        if dx * dx + dy * dy > max_range * max_range:
-            continue
-        for e in range(starts[g], starts[g + 1]):
-            ax = edges[e, 0] - sx
-            ay = edges[e, 1] - sy
-            bx = edges[e, 2] - sx
-            by = edges[e, 3] - sy
-            ex = bx - ax
-            ey = by - ay
-            # beam-index interval covered by the segment (the short arc between its ends)
-            fa = (math.atan2(ay, ax) - theta0) % two_pi
-            fb = (math.atan2(by, bx) - theta0) % two_pi
-            d = fb - fa
-            if d > math.pi:
-                d -= two_pi
-            elif d < -math.pi:
-                d += two_pi
-            lo = (fa if d >= 0 else fb) / dtheta
-            hi = lo + abs(d) / dtheta
-            # past theta0 + 2 pi: beam index modulo nb, or (partial fov) a second pass
-            for wrap in range(2 if not periodic and hi >= period - 1.0 else 1):
-                k_lo = int(math.floor(lo - wrap * period))
-                k_hi = int(math.floor(hi - wrap * period)) + 1
-                for kk in range(k_lo, k_hi + 1):
-                    k = kk % nb if periodic else kk
-                    if k < 0 or k >= nb:
-                        continue
-                    ux = dirs[k, 0]
-                    uy = dirs[k, 1]
-                    den = ux * ey - uy * ex
-                    if den == 0.0:
-                        continue
-                    t = (ax * ey - ay * ex) / den
-                    s = (ax * uy - ay * ux) / den
-                    if t >= 0.0 and 0.0 <= s <= 1.0 and t < best[k]:
-                        best[k] = t
-                        best_id[k] = ids[g]
+    ex = bx - ax
+    ey = by - ay
+    # beam-index interval covered by the segment (the short arc between its ends)
+    fa = (math.atan2(ay, ax) - theta0) % two_pi
+    fb = (math.atan2(by, bx) - theta0) % two_pi
+    d = fb - fa
+    if d > math.pi:
+        d -= two_pi
+    elif d < -math.pi:
+        d += two_pi
+    lo = (fa if d >= 0 else fb) / dtheta
+    hi = lo + abs(d) / dtheta
+    # past theta0 + 2 pi: beam index modulo nb, or (partial fov) a second pass
+    for wrap in range(2 if not periodic and hi >= period - 1.0 else 1):
+        k_lo = int(math.floor(lo - wrap * period))
+        k_hi = int(math.floor(hi - wrap * period)) + 1
+        for kk in range(k_lo, k_hi + 1):
+            k = kk % nb if periodic else kk
+            if k < 0 or k >= nb:
+                continue
+            ux = cos_t[k]
+            uy = sin_t[k]
+            den = ux * ey - uy * ex
+            if den == 0.0:
+                continue
+            t = (ax * ey - ay * ex) / den
+            s = (ax * uy - ay * ux) / den
+            if t >= 0.0 and 0.0 <= s <= 1.0 and t < best[k]:
+                best[k] = t
+                best_id[k] = hid
 
 
 @numba.njit(cache=True)
-def _cast_raster(raster, x0, y0, res, building, sx, sy, max_range, dirs, best, best_id):  # pragma: no cover
+def _cast_edges(edges, starts, boxes, sx, sy, cyaw, syaw, theta0, dtheta, periodic, max_range,
+                cos_t, sin_t, best, best_id):  # pragma: no cover - numba
+    """Buildings: polygon b owns ``edges[starts[b]:starts[b+1]]`` (rows ``x1, y1, x2, y2``)
+    and has the bounding box ``boxes[b]`` (``xmin, ymin, xmax, ymax``), all world frame."""
+    r2 = max_range * max_range
+    for g in range(boxes.shape[0]):
+        dx = max(boxes[g, 0] - sx, 0.0, sx - boxes[g, 2])
+        dy = max(boxes[g, 1] - sy, 0.0, sy - boxes[g, 3])
+        if dx * dx + dy * dy > r2:
+            continue
+        for e in range(starts[g], starts[g + 1]):
+            x1 = edges[e, 0] - sx
+            y1 = edges[e, 1] - sy
+            x2 = edges[e, 2] - sx
+            y2 = edges[e, 3] - sy
+            _cast_segment(cyaw * x1 + syaw * y1, -syaw * x1 + cyaw * y1,
+                          cyaw * x2 + syaw * y2, -syaw * x2 + cyaw * y2, -2,
+                          theta0, dtheta, periodic, max_range, cos_t, sin_t, best, best_id)
+
+
+@numba.njit(cache=True)
+def _cast_boxes(xy, yaw, length, width, sx, sy, cyaw, syaw, theta0, dtheta, periodic, max_range,
+                cos_t, sin_t, best, best_id):  # pragma: no cover - numba
+    """Agents: the four edges of each oriented footprint, hit id = agent index."""
+    cx = np.empty(4)
+    cy = np.empty(4)
+    for k in range(xy.shape[0]):
+        hl = 0.5 * length[k]
+        hw = 0.5 * width[k]
+        dx = xy[k, 0] - sx
+        dy = xy[k, 1] - sy
+        if math.sqrt(dx * dx + dy * dy) - math.sqrt(hl * hl + hw * hw) > max_range:
+            continue
+        # centre and heading in the sensor frame
+        lx = cyaw * dx + syaw * dy
+        ly = -syaw * dx + cyaw * dy
+        ca = math.cos(yaw[k]) * cyaw + math.sin(yaw[k]) * syaw
+        sa = math.sin(yaw[k]) * cyaw - math.cos(yaw[k]) * syaw
+        for q in range(4):
+            ol = hl if q == 0 or q == 3 else -hl  # corners counter-clockwise, as Agents.corners
+            ow = hw if q < 2 else -hw
+            cx[q] = lx + ca * ol - sa * ow
+            cy[q] = ly + sa * ol + ca * ow
+        for q in range(4):
+            p = (q + 1) % 4
+            _cast_segment(cx[q], cy[q], cx[p], cy[p], k, theta0, dtheta, periodic, max_range,
+                          cos_t, sin_t, best, best_id)
+
+
+@numba.njit(cache=True)
+def _finish(best, best_id, max_range, noise, drop, cos_t, sin_t, mx, my,
+            ranges, hit, valid, points):  # pragma: no cover - numba
+    """Turn nearest-hit distances into measurements: noise, dropout, points."""
+    for k in range(best.shape[0]):
+        h = best[k] <= max_range
+        r = best[k] if h else max_range
+        if h and noise.shape[0]:
+            r = min(max(r + noise[k], 0.0), max_range)
+        v = not (drop.shape[0] and drop[k])
+        if not v:
+            h = False
+            r = np.nan
+        if not h:
+            best_id[k] = -1
+        ranges[k] = r
+        hit[k] = h
+        valid[k] = v
+        points[k, 0] = mx + r * cos_t[k] if h else np.nan
+        points[k, 1] = my + r * sin_t[k] if h else np.nan
+
+
+@numba.njit(cache=True)
+def _cast_raster(raster, x0, y0, res, building, sx, sy, cyaw, syaw, theta0, dtheta, periodic,
+                 max_range, cos_t, sin_t, best, best_id):  # pragma: no cover - numba
     """Distance along each beam to the first building cell (exact grid traversal)."""
     hm, wm = raster.shape
     u0 = (sx - x0) / res  # column coordinate
     v0 = (sy - y0) / res  # row coordinate
-    for k in range(dirs.shape[0]):
-        ux = dirs[k, 0]
-        uy = dirs[k, 1]
+    for k in range(cos_t.shape[0]):
+        ux = cyaw * cos_t[k] - syaw * sin_t[k]  # world direction of the beam
+        uy = syaw * cos_t[k] + cyaw * sin_t[k]
         c = int(math.floor(u0))
         r = int(math.floor(v0))
         sc = 1 if ux > 0 else -1
@@ -278,7 +329,8 @@ def _cast_raster(raster, x0, y0, res, building, sx, sy, max_range, dirs, best, b
                     best[k] = t
                     best_id[k] = -2
                     break
-            elif (c < 0 and sc < 0) or (c >= wm and sc > 0) or (r < 0 and sr < 0) or (r >= hm and sr > 0):
+            elif ((c < 0 and sc < 0) or (c >= wm and sc > 0)
+                  or (r < 0 and sr < 0) or (r >= hm and sr > 0)):
                 break  # left the raster for good
             if tmc < tmr:
                 t = tmc

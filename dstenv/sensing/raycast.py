@@ -22,7 +22,7 @@ import math
 import numba
 import numpy as np
 
-from dstenv.dst.frame import SensorState
+from dstenv.dst import SensorState
 from dstenv.grid import GridSpec
 
 __all__ = ["sensor_grid"]

@@ -83,7 +83,8 @@ def generate_city(cfg: dict[str, Any], traffic: dict[str, Any],
     edges += [RoadEdge(nid(i, j), nid(i + 1, j), node_xy[[nid(i, j), nid(i + 1, j)]],
                        int(lanes_y[j]), int(lanes_y[j])) for i, j in zip(*np.nonzero(hseg))]
     builder = NetworkBuilder()
-    degree = add_road_lanes(builder, len(node_xy), edges, reach + STOP_MARGIN, lw)
+    degree = add_road_lanes(builder, len(node_xy), edges, reach + STOP_MARGIN, lw,
+                            right_radius=curb + 0.5 * sw + 0.5 * lw)
     u = rng.random(len(node_xy))
     p_stop, p_sig = traffic["stop_sign_prob"], traffic["signal_prob"]
     control = np.where(u < p_stop, Control.STOP, np.where(u < p_stop + p_sig, Control.SIGNAL,
@@ -176,8 +177,7 @@ def _fillet(raster, surface, face, r, res):
         inside_y = (yc - cy) * sy >= 0
         ox, oy = cx + sx * r, cy + sy * r
         far = ((xc[None, :] - ox) ** 2 + (yc[:, None] - oy) ** 2 > r * r)
-        corner = (xc[None, :] - ox) * sx < 0
-        corner &= ((yc[:, None] - oy) * sy < 0)
+        corner = ((xc[None, :] - ox) * sx < 0) & ((yc[:, None] - oy) * sy < 0)
         m = far & corner & inside_x[None, :] & inside_y[:, None]
         rr, cc = np.nonzero(m)
         rr, cc = rows[rr], cols[cc]

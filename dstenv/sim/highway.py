@@ -2,7 +2,7 @@
 
 :class:`HighwayWorld` has the interface of :class:`dstenv.sim.World` (``reset``,
 ``step``, ``map``, ``agents``, ``ego_pose``, ``ego_speed``, ``time``, ``collision``,
-``off_road``, ``progress``) but takes its road network and traffic from a
+``off_road``, ``route_progress``) but takes its road network and traffic from a
 `highway-env <https://github.com/Farama-Foundation/HighwayEnv>`_ environment:
 
 * every lane of the scene's road network is rasterised as road, the rest of the map
@@ -95,6 +95,7 @@ def _load_class(path: str) -> type:
 
 
 def _mirror(xy: np.ndarray) -> np.ndarray:
+    """highway-env (y-down) points -> the y-up world frame: ``(..., 2) float64``."""
     out = np.array(xy, dtype=np.float64)
     out[..., 1] *= -1.0
     return out
@@ -114,15 +115,6 @@ def _lane_points(lane: Any, s: np.ndarray, r: np.ndarray) -> np.ndarray:
         return lane.center + np.stack([rad * np.cos(phi), rad * np.sin(phi)], -1)
     pts = [lane.position(a, b) for a, b in zip(ss.ravel(), rr.ravel())]
     return np.asarray(pts, dtype=np.float64).reshape(*ss.shape, 2)
-
-
-def _lanes_bbox(lanes: list, step: float = 2.0) -> np.ndarray:
-    """Centre-line samples of every lane, mirrored: ``(P, 2) float64``."""
-    pts = []
-    for lane in lanes:
-        n = max(2, int(np.ceil(lane.length / step)) + 1)
-        pts.append(_lane_points(lane, np.linspace(0.0, lane.length, n), np.zeros(1))[:, 0])
-    return _mirror(np.concatenate(pts, axis=0))
 
 
 def rasterise_lanes(lanes: list, bounds: tuple[float, float, float, float],
@@ -244,7 +236,7 @@ class HighwayWorld:
         agents: every vehicle and obstacle but the ego.
         ego_pose: ``(3,) float64`` ``(x [m], y [m], yaw [rad])``.
         ego_speed: [m/s]. time: [s] since reset. collision, off_road: ego flags.
-        progress: distance [m] the ego advanced along its lane in the last step.
+        route_progress: distance [m] the ego advanced along its lanes since reset.
     """
 
     def __init__(self, config: dict[str, Any] | None = None, seed: int = 0,
@@ -261,7 +253,7 @@ class HighwayWorld:
         self.env = env
         self.external = external
         self.dt = 1.0 / float(env.unwrapped.config["policy_frequency"])
-        self.progress = 0.0
+        self.route_progress = 0.0
         self.time = 0.0
         if not external:
             self.reset(seed)
@@ -285,7 +277,7 @@ class HighwayWorld:
             self.env.reset(seed=int(seed))
         self._quiet_env()
         self.time = 0.0
-        self.progress = 0.0
+        self.route_progress = 0.0
         self._build_map(np.random.default_rng([int(seed), 0x4857]))
 
     def _quiet_env(self) -> None:
@@ -306,7 +298,7 @@ class HighwayWorld:
         if not self.external:
             self.env.step(self._to_env_action(ego_action))
         self.time += self.dt
-        self.progress = self._lane_progress(self.ego_vehicle, self.dt)
+        self.route_progress += self._lane_progress(self.ego_vehicle, self.dt)
 
     def _to_env_action(self, ego_action: Any) -> Any:
         base = self.env.unwrapped
@@ -338,7 +330,9 @@ class HighwayWorld:
     def _build_map(self, rng: np.random.Generator) -> None:
         base = self.env.unwrapped
         lanes = base.road.network.lanes_list()
-        pts = _lanes_bbox(lanes)
+        pts = _mirror(np.concatenate([  # centre-lines every ~2 m
+            _lane_points(ln, np.linspace(0.0, ln.length, int(ln.length // 2) + 2), np.zeros(1))[:, 0]
+            for ln in lanes]))
         margin, res = self.config["margin"], self.config["resolution"]
         lo = pts.min(axis=0) - margin
         hi = pts.max(axis=0) + margin

@@ -15,7 +15,7 @@ import numba as nb
 import numpy as np
 
 __all__ = ["LaneKind", "Control", "Turn", "LaneNetwork", "NetworkBuilder", "lane_pose",
-           "project_on_lane", "resample", "offset_polyline", "cut_polyline", "bezier"]
+           "project_on_lane", "resample", "offset_polyline", "cut_polyline", "bezier", "fillet_curve"]
 
 SPACING = 0.5  # [m] largest distance between resampled lane points
 CONFLICT_DIST = 2.6  # [m] connectors closer than this somewhere conflict
@@ -94,6 +94,29 @@ def bezier(p0, h0: float, p1, h1: float, n: int = 24, k: float = 0.42) -> np.nda
     c1 = p1 - d * np.array([np.cos(h1), np.sin(h1)])
     t = np.linspace(0, 1, n)[:, None]
     return (1 - t) ** 3 * p0 + 3 * (1 - t) ** 2 * t * c0 + 3 * (1 - t) * t ** 2 * c1 + t ** 3 * p1
+
+
+def fillet_curve(p0, h0: float, p1, h1: float, r: float) -> np.ndarray | None:
+    """Straight - circular arc of radius ``r`` - straight from ``p0`` (heading ``h0``) to
+    ``p1`` (heading ``h1``); None when the two lines do not meet ahead with room for the arc."""
+    p0, p1 = np.asarray(p0, float), np.asarray(p1, float)
+    d0, d1 = np.array([np.cos(h0), np.sin(h0)]), np.array([np.cos(h1), np.sin(h1)])
+    cross = d0[0] * d1[1] - d0[1] * d1[0]
+    if abs(cross) < 1e-3:
+        return None
+    t0 = ((p1 - p0)[0] * d1[1] - (p1 - p0)[1] * d1[0]) / cross
+    corner = p0 + t0 * d0
+    theta = float(np.angle(np.exp(1j * (h1 - h0))))
+    tl = r * np.tan(abs(theta) / 2)
+    a, b = corner - tl * d0, corner + tl * d1
+    if (a - p0) @ d0 < 0 or (p1 - b) @ d1 < 0:
+        return None
+    side = np.sign(theta)  # +1: centre on the left
+    centre = a + side * r * np.array([-d0[1], d0[0]])
+    ang0 = np.arctan2(*(a - centre)[::-1])
+    arc = ang0 + np.linspace(0, theta, max(int(abs(theta) * r / 0.4), 4))
+    pts = centre + r * np.stack([np.cos(arc), np.sin(arc)], -1)
+    return np.vstack([p0, pts, p1])
 
 
 @dataclass

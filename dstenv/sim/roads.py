@@ -6,7 +6,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dstenv.sim.lanes import LaneKind, NetworkBuilder, Turn, bezier, cut_polyline, offset_polyline
+from dstenv.sim.lanes import (LaneKind, NetworkBuilder, Turn, bezier, cut_polyline, fillet_curve,
+                              offset_polyline)
 
 __all__ = ["RoadEdge", "add_road_lanes", "signal_group"]
 
@@ -22,6 +23,7 @@ class RoadEdge:
         poly: ``(K, 2) float64`` centre-line from node ``u`` to node ``v`` [m].
         n_fwd: lanes in the direction u -> v (>= 1).
         n_bwd: lanes in the direction v -> u (0: one-way street).
+        lane_width: lane width of this street [m] (None: the network's).
     """
 
     u: int
@@ -29,6 +31,7 @@ class RoadEdge:
     poly: np.ndarray
     n_fwd: int
     n_bwd: int
+    lane_width: float | None = None
 
 
 def signal_group(heading: float) -> int:
@@ -41,7 +44,8 @@ def _wrap(a: float) -> float:
 
 
 def add_road_lanes(builder: NetworkBuilder, n_nodes: int, edges: list[RoadEdge],
-                   trims: np.ndarray, lane_width: float, uturn_trim: float = 3.0) -> np.ndarray:
+                   trims: np.ndarray, lane_width: float, uturn_trim: float = 3.0,
+                   right_radius: float = 6.0) -> np.ndarray:
     """Add the road and connector lanes of a street graph to ``builder``.
 
     Lanes keep to the right. Road lanes stop ``trims[node]`` metres before each
@@ -56,6 +60,8 @@ def add_road_lanes(builder: NetworkBuilder, n_nodes: int, edges: list[RoadEdge],
         trims: ``(n_nodes,) float64`` stop-line distance from each node [m].
         lane_width: [m].
         uturn_trim: stop-line distance at dead ends [m].
+        right_radius: radius of right turns from the kerb lane [m] (they hug the kerb
+            corner; other manoeuvres are smooth cubic curves).
 
     Returns:
         ``(n_nodes,) int64`` node degrees (streets meeting at each node).
@@ -78,8 +84,9 @@ def add_road_lanes(builder: NetworkBuilder, n_nodes: int, edges: list[RoadEdge],
         centre = cut_polyline(poly, t_u, total - t_v)
         for direction, n, line, a, b in ((0, e.n_fwd, centre, e.u, e.v),
                                          (1, e.n_bwd, centre[::-1], e.v, e.u)):
+            lw = e.lane_width or lane_width
             for k in range(n):
-                off = -(k + 0.5) * lane_width if e.n_bwd > 0 else -(k - (n - 1) / 2) * lane_width
+                off = -(k + 0.5) * lw if e.n_bwd > 0 else -(k - (n - 1) / 2) * lw
                 lane_poly = offset_polyline(line, off)
                 lid = builder.add(lane_poly, LaneKind.ROAD, rightmost=(k == n - 1))
                 d0, d1 = lane_poly[1] - lane_poly[0], lane_poly[-1] - lane_poly[-2]
@@ -90,14 +97,15 @@ def add_road_lanes(builder: NetworkBuilder, n_nodes: int, edges: list[RoadEdge],
         for o in out[node]:
             by_edge.setdefault(o[1], []).append(o)
         for a, ea, ka, na, ha, pa in inc[node]:
-            made = _connect(builder, node, degree[node], by_edge, a, ea, ka, na, ha, pa, False)
+            made = _connect(builder, node, degree[node], by_edge, a, ea, ka, na, ha, pa, False,
+                            right_radius)
             if not made:  # e.g. a middle lane at a T: let it turn anyway
-                _connect(builder, node, degree[node], by_edge, a, ea, ka, na, ha, pa, True)
+                _connect(builder, node, degree[node], by_edge, a, ea, ka, na, ha, pa, True, right_radius)
     return degree
 
 
 def _connect(builder: NetworkBuilder, node: int, deg: int, by_edge: dict, a: int, ea: int,
-             ka: int, na: int, ha: float, pa: np.ndarray, relaxed: bool) -> bool:
+             ka: int, na: int, ha: float, pa: np.ndarray, relaxed: bool, right_radius: float) -> bool:
     made = False
     for eb, outs in by_edge.items():
         if eb == ea and deg > 1:
@@ -124,8 +132,11 @@ def _connect(builder: NetworkBuilder, node: int, deg: int, by_edge: dict, a: int
         b, _, _, _, hb, pb = next(o for o in outs if o[2] == k_out)
         if np.hypot(*(pb - pa)) < 1e-6:
             continue
-        k = 0.67 if turn == Turn.UTURN else 0.42
-        poly = bezier(pa, ha, pb, hb, n=24, k=k)
+        poly = None
+        if turn == Turn.RIGHT and ka == na - 1:
+            poly = fillet_curve(pa, ha, pb, hb, right_radius)
+        if poly is None:
+            poly = bezier(pa, ha, pb, hb, n=24, k=0.67 if turn == Turn.UTURN else 0.42)
         c = builder.add(poly, LaneKind.CONNECTOR, node=node, turn=turn, group=signal_group(ha))
         builder.link(a, c)
         builder.link(c, b)

@@ -74,3 +74,35 @@ def test_quantised_shard_error_bound_through_dataset(tmp_path, make_frame, shard
         w.add(f)
     x = ShardDataset(tmp_path / "q.h5")[0]["x"].numpy()
     assert np.abs(x - f.fcn_input()).max() <= QUANT_MAX_ERROR + 1e-7
+
+
+def test_corrupt_chunk_at_read_time(tmp_path, make_frame, shard_attrs):
+    import h5py
+
+    rng = np.random.default_rng(4)
+    frames = [make_frame(rng, step=i) for i in range(3)]
+    path = tmp_path / "c.h5"
+    with ShardWriter(path, shard_attrs, compression=None) as w:
+        for f in frames:
+            w.add(f)
+    with h5py.File(path) as h:
+        offset = h["labels"].id.get_chunk_info(1).byte_offset
+    data = bytearray(path.read_bytes())
+    data[offset] ^= 0xFF
+    path.write_bytes(bytes(data))
+    ds = ShardDataset(path)
+    expected = sum(np.bincount(f.labels.ravel(), minlength=256)[:5] for f in frames)
+    np.testing.assert_array_equal(ds.class_counts, expected)
+    ds[0]
+    with pytest.raises(ShardError, match=r"c\.h5: frame 1: cannot read 'labels'"):
+        ds[1]
+    good = tmp_path / "good.h5"
+    with ShardWriter(good, shard_attrs) as w:
+        w.add(frames[2])
+    skipping = ShardDataset([path, good], on_error="skip")
+    with pytest.warns(RuntimeWarning, match=r"c\.h5: frame 1"):
+        item = skipping[1]  # the damaged shard is dropped: the next readable frame comes
+    np.testing.assert_array_equal(item["labels"].numpy(), frames[2].labels)
+    assert int(skipping[0]["labels"][0, 0]) == 255  # later reads skip the bad shard
+    with pytest.warns(RuntimeWarning), pytest.raises(ShardError, match="no readable frame"):
+        ShardDataset([path], on_error="skip")[1]

@@ -13,6 +13,7 @@ from dstenv.cli import main
 from dstenv.data.datasets import ShardDataset, StreamingDataset
 from dstenv.data.manifest import load_manifest
 from dstenv.data.sampling import split_of_seed
+from dstenv.data.shards import ShardReader
 
 TINY = {
     "grid": {"height": 32, "width": 32},
@@ -47,7 +48,7 @@ def test_generate_cli_real_pipeline_is_deterministic(tmp_path):
     fcn = ShardDataset(tmp_path / "a")[0]
     assert fcn["x"].shape == (10, 32, 32) and fcn["labels"].max() <= 4
     np.testing.assert_allclose(fcn["x"][:5].sum(0).numpy(), 1.0, atol=5 / 510 + 1e-6)
-    with ShardDataset(tmp_path / "a")._reader(0) as r:
+    with ShardReader(tmp_path / "a" / "test" / "shard-00000.h5") as r:
         f = r[0]
         assert f.step == 3 and split_of_seed(f.seed) == "test"
         assert np.array_equal(f.visible, f.sensor != 0)
@@ -84,7 +85,6 @@ def test_streaming_workers_yield_different_frames():
     assert not torch.equal(next(iter(ds))["x"], items[0]["x"])
 
 
-@pytest.mark.slow
 def test_worker_pool_matches_serial(tmp_path):
     common = ["--frames", "4", "--seed", "2", "--split", "train", *TINY_ARGS]
     assert main(["generate", "--out", str(tmp_path / "serial"), *common]) == 0

@@ -9,6 +9,14 @@ import pytest
 #: A grid just above NatureCNN's 36 x 36 minimum.
 SMALL_GRID: dict[str, Any] = {"height": 40, "width": 40, "cell_size": 1.0}
 
+#: Small city: 2 x 2 blocks, light traffic (fast resets), fewer beams.
+SMALL_CITY: dict[str, Any] = {
+    "grid": SMALL_GRID,
+    "lidar": {"beams": 360},
+    "world": {"map": {"blocks_x": 2, "blocks_y": 2},
+              "traffic": {"cars": 8, "cyclists": 1, "pedestrians": 6}},
+}
+
 #: Small highway-env backend: coarse map raster, fewer beams.
 SMALL_HIGHWAY: dict[str, Any] = {
     "source": "highway",
@@ -20,7 +28,7 @@ SMALL_HIGHWAY: dict[str, Any] = {
 
 def city_available() -> bool:
     try:
-        from dstenv.sim import World  # noqa: F401
+        from dstenv.sim.world import World  # noqa: F401
     except ImportError:
         return False
     return True

@@ -92,8 +92,8 @@ def test_vgg16_weights_from_local_file(tmp_path):
     sd["classifier.3.bias"] = torch.zeros(16)
     torch.save(sd, tmp_path / "vgg16.pth")
     load_vgg16_weights(enc, tmp_path / "vgg16.pth")
-    assert float(enc.features[0].weight.mean()) == 0.5
-    assert float(enc.fc6.weight[0, 0, 0, 1]) == 1.0 and enc.fc6.weight.shape == (16, 512, 7, 7)
+    assert float(enc.features[0].weight.detach().mean()) == 0.5
+    assert float(enc.fc6.weight.detach()[0, 0, 0, 1]) == 1.0 and enc.fc6.weight.shape == (16, 512, 7, 7)
     del sd["classifier.3.bias"]
     torch.save(sd, tmp_path / "bad.pth")
     with pytest.raises(ValueError, match="missing key"):

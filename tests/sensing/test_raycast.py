@@ -15,7 +15,9 @@ U, F, O = SensorState.UNKNOWN, SensorState.FREE, SensorState.OCCUPIED
 SPEC = GridSpec(16, 16, 1.0)  # ego cell (8, 8); cell (i, j) centre x = 8 - i, y = 8 - j
 
 
-def _cells_crossed(spec: GridSpec, x0: float, y0: float, x1: float, y1: float) -> list[tuple[int, int]]:
+def _cells_crossed(
+    spec: GridSpec, x0: float, y0: float, x1: float, y1: float
+) -> list[tuple[int, int]]:
     """Reference: cells a segment crosses, from its crossings with every grid line."""
     i0, j0 = spec.ego_cell
     c = spec.cell_size
@@ -55,7 +57,8 @@ def test_no_return_clears_to_max_range_including_end_cell():
 
 
 def test_hit_beyond_max_range_is_a_clear_ray():
-    # a "hit" at 10 m with a 4.2 m sensor: cells up to x = 4.2 (row 3.3 + 1 -> row 4) free, none occupied
+    # a "hit" at 10 m with a 4.2 m sensor: free up to x = 4.2 (u = 8 - 4.2 + 0.5 = 4.3 -> row 4),
+    # nothing occupied
     g = sensor_grid(np.array([0.0]), np.array([10.0]), np.array([True]), SPEC, 4.2)
     assert not np.any(g == O)
     np.testing.assert_array_equal(np.flatnonzero(g[:, 8] == F), [4, 5, 6, 7, 8])
@@ -73,12 +76,14 @@ def test_occupied_wins_over_free():
     g = sensor_grid(np.array([0.0, 0.0]), np.array([3.2, 6.0]), np.array([True, False]), SPEC, 80.0)
     np.testing.assert_array_equal(g[:, 8], [U, U, F, F, F, O, F, F, F, U, U, U, U, U, U, U])
     # order of the rays does not matter
-    g2 = sensor_grid(np.array([0.0, 0.0]), np.array([6.0, 3.2]), np.array([False, True]), SPEC, 80.0)
+    g2 = sensor_grid(np.array([0.0, 0.0]), np.array([6.0, 3.2]), np.array([False, True]), SPEC,
+                     80.0)
     np.testing.assert_array_equal(g, g2)
 
 
 def test_nan_range_is_skipped():
-    g = sensor_grid(np.array([0.0, 1.0]), np.array([np.nan, 3.0]), np.array([False, True]), SPEC, 80.0)
+    g = sensor_grid(np.array([0.0, 1.0]), np.array([np.nan, 3.0]), np.array([False, True]), SPEC,
+                    80.0)
     g1 = sensor_grid(np.array([1.0]), np.array([3.0]), np.array([True]), SPEC, 80.0)
     np.testing.assert_array_equal(g, g1)
 
@@ -92,8 +97,8 @@ def test_traversal_matches_exact_reference(origin):
         hit = bool(rng.random() < 0.5)
         g = sensor_grid(np.array([a]), np.array([r]), np.array([hit]), spec, 80.0, origin=origin)
         ox, oy = origin
-        cells = [(i, j) for i, j in _cells_crossed(spec, ox, oy, ox + r * np.cos(a), oy + r * np.sin(a))
-                 if 0 <= i < spec.height and 0 <= j < spec.width]
+        crossed = _cells_crossed(spec, ox, oy, ox + r * np.cos(a), oy + r * np.sin(a))
+        cells = [(i, j) for i, j in crossed if 0 <= i < spec.height and 0 <= j < spec.width]
         expected = np.zeros(spec.shape, np.uint8)
         for i, j in cells:
             expected[i, j] = F
@@ -111,8 +116,8 @@ def test_many_rays_kitti_like():
     # points on a few "walls" and scattered objects, like a ground-removed scan
     pts = np.concatenate([
         np.stack([rng.uniform(-12, 12, n // 3), np.full(n // 3, 6.3)], 1),
-        np.stack([np.full(n // 3, -8.1), rng.uniform(-12, 12, n // 3)], 1),
-        rng.uniform(-15, 15, (n - 2 * (n // 3), 2)),
+        np.stack([np.full(n // 3, -8.1), rng.uniform(-12, 6.0, n // 3)], 1),
+        rng.uniform((-8.0, -15.0), (15.0, 6.0), (n - 2 * (n // 3), 2)),
     ])
     angles, ranges = np.arctan2(pts[:, 1], pts[:, 0]), np.hypot(pts[:, 0], pts[:, 1])
     g = sensor_grid(angles, ranges, np.ones(n, bool), spec, 80.0)
@@ -126,11 +131,10 @@ def test_many_rays_kitti_like():
         union = np.maximum(union, sensor_grid(angles[k:k + 1], ranges[k:k + 1], [True], spec, 80.0))
     sub = sensor_grid(angles[::7], ranges[::7], np.ones(len(angles[::7]), bool), spec, 80.0)
     np.testing.assert_array_equal(sub, union)
-    # the wall at y = 6.3 hides what lies behind it: columns left of it (y > 6.5) inside
-    # the wall's x span stay unknown
-    behind = g[:, : spec.ego_cell[1] - 21]
-    rows = slice(spec.ego_cell[0] - 8, spec.ego_cell[0] + 8)
-    assert np.all(behind[rows] != F)
+    # no point lies beyond y = 6.3 (v = 32 - 6.3 / 0.33 + 0.5 = 13.4: column 13), so the
+    # columns left of it stay unknown, and the wall's own column holds free and occupied
+    assert np.all(g[:, :13] == U)
+    assert np.any(g[:, 13] == O) and np.any(g[:, 14] == F)
 
 
 def test_bad_input_is_rejected():

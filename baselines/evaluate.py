@@ -1,0 +1,207 @@
+"""Evaluate drivers on a fixed set of seeds and write the results table.
+
+Every policy drives one episode per seed ``--seed .. --seed + --episodes - 1`` of
+the same env (same worlds, same traffic): ``random`` (:mod:`random_policy`),
+``autopilot`` and ``constant`` (:mod:`rule_based`), and each trained PPO
+checkpoint given with ``--checkpoints`` (``model.zip`` from :mod:`ppo_grid`, with
+its ``model.json`` sidecar: observation type, training budget, machine). Reported
+per policy: success rate, collision rate, off-road rate, mean return and mean
+route progress [m] with standard errors (definitions in :mod:`rl_common`).
+
+The Markdown table, the command that produced it, the training budgets and the
+machine replace the block between ``<!-- results:begin -->`` and
+``<!-- results:end -->`` of ``--readme`` (written atomically). Run::
+
+    python baselines/evaluate.py --episodes 50 --checkpoints runs/ppo_grid/model.zip
+"""
+
+from __future__ import annotations
+
+import json
+import shlex
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from random_policy import RandomPolicy
+from rl_common import EnvArgs, EpisodeResult, atomic_write_text, evaluate_policy, machine_info
+from rl_common import make_env, opt, parse_args, summarize, write_results_csv
+from rule_based import AutopilotPolicy, ConstantPolicy, make_autopilot_env
+
+BEGIN, END = "<!-- results:begin -->", "<!-- results:end -->"
+POLICIES = ("random", "autopilot", "constant")
+
+
+@dataclass
+class Args(EnvArgs):
+    """Evaluate drivers on fixed seeds and write the results table."""
+
+    policies: list[str] = opt(["random", "autopilot", "constant"],
+                              "reference drivers: random | autopilot | constant")
+    checkpoints: list[str] = opt([], "PPO model.zip files from ppo_grid.py")
+    constant_action: int = opt(2, "action of the constant driver (city: 2 = FASTER)")
+    episodes: int = opt(50, "episodes per policy, one per seed")
+    seed: int = opt(10_000, "first evaluation seed (episode k uses seed + k)")
+    success_distance: float = opt(100.0, "[m] route progress that counts as success")
+    deterministic: bool = opt(True, "PPO: take the most likely action")
+    readme: str = opt("baselines/README.md", "Markdown file to update; '' = do not write")
+    csv: str = opt("", "write every episode of every policy to this CSV file")
+
+
+class PPOPolicy:
+    """A trained stable-baselines3 PPO checkpoint and its ``model.json`` sidecar."""
+
+    def __init__(self, path: str | Path, deterministic: bool = True) -> None:
+        from stable_baselines3 import PPO
+
+        self.path = Path(path)
+        if not self.path.is_file():
+            raise FileNotFoundError(f"--checkpoints: no such file {self.path}")
+        sidecar = self.path.with_name(self.path.stem + ".json")
+        if not sidecar.is_file():
+            raise FileNotFoundError(f"{self.path}: missing its sidecar {sidecar.name}")
+        self.meta: dict[str, Any] = json.loads(sidecar.read_text())
+        self.model = PPO.load(self.path, device="cpu")
+        self.deterministic = deterministic
+        a = self.meta["args"]
+        self.name = f"PPO {a['extractor']} on {a['obs']} ({self.path.parent.name})"
+
+    def make_env(self, args: EnvArgs) -> gym.Env:
+        """The evaluation env with this checkpoint's observation."""
+        a = self.meta["args"]
+        env = make_env(args, a["obs"], a["ego_speed"])
+        if env.observation_space != self.model.observation_space:
+            env.close()
+            raise ValueError(f"{self.path}: trained on observations {self.model.observation_space}"
+                             f", the env gives {env.observation_space} (grid size or --obs?)")
+        return env
+
+    def reset(self, env: gym.Env, seed: int) -> None:
+        pass
+
+    def act(self, obs: Any, info: dict[str, Any]) -> Any:
+        action, _ = self.model.predict(obs, deterministic=self.deterministic)
+        return int(action) if np.ndim(action) == 0 else action
+
+
+def _reference(name: str, args: Args) -> tuple[Any, gym.Env]:
+    if name == "random":
+        return RandomPolicy(), make_env(args)
+    if name == "autopilot":
+        return AutopilotPolicy(), make_autopilot_env(args)
+    if name == "constant":
+        return ConstantPolicy(args.constant_action), make_env(args)
+    raise ValueError(f"--policies: unknown policy {name!r}; known: {', '.join(POLICIES)}")
+
+
+def _pct(x: float) -> str:
+    return f"{100 * x:.0f} %"
+
+
+def _budget(meta: dict[str, Any] | None) -> str:
+    if meta is None:
+        return "-"
+    return f"{meta['timesteps']:,} steps, {meta['wall_time_s'] / 60:.0f} min"
+
+
+def results_markdown(rows: list[tuple[str, dict[str, float], dict[str, Any] | None]],
+                     args: Args, command: str) -> str:
+    """The results block: table, command, seeds, training budgets, machine."""
+    lines = [
+        f"Env `{args.env_id}`" + (f" with `--env-config '{args.env_config}'`"
+                                  if args.env_config else "")
+        + f", seeds {args.seed}..{args.seed + args.episodes - 1} (one episode each), "
+        f"success = no collision, on the road, >= {args.success_distance:g} m of route "
+        "progress (or arrived).",
+        "",
+        "| policy | success | collision | off-road | return | progress [m] | length [steps]"
+        " | training budget |",
+        "|---|---:|---:|---:|---:|---:|---:|---|",
+    ]
+    for name, s, meta in rows:
+        lines.append(f"| {name} | {_pct(s['success'])} | {_pct(s['collision'])} | "
+                     f"{_pct(s['off_road'])} | {s['return']:.1f} ± {s['return_se']:.1f} | "
+                     f"{s['progress']:.0f} ± {s['progress_se']:.0f} | {s['length']:.0f} | "
+                     f"{_budget(meta)} |")
+    m = machine_info()
+    lines += ["", "Reproduce:", "", "```", command, "```", "",
+              f"Evaluated {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())} on "
+              f"{m['cpu']} ({m['cores']} cores), torch {m['torch']}, "
+              f"stable-baselines3 {m['stable_baselines3']}."]
+    for name, _, meta in rows:
+        if meta is None:
+            continue
+        tm = meta["machine"]
+        lines += ["", f"Training of {name}: {meta['timesteps']:,} steps in "
+                  f"{meta['wall_time_s'] / 60:.1f} min wall time "
+                  f"({meta['timesteps'] / max(meta['wall_time_s'], 1e-9):.0f} steps/s), "
+                  f"{tm['cpu']} ({tm['cores']} cores, {tm['torch_threads']} torch threads), "
+                  f"finished {meta['finished_utc']} UTC:", "", "```",
+                  meta.get("command") or "(command not recorded)", "```"]
+    return "\n".join(lines) + "\n"
+
+
+def write_readme(path: str | Path, block: str) -> None:
+    """Replace the results block of ``path`` (append it when the markers are missing)."""
+    path = Path(path)
+    text = path.read_text() if path.is_file() else "# RL baselines\n"
+    if BEGIN in text and END in text:
+        head, rest = text.split(BEGIN, 1)
+        tail = rest.split(END, 1)[1]
+    else:
+        head, tail = text.rstrip("\n") + "\n\n", "\n"
+    atomic_write_text(path, f"{head}{BEGIN}\n{block}{END}{tail}")
+
+
+def run(args: Args, command: str) -> str:
+    """Evaluate every policy of ``args``; returns the Markdown block (written when
+    ``args.readme``)."""
+    seeds = range(args.seed, args.seed + args.episodes)
+    rows: list[tuple[str, dict[str, float], dict[str, Any] | None]] = []
+    episodes: list[tuple[str, list[EpisodeResult]]] = []
+    jobs: list[tuple[Any, Any]] = [(name, None) for name in args.policies]
+    jobs += [(None, path) for path in args.checkpoints]
+    for name, path in jobs:
+        if path is None:
+            policy, env = _reference(name, args)
+            meta = None
+        else:
+            policy = PPOPolicy(path, args.deterministic)
+            env, meta = policy.make_env(args), policy.meta
+            if meta["args"]["env_id"] != args.env_id:
+                print(f"warning: {path} was trained on {meta['args']['env_id']}, "
+                      f"evaluated on {args.env_id}")
+        start = time.monotonic()
+        try:
+            results = evaluate_policy(env, policy, seeds, args.success_distance)
+        finally:
+            env.close()
+        summary = summarize(results)
+        print(f"{policy.name}: {len(results)} episodes in {time.monotonic() - start:.0f} s",
+              {k: round(v, 3) for k, v in summary.items()}, flush=True)
+        rows.append((policy.name, summary, meta))
+        episodes.append((policy.name, results))
+    block = results_markdown(rows, args, command)
+    if args.readme:
+        write_readme(args.readme, block)
+    if args.csv:
+        write_results_csv(args.csv, episodes)
+    return block
+
+
+def main(argv: list[str] | None = None) -> str:
+    """Command-line entry point; returns the Markdown results block."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    command = shlex.join(["python", "baselines/evaluate.py", *argv])
+    block = run(parse_args(Args, argv), command)
+    print(block)
+    return block
+
+
+if __name__ == "__main__":
+    main()

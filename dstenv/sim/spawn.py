@@ -1,0 +1,258 @@
+"""Placing agents: parked cars, moving traffic, pedestrians, the ego and task traffic.
+
+The world state is a dict of structure-of-arrays over B rows, the ego last:
+``xy (B,2)``, ``yaw``, ``v``, ``hl``/``hw`` (half length / width), ``akind``
+(:class:`AgentKind`), ``mobile``, ``parked``, ``route (B,K)`` lanes ahead,
+``s`` arc length on ``route[:,0]``, ``lat`` lateral offset (left +), junction
+``grant``, request time ``req_t``, ``stop_clock``, ``halt`` timer, ``stuck`` and
+``idm (B,5)`` (desired speed, accel, comfortable decel, headway, jam gap).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from dstenv.sim.ego import box_corners, boxes_overlap
+from dstenv.sim.lanes import LaneKind, LaneNetwork, lane_pose
+from dstenv.sim.traffic import choose_successor
+from dstenv.sim.types import AgentKind, WorldMap
+
+__all__ = ["populate", "respawn", "plan_route", "nearest_lane", "add_row", "net_tuple",
+           "state_tuple", "rules_tuple"]
+
+#: kind -> (length range, width range, accel, comfortable decel, headway, jam gap)
+BODY = {
+    AgentKind.CAR: ((3.9, 4.9), (1.7, 1.95), 1.5, 2.5, 1.2, 2.0),
+    AgentKind.CYCLIST: ((1.7, 1.9), (0.55, 0.7), 1.0, 2.0, 1.0, 1.5),
+    AgentKind.PEDESTRIAN: ((0.45, 0.55), (0.45, 0.55), 0.8, 1.5, 0.6, 0.4),
+}
+_FIELDS = ("xy", "yaw", "v", "hl", "hw", "akind", "mobile", "parked", "route", "s", "lat",
+           "grant", "req_t", "stop_clock", "halt", "stuck", "idm")
+
+
+def net_tuple(net: LaneNetwork) -> tuple:
+    """Lane-network arrays in the order :func:`dstenv.sim.traffic.traffic_step` expects."""
+    return (net.pts, net.hdg, net.start, net.npts, net.ds, net.length, net.kind, net.node,
+            net.turn, net.group, net.vmax, net.succ_ptr, net.succ, net.conf_ptr, net.conf,
+            net.node_control, net.node_phase)
+
+
+def state_tuple(st: dict[str, np.ndarray]) -> tuple:
+    """State arrays in the order :func:`dstenv.sim.traffic.traffic_step` expects."""
+    return tuple(st[k] for k in _FIELDS[:-1])
+
+
+def rules_tuple(tr: dict[str, Any]) -> tuple:
+    """Traffic-rule parameters for :func:`dstenv.sim.traffic.traffic_step`."""
+    return tuple(float(tr[k]) for k in ("signal_green", "stop_duration", "halt_rate",
+                                        "halt_duration", "pause_rate", "pause_duration",
+                                        "crossing_prob"))
+
+
+def plan_route(net: LaneNetwork, lane: int, rng: np.random.Generator, k: int,
+               cross_prob: float = 0.0, fixed: tuple[int, ...] = ()) -> np.ndarray:
+    """``(k,) int64`` route starting with ``lane`` (then ``fixed``), random successors after."""
+    route = np.full(k, -1, np.int64)
+    head = (lane, *fixed)
+    route[:len(head)] = head
+    for i in range(len(head), k):
+        if route[i - 1] < 0:
+            break
+        route[i] = choose_successor(route[i - 1], rng.random(), net.succ_ptr, net.succ, net.kind,
+                                    net.turn, cross_prob)
+    return route
+
+
+def nearest_lane(net: LaneNetwork, x: float, y: float, yaw: float,
+                 max_dist: float = 6.0) -> tuple[int, float] | None:
+    """Closest vehicle lane point heading within 60 deg of ``yaw``: ``(lane, s)`` or None."""
+    lane_of = np.repeat(np.arange(len(net)), net.npts)
+    ok = (net.kind[lane_of] <= LaneKind.CONNECTOR) & \
+        (np.cos(net.hdg - yaw) > 0.5) & (np.abs(net.pts[:, 0] - x) < max_dist)
+    idx = np.flatnonzero(ok)
+    if len(idx) == 0:
+        return None
+    d = np.hypot(net.pts[idx, 0] - x, net.pts[idx, 1] - y)
+    k = int(np.argmin(d))
+    if d[k] > max_dist:
+        return None
+    p = int(idx[k])
+    lane = int(lane_of[p])
+    return lane, float((p - net.start[lane]) * net.ds[lane])
+
+
+def _empty(k: int) -> dict[str, np.ndarray]:
+    return {"xy": np.zeros((0, 2)), "yaw": np.zeros(0), "v": np.zeros(0), "hl": np.zeros(0),
+            "hw": np.zeros(0), "akind": np.zeros(0, np.uint8), "mobile": np.zeros(0, bool),
+            "parked": np.zeros(0, bool), "route": np.zeros((0, k), np.int64), "s": np.zeros(0),
+            "lat": np.zeros(0), "grant": np.zeros(0, np.int64), "req_t": np.zeros(0),
+            "stop_clock": np.zeros(0), "halt": np.zeros(0), "stuck": np.zeros(0, bool),
+            "idm": np.zeros((0, 5))}
+
+
+def add_row(st: dict[str, np.ndarray], kind: AgentKind, xy, yaw: float, length: float,
+            width: float, *, speed: float = 0.0, parked: bool = False, route=None, s: float = 0.0,
+            lat: float = 0.0, idm=(0.0, 1.0, 1.0, 1.0, 1.0), at: int | None = None) -> int:
+    """Insert one agent row (before row ``at``; default: append). Returns its index."""
+    k = st["route"].shape[1]
+    row = {"xy": np.asarray(xy, float).reshape(1, 2), "yaw": [yaw], "v": [speed],
+           "hl": [length / 2], "hw": [width / 2], "akind": [int(kind)],
+           "mobile": [route is not None and not parked], "parked": [parked],
+           "route": (np.full((1, k), -1) if route is None else np.asarray(route).reshape(1, k)),
+           "s": [s], "lat": [lat], "grant": [-1], "req_t": [np.inf], "stop_clock": [0.0],
+           "halt": [0.0], "stuck": [False], "idm": np.asarray(idm, float).reshape(1, 5)}
+    at = len(st["v"]) if at is None else at
+    for f in _FIELDS:
+        st[f] = np.insert(st[f], at, np.asarray(row[f], dtype=st[f].dtype), axis=0)
+    return at
+
+
+def _free(st, xy, yaw, length, width, gap) -> bool:
+    if len(st["v"]) == 0:
+        return True
+    box = box_corners(xy[0], xy[1], yaw, length + 2 * gap, width + 0.4)
+    c, s_ = np.cos(st["yaw"]), np.sin(st["yaw"])
+    hl, hw = st["hl"], st["hw"]
+    local = np.stack([np.stack([hl, hw], -1), np.stack([-hl, hw], -1),
+                      np.stack([-hl, -hw], -1), np.stack([hl, -hw], -1)], 1)
+    rot = np.stack([np.stack([c, -s_], -1), np.stack([s_, c], -1)], 1)
+    others = np.einsum("nij,nkj->nki", rot, local) + st["xy"][:, None, :]
+    return not boxes_overlap(box, others).any()
+
+
+def _mobile(world_map, st, rng, cfg, kind, lanes, weights, k, *, lane=None, s=None, fixed=(),
+            at=None, min_ego_dist=0.0) -> int | None:
+    """Place one moving agent on a random (or the given) lane, clear of others."""
+    net, tr = world_map.lanes, cfg["traffic"]
+    (l_lo, l_hi), (w_lo, w_hi), amax, bcomf, headway, jam = BODY[kind]
+    length, width = rng.uniform(l_lo, l_hi), rng.uniform(w_lo, w_hi)
+    v0 = {AgentKind.CAR: tr["speed_limit"] * rng.uniform(0.8, 1.2),
+          AgentKind.CYCLIST: tr["cyclist_speed"] * rng.uniform(0.8, 1.2),
+          AgentKind.PEDESTRIAN: tr["pedestrian_speed"] * rng.uniform(0.75, 1.25)}[kind]
+    lat = -(net.lane_width / 2 - 0.8) if kind == AgentKind.CYCLIST else 0.0
+    for _ in range(30):
+        ln = int(rng.choice(lanes, p=weights)) if lane is None else lane
+        lo, hi = length / 2 + 0.5, net.length[ln] - length / 2 - 0.5
+        if hi <= lo:
+            continue
+        pos = rng.uniform(lo, hi) if s is None else min(max(s, lo), hi)
+        x, y, h = lane_pose(net.pts, net.hdg, net.start, net.npts, net.ds, ln, pos)
+        x, y = x - lat * np.sin(h), y + lat * np.cos(h)
+        if min_ego_dist > 0 and np.hypot(x - st["xy"][-1, 0], y - st["xy"][-1, 1]) < min_ego_dist:
+            continue
+        gap = 0.3 if kind == AgentKind.PEDESTRIAN else 3.0
+        if not _free(st, (x, y), h, length, width, gap):
+            continue
+        route = plan_route(net, ln, rng, k, tr["crossing_prob"], fixed)
+        v = min(v0, net.vmax[ln]) * rng.uniform(0.3, 0.8)
+        return add_row(st, kind, (x, y), h, length, width, speed=v, route=route, s=pos, lat=lat,
+                       idm=(v0, amax, bcomf, headway, jam), at=at)
+    return None
+
+
+def populate(world_map: WorldMap, cfg: dict[str, Any], rng: np.random.Generator,
+             k: int) -> dict[str, np.ndarray]:
+    """All agents of a new episode: parked cars, ego, task traffic, moving traffic."""
+    net, tr, ego = world_map.lanes, cfg["traffic"], cfg["ego"]
+    st = _empty(k)
+    slots = world_map.meta.get("parking_slots", np.zeros((0, 3)))
+    taken = rng.random(len(slots)) < tr["parked_density"]
+    for x, y, yaw in slots[taken]:
+        (l_lo, l_hi), (w_lo, w_hi) = BODY[AgentKind.CAR][:2]
+        add_row(st, AgentKind.CAR, (x, y), yaw, rng.uniform(l_lo, l_hi), rng.uniform(w_lo, w_hi),
+                parked=True)
+    road = np.flatnonzero((net.kind == LaneKind.ROAD) & (net.length > 12.0))
+    if len(road) == 0:
+        road = np.flatnonzero(net.kind == LaneKind.ROAD)
+    if len(road) == 0:
+        raise ValueError("the map has no road lanes to place the ego on")
+    ego_idm = (ego["autopilot_speed"], 1.5, 2.5, 1.2, 2.0)
+    for _ in range(50):
+        lane = int(rng.choice(road, p=net.length[road] / net.length[road].sum()))
+        s = rng.uniform(0.25, 0.6) * net.length[lane]
+        x, y, h = lane_pose(net.pts, net.hdg, net.start, net.npts, net.ds, lane, s)
+        if _free(st, (x, y), h, ego["length"], ego["width"], 1.0):
+            break
+    add_row(st, AgentKind.CAR, (x, y), h, ego["length"], ego["width"], speed=ego["initial_speed"],
+            route=plan_route(net, lane, rng, k), s=s, idm=ego_idm)
+    st["mobile"][-1] = False  # moved by the bicycle model, not by the traffic step
+    _task(world_map, st, rng, cfg, k, slots, taken)
+    for kind, count, kinds in ((AgentKind.CAR, tr["cars"], (LaneKind.ROAD,)),
+                               (AgentKind.CYCLIST, tr["cyclists"], (LaneKind.ROAD,)),
+                               (AgentKind.PEDESTRIAN, tr["pedestrians"], (LaneKind.SIDEWALK,))):
+        lanes = np.flatnonzero(np.isin(net.kind, kinds) & (net.length > 6.0))
+        if kind == AgentKind.CYCLIST:
+            lanes = lanes[net.rightmost[lanes]]
+        if count == 0 or len(lanes) == 0:
+            continue
+        w = net.length[lanes] / net.length[lanes].sum()
+        for _ in range(count):
+            _mobile(world_map, st, rng, cfg, kind, lanes, w, k, at=len(st["v"]) - 1)
+    return st
+
+
+def _task(world_map, st, rng, cfg, k, slots, taken) -> None:
+    """Driving-task traffic: hidden cross traffic, parked cars and pedestrians by the route."""
+    task, net = cfg["task"], world_map.lanes
+    ego_route = st["route"][-1]
+    route_lanes = [int(l) for l in ego_route if l >= 0]
+    nodes = [int(net.node[l]) for l in route_lanes if net.kind[l] == LaneKind.CONNECTOR]
+    placed = 0
+    for n in nodes:  # cars waiting to enter the ego's next junctions from side streets
+        conn = np.flatnonzero(net.node == n)
+        approach = [a for a in range(len(net)) if net.kind[a] == LaneKind.ROAD
+                    and a not in route_lanes and np.isin(net.successors(a), conn).any()]
+        for a in rng.permutation(approach) if approach else []:
+            if placed >= task["cross_traffic"]:
+                break
+            s = net.length[a] - rng.uniform(6.0, 30.0)
+            if _mobile(world_map, st, rng, cfg, AgentKind.CAR, None, None, k, lane=int(a), s=s,
+                       at=len(st["v"]) - 1) is not None:
+                placed += 1
+    pts = np.vstack([net.polyline(l) for l in route_lanes])
+    if task["parked_near_route"] > 0 and len(slots):
+        d = np.hypot(slots[:, None, 0] - pts[None, :, 0], slots[:, None, 1] - pts[None, :, 1])
+        near = np.flatnonzero((d.min(1) < 6.0) & ~taken)
+        for i in rng.permutation(near)[:task["parked_near_route"]]:
+            x, y, yaw = slots[i]
+            if _free(st, (x, y), yaw, 4.5, 1.8, 0.3):
+                add_row(st, AgentKind.CAR, (x, y), yaw, rng.uniform(3.9, 4.9),
+                        rng.uniform(1.7, 1.95), parked=True, at=0)
+    crossings = [c for c in np.flatnonzero(net.kind == LaneKind.CROSSING)
+                 if np.hypot(*(pts - net.polyline(c)[0]).T).min() < 15.0]
+    placed = 0
+    for c in rng.permutation(crossings) if crossings else []:
+        if placed >= task["crossing_pedestrians"]:
+            break
+        pred = [p for p in range(len(net)) if c in net.successors(p)]
+        if pred:
+            s = net.length[pred[0]] - rng.uniform(0.5, 4.0)
+            if _mobile(world_map, st, rng, cfg, AgentKind.PEDESTRIAN, None, None, k,
+                       lane=pred[0], s=s, fixed=(int(c),), at=len(st["v"]) - 1) is not None:
+                placed += 1
+
+
+def respawn(world_map: WorldMap, st: dict[str, np.ndarray], i: int, rng: np.random.Generator,
+            min_ego_dist: float = 60.0) -> None:
+    """Move agent ``i`` (stuck at a dead end) to a free road lane far from the ego."""
+    net = world_map.lanes
+    lanes = np.flatnonzero((net.kind == LaneKind.ROAD) & (net.length > 8.0))
+    k = st["route"].shape[1]
+    keep = {f: st[f][i].copy() for f in ("hl", "hw", "akind", "idm", "lat")}
+    tmp = {f: np.delete(st[f], i, axis=0) for f in _FIELDS}
+    w = net.length[lanes] / net.length[lanes].sum()
+    for _ in range(30):
+        ln = int(rng.choice(lanes, p=w))
+        pos = rng.uniform(keep["hl"] + 0.5, max(net.length[ln] - keep["hl"] - 0.5, keep["hl"] + 0.6))
+        x, y, h = lane_pose(net.pts, net.hdg, net.start, net.npts, net.ds, ln, pos)
+        if np.hypot(x - st["xy"][-1, 0], y - st["xy"][-1, 1]) < min_ego_dist:
+            continue
+        if _free(tmp, (x, y), h, 2 * keep["hl"], 2 * keep["hw"], 3.0):
+            break
+    st["route"][i] = plan_route(net, ln, rng, k)
+    st["s"][i], st["v"][i], st["grant"][i], st["stuck"][i] = pos, 0.0, -1, False
+    st["req_t"][i], st["stop_clock"][i], st["halt"][i] = np.inf, 0.0, 0.0
+    st["xy"][i] = x - keep["lat"] * np.sin(h), y + keep["lat"] * np.cos(h)
+    st["yaw"][i] = h

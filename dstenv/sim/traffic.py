@@ -1,0 +1,310 @@
+"""Vectorised traffic step (numba): junction right of way, IDM car following, lane motion.
+
+Every mobile agent sits at arc length ``s`` on ``route[i, 0]`` and has its next
+lanes planned in ``route[i, 1:]``. One step:
+
+1. releases junction grants of agents that left the junction;
+2. the front agent of each approach lane requests its connector; requests are
+   granted oldest first if the junction's rule allows (green light / full stop at
+   a stop sign), no granted connector conflicts and the exit lane has room;
+3. each agent looks along its route for the nearest body (agent or ego) inside
+   its corridor, an ungranted stop line or a blocked crosswalk, and takes the
+   IDM acceleration towards it;
+4. agents move along their lanes; the travel is also clamped to the gap, so no
+   agent ever drives into a body ahead of it.
+
+The ego is the last row of the state arrays: it is an obstacle for everyone and,
+under autopilot, it gets an acceleration from the same rules (its motion is
+integrated by the bicycle model in :mod:`dstenv.sim.ego`).
+"""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+from dstenv.sim.lanes import lane_pose
+
+__all__ = ["traffic_step", "choose_successor", "route_point", "CAR", "CYCLIST", "PEDESTRIAN"]
+
+CAR, CYCLIST, PEDESTRIAN = 0, 1, 2  # AgentKind codes (kept numeric for numba)
+K_ROAD, K_CONN, K_WALK, K_CROSS = 0, 1, 2, 3  # LaneKind codes
+C_NONE, C_YIELD, C_STOP, C_SIGNAL = 0, 1, 2, 3  # Control codes
+ALL_RED = 3.0  # [s] clearance time between signal phases
+PATH_MAX = 200  # points in an agent's look-ahead path
+
+
+@nb.njit(cache=True)
+def choose_successor(lane, u, succ_ptr, succ, lkind, turn, cross_prob):
+    """Random next lane after ``lane`` (-1 at a dead end); straight on is preferred."""
+    a, b = succ_ptr[lane], succ_ptr[lane + 1]
+    if a == b:
+        return -1
+    total = 0.0
+    for k in range(a, b):
+        total += _weight(succ[k], lkind, turn, cross_prob)
+    x = u * total
+    for k in range(a, b):
+        x -= _weight(succ[k], lkind, turn, cross_prob)
+        if x <= 0.0:
+            return succ[k]
+    return succ[b - 1]
+
+
+@nb.njit(cache=True)
+def _weight(c, lkind, turn, cross_prob):
+    if lkind[c] == K_CONN:
+        return 2.0 if turn[c] == 0 else (0.3 if turn[c] == 3 else 1.0)
+    if lkind[c] == K_CROSS:
+        return cross_prob
+    if lkind[c] == K_WALK:
+        return 1.0 - cross_prob
+    return 1.0
+
+
+@nb.njit(cache=True)
+def route_point(route, s, d, pts, hdg, start, npts, ds, length):
+    """World ``(x, y, yaw)`` at distance ``d`` [m] ahead of ``s`` along ``route``."""
+    target = s + d
+    k = 0
+    while k < route.shape[0] - 1 and route[k + 1] >= 0 and target > length[route[k]]:
+        target -= length[route[k]]
+        k += 1
+    return lane_pose(pts, hdg, start, npts, ds, route[k], min(target, length[route[k]]))
+
+
+@nb.njit(cache=True)
+def _green(group, t, phase, green):
+    cycle = 2.0 * (green + ALL_RED)
+    tt = (t + phase) % cycle
+    if group == 0:
+        return tt < green
+    return cycle / 2 <= tt < cycle / 2 + green
+
+
+@nb.njit(cache=True)
+def _seg_dist(px, py, ax, ay, bx, by):
+    dx, dy = bx - ax, by - ay
+    l2 = dx * dx + dy * dy
+    t = 0.0 if l2 == 0 else min(max(((px - ax) * dx + (py - ay) * dy) / l2, 0.0), 1.0)
+    return np.hypot(ax + t * dx - px, ay + t * dy - py)
+
+
+@nb.njit(cache=True)
+def traffic_step(net, st, idm, rules, t, dt, u, ego_auto):
+    """Advance all mobile agents by ``dt``; returns the ego's autopilot acceleration.
+
+    Args:
+        net: lane-network arrays ``(pts, hdg, start, npts, ds, length, kind, node,
+            turn, group, vmax, succ_ptr, succ, conf_ptr, conf, node_control, node_phase)``.
+        st: state arrays over B rows (ego last) ``(xy, yaw, v, hl, hw, akind, mobile,
+            parked, route, s, lat, grant, req_t, stop_clock, halt, stuck)``.
+        idm: ``(B, 5)`` desired speed, max accel, comfortable decel, headway, jam gap.
+        rules: ``(signal_green, stop_duration, halt_rate, halt_mean, pause_rate,
+            pause_mean, crossing_prob)``.
+        t: time [s]; dt: step [s]; u: ``(B, 3)`` uniform randoms; ego_auto: plan the ego.
+    """
+    (pts, hdg, start, npts, ds, length, lkind, node, turn, group, vmax, succ_ptr, succ,
+     conf_ptr, conf, node_control, node_phase) = net
+    (xy, yaw, v, hl, hw, akind, mobile, parked, route, s, lat, grant, req_t, stop_clock,
+     halt, stuck) = st
+    green, stop_dur, halt_rate, halt_mean, pause_rate, pause_mean, cross_prob = rules
+    nb_rows = xy.shape[0]
+    ego = nb_rows - 1
+    n_route = route.shape[1]
+    planner = mobile.copy()
+    planner[ego] = ego_auto and route[ego, 0] >= 0
+    # 1. release grants once the rear has left the junction
+    for i in range(nb_rows):
+        g = grant[i]
+        if g < 0:
+            continue
+        ahead = False
+        for k in range(n_route):
+            ahead = ahead or route[i, k] == g
+        if not ahead:
+            ex = succ[succ_ptr[g]]
+            if route[i, 0] != ex or s[i] > 2.0 * hl[i] + 1.0:
+                grant[i] = -1
+    held = grant.copy()
+    if not ego_auto and route[ego, 0] >= 0 and lkind[route[ego, 0]] == K_CONN:
+        held[ego] = route[ego, 0]  # a driven ego inside a junction blocks conflicting moves
+    # 2. requests by the front agent of each approach lane
+    n_lanes = start.shape[0]
+    front = np.full(n_lanes, -1)
+    for i in range(nb_rows):
+        if planner[i] and (front[route[i, 0]] < 0 or s[i] > s[front[route[i, 0]]]):
+            front[route[i, 0]] = i
+    for i in range(nb_rows):
+        l0, c = route[i, 0], route[i, 1]
+        asking = False
+        if planner[i] and akind[i] != PEDESTRIAN and c >= 0 and lkind[c] == K_CONN \
+                and lkind[l0] != K_CONN and node_control[node[c]] != C_NONE and grant[i] != c \
+                and front[l0] == i:
+            d = length[l0] - s[i] - hl[i]
+            if d < max(10.0, v[i] * v[i] / 4.0 + 6.0):
+                asking = True
+                if v[i] < 0.1 and d < 3.0:
+                    stop_clock[i] += dt
+        if not asking:
+            req_t[i] = np.inf
+            stop_clock[i] = 0.0
+        elif req_t[i] == np.inf:
+            req_t[i] = t
+    order = np.argsort(req_t)
+    for oi in range(nb_rows):
+        i = order[oi]
+        if req_t[i] == np.inf:
+            break
+        c = route[i, 1]
+        n = node[c]
+        ok = True
+        if node_control[n] == C_SIGNAL:
+            ok = _green(group[c], t, node_phase[n], green)
+        elif node_control[n] == C_STOP:
+            ok = stop_clock[i] >= stop_dur
+        for k in range(nb_rows):
+            if not ok:
+                break
+            g = held[k]
+            if g < 0:
+                continue
+            if g == c:
+                ok = False
+            for q in range(conf_ptr[c], conf_ptr[c + 1]):
+                if conf[q] == g:
+                    ok = False
+        if ok:  # the exit lane must have room (never block the box)
+            ex = succ[succ_ptr[c]]
+            room = length[ex]
+            for k in range(nb_rows):
+                if route[k, 0] == ex:
+                    room = min(room, s[k] - hl[k])
+                elif held[k] >= 0 and succ[succ_ptr[held[k]]] == ex:
+                    room -= 2.0 * hl[k] + 3.0
+            ok = room >= 2.0 * hl[i] + 3.0
+        if ok:
+            grant[i] = c
+            held[i] = c
+            req_t[i] = np.inf
+            stop_clock[i] = 0.0
+    # 3. car following along the route
+    acc = np.zeros(nb_rows)
+    gaps = np.full(nb_rows, 1e9)
+    path = np.empty((PATH_MAX, 4))  # x, y, heading, distance ahead of the centre
+    for i in range(nb_rows):
+        if not planner[i]:
+            continue
+        v0, amax, bcomf, headway, jam = idm[i, 0], idm[i, 1], idm[i, 2], idm[i, 3], idm[i, 4]
+        ped = akind[i] == PEDESTRIAN
+        look = min(max(v[i] * headway + v[i] * v[i] / (2 * bcomf) + jam + 2 * hl[i] + 4.0,
+                       4.0 if ped else 15.0), 60.0)
+        # look-ahead path and the special lanes on it
+        npath = 0
+        base = -s[i]
+        vlim = min(v0, vmax[route[i, 0]])
+        gap, vlead = 1e9, 0.0
+        for k in range(n_route):
+            ln = route[i, k]
+            if ln < 0 or base > look:
+                break
+            if k > 0:
+                if vmax[ln] < vlim:
+                    vlim = min(vlim, np.sqrt(vmax[ln] ** 2 + 3.0 * max(base - hl[i], 0.0)))
+                stop_here = False
+                if lkind[ln] == K_CONN and node_control[node[ln]] != C_NONE and grant[i] != ln:
+                    stop_here = True
+                elif lkind[ln] == K_CROSS and base < 2.5:
+                    a0, a1 = start[ln], start[ln] + npts[ln] - 1
+                    for q in range(nb_rows):
+                        if (akind[q] != PEDESTRIAN and not parked[q] and q != i
+                                and _seg_dist(xy[q, 0], xy[q, 1], pts[a0, 0], pts[a0, 1],
+                                              pts[a1, 0], pts[a1, 1]) < hl[q] + 2.0 + 2.5 * v[q]):
+                            stop_here = True
+                if stop_here:
+                    g = base - hl[i] - 0.3
+                    if g < gap:
+                        gap, vlead = g, 0.0
+                    break
+            i0 = 0 if k > 0 else int(np.floor(s[i] / ds[ln])) + 1
+            for p in range(start[ln] + i0, start[ln] + npts[ln]):
+                d = base + (p - start[ln]) * ds[ln]
+                if npath >= PATH_MAX or d > look:
+                    break
+                h = hdg[p]
+                path[npath, 0] = pts[p, 0] - lat[i] * np.sin(h)
+                path[npath, 1] = pts[p, 1] + lat[i] * np.cos(h)
+                path[npath, 2] = h
+                path[npath, 3] = d
+                npath += 1
+            base += length[ln]
+        reach = look + hl[i] + 8.0
+        margin = 0.15 if ped else 0.3
+        for j in range(nb_rows):
+            if j == i:
+                continue
+            dx, dy = xy[j, 0] - xy[i, 0], xy[j, 1] - xy[i, 1]
+            if dx * dx + dy * dy > reach * reach:
+                continue
+            for p in range(npath):
+                h = path[p, 2]
+                ch, sh = np.cos(h), np.sin(h)
+                ex, ey = xy[j, 0] - path[p, 0], xy[j, 1] - path[p, 1]
+                lon = ex * ch + ey * sh
+                if abs(lon) > 0.3:
+                    continue
+                ca, sa = abs(np.cos(yaw[j] - h)), abs(np.sin(yaw[j] - h))
+                if abs(-ex * sh + ey * ch) < hw[i] + hl[j] * sa + hw[j] * ca + margin:
+                    g = path[p, 3] + lon - hl[i] - (hl[j] * ca + hw[j] * sa)
+                    if g < gap:
+                        gap, vlead = g, max(v[j] * np.cos(yaw[j] - h), 0.0)
+                    break
+        if halt[i] > 0.0:
+            vlim = 0.0
+        if vlim < 0.05:
+            a = -min(bcomf, v[i] / dt)
+        else:
+            a = amax * (1.0 - (v[i] / vlim) ** 4)
+        if gap < 1e8:
+            sstar = jam + max(0.0, v[i] * headway + v[i] * (v[i] - vlead) / (2 * np.sqrt(amax * bcomf)))
+            a -= amax * (sstar / max(gap, 0.01)) ** 2
+        acc[i] = min(max(a, -3.0 if ped else -9.0), amax)
+        gaps[i] = gap
+    # 4. motion of the non-ego agents
+    for i in range(nb_rows - 1):
+        if not mobile[i]:
+            continue
+        vn = max(v[i] + acc[i] * dt, 0.0)
+        dist = 0.5 * (v[i] + vn) * dt
+        if vn == 0.0 and acc[i] < 0.0:
+            dist = min(v[i] * v[i] / (-2.0 * acc[i]), v[i] * dt)
+        allowed = max(gaps[i] - 0.05, 0.0)
+        if dist > allowed:
+            dist = allowed
+            vn = min(vn, dist / dt)
+        v[i] = vn
+        s[i] += dist
+        while s[i] > length[route[i, 0]]:
+            if route[i, 1] < 0:
+                s[i] = length[route[i, 0]]
+                v[i] = 0.0
+                stuck[i] = True
+                break
+            s[i] -= length[route[i, 0]]
+            for k in range(n_route - 1):
+                route[i, k] = route[i, k + 1]
+            last = route[i, n_route - 2]
+            route[i, n_route - 1] = -1 if last < 0 else choose_successor(
+                last, u[i, 0], succ_ptr, succ, lkind, turn, cross_prob)
+        x, y, h = lane_pose(pts, hdg, start, npts, ds, route[i, 0], s[i])
+        xy[i, 0], xy[i, 1], yaw[i] = x - lat[i] * np.sin(h), y + lat[i] * np.cos(h), h
+        # halts of cars mid-block and pauses of pedestrians
+        if halt[i] > 0.0:
+            halt[i] -= dt
+        elif akind[i] == PEDESTRIAN:
+            if lkind[route[i, 0]] == K_WALK and u[i, 1] < pause_rate * dt:
+                halt[i] = -pause_mean * np.log(max(u[i, 2], 1e-9))
+        elif akind[i] == CAR and lkind[route[i, 0]] == K_ROAD and \
+                length[route[i, 0]] - s[i] > 25.0 and u[i, 1] < halt_rate * dt:
+            halt[i] = -halt_mean * np.log(max(u[i, 2], 1e-9))
+    return acc[ego]

@@ -1,0 +1,236 @@
+"""The 2-D urban world: a map, traffic agents and an ego vehicle, stepped at ``dt``."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from dstenv.config import ConfigError, merge_config
+from dstenv.sim import spawn
+from dstenv.sim.citygen import generate_city
+from dstenv.sim.config import MAP_KINDS, default_config
+from dstenv.sim.ego import bicycle_step, box_corners, hits, pure_pursuit
+from dstenv.sim.lanes import LaneKind, LaneNetwork, lane_pose, project_on_lane
+from dstenv.sim.traffic import choose_successor, route_point, traffic_step
+from dstenv.sim.types import AgentKind, Agents, WorldMap
+
+__all__ = ["World"]
+
+ROUTE_LEN = 8  # lanes planned ahead of every agent
+
+
+class World:
+    """A seeded urban traffic scene around a controllable ego vehicle.
+
+    Args:
+        config: overrides of :func:`dstenv.sim.default_config` (validated).
+        seed: seed of the first episode (``reset`` is called once here).
+        world_map: a ready map (hand-built or loaded) used instead of ``map.kind``;
+            it needs a :class:`~dstenv.sim.lanes.LaneNetwork` in ``lanes``.
+        base_dir: directory that resolves a relative ``map.osm_file`` (default: the
+            current directory, then the shipped scenarios).
+
+    All randomness comes from one ``np.random.Generator`` seeded by :meth:`reset`:
+    the same seed gives bit-identical maps, agents and trajectories.
+    """
+
+    def __init__(self, config: Mapping[str, Any] | None = None, seed: int | None = 0, *,
+                 world_map: WorldMap | None = None, base_dir: str | Path | None = None) -> None:
+        self.config = merge_config(default_config(), config, "world")
+        _validate(self.config)
+        self._fixed_map = world_map
+        self._base_dir = Path(base_dir) if base_dir is not None else None
+        if world_map is None and self.config["map"]["kind"] == "osm":
+            self._fixed_map = self._load_osm()
+        self.reset(seed)
+
+    # ------------------------------------------------------------------ episode
+    def reset(self, seed: int | None = None) -> None:
+        """Start an episode: new map (procedural kind), agents and ego from ``seed``."""
+        self.seed = seed
+        self.rng = np.random.default_rng(seed)
+        if self._fixed_map is not None:
+            self._map = self._fixed_map
+        else:
+            self._map = generate_city(self.config["map"], self.config["traffic"], self.rng)
+        if not isinstance(self._map.lanes, LaneNetwork):
+            raise ValueError("world map has no lane network (WorldMap.lanes)")
+        self.time = 0.0
+        self.steps = 0
+        self.route_progress = 0.0
+        self._state = spawn.populate(self._map, self.config, self.rng, ROUTE_LEN)
+        self._steer = 0.0
+        self._lane_offset = 0.0
+        self._update_flags()
+
+    def step(self, ego_action: tuple[float, float] | np.ndarray | None = None) -> None:
+        """Advance the world by ``dt``.
+
+        Args:
+            ego_action: ``(acceleration [m/s^2], steering angle [rad])`` of the ego,
+                clipped to ``ego.max_accel`` / ``ego.max_steer``; ``None`` drives the
+                ego by autopilot (route following with the traffic's IDM rule).
+        """
+        cfg, ego_cfg, st = self.config, self.config["ego"], self._state
+        dt = cfg["dt"]
+        net = self._map.lanes
+        auto = ego_action is None
+        u = self.rng.random((len(st["v"]), 3))
+        acc = traffic_step(spawn.net_tuple(net), spawn.state_tuple(st), st["idm"],
+                           spawn.rules_tuple(cfg["traffic"]), self.time, dt, u, auto)
+        e = len(st["v"]) - 1
+        x, y, yaw, v = st["xy"][e, 0], st["xy"][e, 1], st["yaw"][e], st["v"][e]
+        if auto:
+            accel = float(acc)
+            # pure pursuit of the rear axle, which then stays on the lane in turns
+            look = float(np.clip(2.5 + 0.4 * v, 3.5, 12.0))
+            half_wb = ego_cfg["wheelbase"] / 2
+            tx, ty, _ = route_point(st["route"][e], st["s"][e], look - half_wb, net.pts, net.hdg,
+                                    net.start, net.npts, net.ds, net.length)
+            steer = pure_pursuit(x - half_wb * np.cos(yaw), y - half_wb * np.sin(yaw), yaw,
+                                 (tx, ty), ego_cfg["wheelbase"], ego_cfg["max_steer"])
+        else:
+            a = np.asarray(ego_action, np.float64).reshape(-1)
+            if a.shape != (2,) or not np.isfinite(a).all():
+                raise ValueError(f"ego_action must be finite (accel, steer), got {ego_action!r}")
+            accel = float(np.clip(a[0], -ego_cfg["max_accel"], ego_cfg["max_accel"]))
+            steer = float(np.clip(a[1], -ego_cfg["max_steer"], ego_cfg["max_steer"]))
+        nx, ny, nyaw, nv = bicycle_step(x, y, yaw, v, accel, steer, ego_cfg["wheelbase"], dt,
+                                        ego_cfg["max_speed"])
+        st["xy"][e] = nx, ny
+        st["yaw"][e], st["v"][e] = nyaw, nv
+        self._steer = steer
+        self._localise(u[e, 0])
+        for i in np.flatnonzero(st["stuck"][:-1]):
+            spawn.respawn(self._map, st, int(i), self.rng)
+        self.time = round(self.time + dt, 9)
+        self.steps += 1
+        self._update_flags()
+
+    # ------------------------------------------------------------------ views
+    @property
+    def map(self) -> WorldMap:
+        """The static map of this episode."""
+        return self._map
+
+    @property
+    def agents(self) -> Agents:
+        """All agents except the ego (copies, safe to keep)."""
+        st = self._state
+        return Agents(st["xy"][:-1].copy(), st["yaw"][:-1].copy(), st["v"][:-1].copy(),
+                      2 * st["hl"][:-1], 2 * st["hw"][:-1], st["akind"][:-1].copy(),
+                      st["parked"][:-1].copy())
+
+    @property
+    def ego_pose(self) -> np.ndarray:
+        """``(3,) float64`` ego centre and heading ``(x [m], y [m], yaw [rad])``."""
+        st = self._state
+        return np.array([st["xy"][-1, 0], st["xy"][-1, 1], st["yaw"][-1]])
+
+    @property
+    def ego_speed(self) -> float:
+        """Ego speed [m/s]."""
+        return float(self._state["v"][-1])
+
+    @property
+    def ego_steer(self) -> float:
+        """Steering angle applied in the last step [rad]."""
+        return self._steer
+
+    @property
+    def ego_size(self) -> tuple[float, float]:
+        """``(length, width)`` of the ego [m]."""
+        return (self.config["ego"]["length"], self.config["ego"]["width"])
+
+    @property
+    def lane_offset(self) -> float:
+        """Signed distance of the ego centre from its route lane's centre-line [m], left +."""
+        return self._lane_offset
+
+    @property
+    def route(self) -> np.ndarray:
+        """``(ROUTE_LEN,) int64`` lanes the ego plans to follow, current lane first."""
+        return self._state["route"][-1].copy()
+
+    def route_polyline(self, ahead: float = 50.0, spacing: float = 1.0) -> np.ndarray:
+        """Points of the ego route from its position on: ``(M, 2) float64`` [m]."""
+        st, net = self._state, self._map.lanes
+        d = np.arange(0.0, ahead + 1e-9, spacing)
+        return np.array([route_point(st["route"][-1], st["s"][-1], float(k), net.pts, net.hdg,
+                                     net.start, net.npts, net.ds, net.length)[:2] for k in d])
+
+    # ------------------------------------------------------------------ internals
+    def _localise(self, u: float) -> None:
+        """Find the ego on its route after it moved; re-plan when it left the route."""
+        st, net = self._state, self._map.lanes
+        route, s_old = st["route"][-1], st["s"][-1]
+        x, y, yaw = st["xy"][-1, 0], st["xy"][-1, 1], st["yaw"][-1]
+        s, lat, dist = project_on_lane(net.pts, net.start, net.npts, net.ds, route[0], x, y, s_old, 5.0)
+        gain = s - s_old
+        if s >= net.length[route[0]] - 1e-6 and route[1] >= 0:
+            s1, lat1, d1 = project_on_lane(net.pts, net.start, net.npts, net.ds, route[1], x, y, 0.0, 5.0)
+            if d1 <= dist + 1e-9:
+                gain = net.length[route[0]] - s_old + s1
+                s, lat, dist = s1, lat1, d1
+                route[:-1] = route[1:].copy()
+                route[-1] = -1 if route[-2] < 0 else choose_successor(
+                    route[-2], u, net.succ_ptr, net.succ, net.kind, net.turn, 0.0)
+        _, _, lane_yaw = lane_pose(net.pts, net.hdg, net.start, net.npts, net.ds, route[0], s)
+        heading_err = abs((yaw - lane_yaw + np.pi) % (2 * np.pi) - np.pi)
+        if dist > 4.0 or heading_err > np.pi / 2:
+            found = spawn.nearest_lane(net, x, y, yaw)
+            if found is not None:
+                lane, s = found
+                route[:] = spawn.plan_route(net, lane, self.rng, len(route))
+                _, lat, _ = project_on_lane(net.pts, net.start, net.npts, net.ds, lane, x, y, s, 1.0)
+                gain = 0.0
+        st["s"][-1] = s
+        self._lane_offset = float(lat)
+        self.route_progress += float(gain)
+
+    def _update_flags(self) -> None:
+        x, y, yaw = self.ego_pose
+        corners = box_corners(x, y, yaw, *self.ego_size)
+        self.collision, self.off_road = hits(self._map, self.agents, corners)
+
+    def _load_osm(self) -> WorldMap:
+        from dstenv.sim.osm import load_osm
+
+        m = self.config["map"]
+        path = Path(m["osm_file"])
+        if not m["osm_file"]:
+            raise ConfigError("world.map.osm_file: required when world.map.kind = 'osm'")
+        if not path.is_absolute():
+            bases = [self._base_dir] if self._base_dir else []
+            bases += [Path.cwd(), Path(str(resources.files("dstenv.scenarios")))]
+            path = next((b / path for b in bases if (b / path).is_file()), bases[0] / path)
+        return load_osm(path, resolution=m["resolution"], lane_width=m["osm_lane_width"],
+                        margin=m["margin"], traffic=self.config["traffic"])
+
+
+def _validate(cfg: dict[str, Any]) -> None:
+    """Value checks beyond the key/type checks of ``merge_config``."""
+    m, tr, ego = cfg["map"], cfg["traffic"], cfg["ego"]
+    checks = [
+        ("dt", cfg["dt"] > 0, "must be > 0 s"),
+        ("map.kind", m["kind"] in MAP_KINDS, f"must be one of {', '.join(MAP_KINDS)}"),
+        ("map.lanes_min", 1 <= m["lanes_min"] <= 3, "must be 1..3"),
+        ("map.lanes_max", m["lanes_min"] <= m["lanes_max"] <= 3, "must be lanes_min..3"),
+        ("map.block_max", m["block_min"] <= m["block_max"], "must be >= block_min"),
+        ("map.block_min", m["block_min"] >= 30.0, "must be >= 30 m"),
+        ("map.resolution", 0.01 < m["resolution"] <= 2.0, "must be in (0.01, 2] m"),
+        ("ego.wheelbase", 0 < ego["wheelbase"] <= ego["length"], "must be in (0, ego.length]"),
+    ]
+    for key in ("t_junction_prob", "parking_prob", "building_coverage", "gap_prob"):
+        checks.append((f"map.{key}", 0.0 <= m[key] <= 1.0, "must be in [0, 1]"))
+    for key in ("parked_density", "stop_sign_prob", "signal_prob", "crossing_prob"):
+        checks.append((f"traffic.{key}", 0.0 <= tr[key] <= 1.0, "must be in [0, 1]"))
+    for key in ("cars", "cyclists", "pedestrians"):
+        checks.append((f"traffic.{key}", tr[key] >= 0, "must be >= 0"))
+    for key, ok, why in checks:
+        if not ok:
+            raise ConfigError(f"world.{key}: {why}")

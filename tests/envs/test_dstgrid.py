@@ -1,0 +1,177 @@
+"""DSTGridEnv behaviour: determinism, pickling, vector envs, config, episode end, info."""
+
+from __future__ import annotations
+
+import pickle
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import dstenv  # noqa: F401
+from dstenv.config import ConfigError
+from dstenv.envs import DSTGridEnv
+
+from .conftest import SMALL_CITY, SMALL_HIGHWAY, needs_city
+
+
+def _assert_same(a, b, where=""):
+    if isinstance(a, dict):
+        assert a.keys() == b.keys(), where
+        for k in a:
+            _assert_same(a[k], b[k], f"{where}.{k}")
+    elif isinstance(a, np.ndarray):
+        assert np.array_equal(a, b, equal_nan=a.dtype.kind == "f"), where
+    else:
+        assert a == b, where
+
+
+def _rollout(config, seed, steps, id_="DSTGrid-RL-v0"):
+    env = gym.make(id_, config=config)
+    obs, info = env.reset(seed=seed)
+    out = [(obs, info)]
+    rng = np.random.default_rng(seed)
+    for _ in range(steps):
+        obs, r, term, trunc, info = env.step(int(rng.integers(env.action_space.n)))
+        out.append((obs, {**info, "reward": r}))
+        if term or trunc:
+            obs, info = env.reset()
+            out.append((obs, info))
+    return out
+
+
+@pytest.mark.parametrize("config,id_", [
+    (SMALL_HIGHWAY, "DSTGrid-Highway-v0"),
+    pytest.param(SMALL_CITY, "DSTGrid-RL-v0", marks=needs_city),
+])
+def test_same_seed_same_observations_and_infos_over_100_steps(config, id_):
+    cfg = {**config, "info": {"lidar_points": True}}
+    a = _rollout(cfg, 11, 100, id_)
+    b = _rollout(cfg, 11, 100, id_)
+    assert len(a) == len(b)
+    for i, ((oa, ia), (ob, ib)) in enumerate(zip(a, b)):
+        assert np.array_equal(oa, ob), f"obs differ at step {i}"
+        _assert_same(ia, ib, f"step {i}")
+    c = _rollout(cfg, 12, 5, id_)
+    assert not np.array_equal(a[5][0], c[5][0])
+
+
+@pytest.mark.parametrize("config,id_", [
+    (SMALL_HIGHWAY, "DSTGrid-Highway-v0"),
+    pytest.param(SMALL_CITY, "DSTGrid-RL-v0", marks=needs_city),
+])
+def test_pickled_env_continues_identically(config, id_):
+    env = gym.make(id_, config=config)
+    env.reset(seed=3)
+    for _ in range(3):
+        env.step(1)
+    clone = pickle.loads(pickle.dumps(env))
+    for action in (2, 1, 0, 1, 2):
+        oa, ra, *_ = env.step(action)
+        ob, rb, *_ = clone.step(action)
+        assert np.array_equal(oa, ob) and ra == rb
+
+
+def _make_highway():
+    return gym.make("DSTGrid-Highway-v0", config=SMALL_HIGHWAY)
+
+
+def test_sync_vector_env():
+    venv = gym.vector.SyncVectorEnv([_make_highway, _make_highway])
+    obs, info = venv.reset(seed=[1, 2])
+    assert obs.shape == (2, 4, 40, 40) and info["labels"].shape == (2, 40, 40)
+    for _ in range(3):
+        obs, rew, term, trunc, info = venv.step(np.array([1, 2]))
+    assert rew.shape == (2,) and info["rewards"]["progress"].shape == (2,)
+    venv.close()
+
+
+def test_async_vector_env():
+    venv = gym.vector.AsyncVectorEnv([_make_highway, _make_highway])
+    obs, _ = venv.reset(seed=[1, 2])
+    single = gym.make("DSTGrid-Highway-v0", config=SMALL_HIGHWAY)
+    ref, _ = single.reset(seed=2)
+    assert np.array_equal(obs[1], ref)  # each sub-env seeded like a single env
+    obs, rew, *_ = venv.step(np.array([1, 1]))
+    assert obs.shape == (2, 4, 40, 40)
+    venv.close()
+
+
+@pytest.mark.parametrize("mode,shape,dtype", [
+    ("pignistic", (5, 40, 40), np.float32), ("fcn10", (10, 40, 40), np.float32),
+    ("masses", (32, 40, 40), np.float32), ("image", (4, 40, 40), np.uint8)])
+def test_observation_modes_via_config(mode, shape, dtype):
+    env = DSTGridEnv({**SMALL_HIGHWAY, "observation": {"type": mode}})
+    obs, _ = env.reset(seed=0)
+    assert obs.shape == shape and obs.dtype == dtype and env.observation_space.contains(obs)
+    obs, *_ = env.step(1)
+    assert env.observation_space.contains(obs)
+    if mode == "masses":  # masses are a distribution per cell
+        assert np.allclose(obs.sum(axis=0), 1.0, atol=1e-5)
+
+
+def test_reset_options_config_rebuilds_spaces():
+    env = DSTGridEnv(SMALL_HIGHWAY)
+    env.reset(seed=0)
+    obs, _ = env.reset(seed=0, options={"config": {"grid": {"height": 48, "width": 44}}})
+    assert obs.shape == (4, 48, 44) and env.observation_space.shape == (4, 48, 44)
+    with pytest.raises(ConfigError, match="unknown key 'colour'"):
+        env.reset(options={"config": {"observation": {"colour": 1}}})
+    with pytest.raises(ConfigError, match="unknown key 'cfg'"):
+        env.reset(options={"cfg": {}})
+
+
+def test_bad_config_names_the_key():
+    with pytest.raises(ConfigError, match="config.grid.heigth: unknown key 'heigth'; allowed keys: cell_size, height, width"):
+        DSTGridEnv({"grid": {"heigth": 10}})
+    with pytest.raises(ConfigError, match="unknown mode 'rgb'"):
+        DSTGridEnv({**SMALL_HIGHWAY, "observation": {"type": "rgb"}})
+
+
+def test_collision_terminates_with_penalty_and_info_is_complete():
+    env = DSTGridEnv({**SMALL_HIGHWAY, "info": {"lidar_points": True}})
+    env.reset(seed=0)
+    for _ in range(300):  # full speed through the busy junction, never braking
+        obs, reward, term, trunc, info = env.step(2)
+        if term:
+            break
+    assert term and (info["collision"] or info["off_road"] or info["arrived"])
+    assert reward == pytest.approx(sum(info["rewards"].values()))
+    if info["collision"]:
+        assert info["rewards"]["collision"] == -10.0
+    for key, shape, dtype in [("labels", (40, 40), np.uint8), ("visible", (40, 40), bool),
+                              ("sensor", (40, 40), np.uint8), ("gis", (40, 40), np.uint8),
+                              ("ego_pose", (3,), np.float64), ("lidar_points", (360, 2), np.float32)]:
+        assert info[key].shape == shape and info[key].dtype == dtype, key
+    assert np.array_equal(info["visible"], info["sensor"] != 0)
+
+
+def test_continuous_actions_on_highway_scene():
+    env = DSTGridEnv({**SMALL_HIGHWAY, "action": {"type": "continuous"}})
+    assert env.action_space.shape == (2,) and env.action_space.dtype == np.float32
+    env.reset(seed=0)
+    v0 = env.unwrapped.pipeline.world.ego_speed
+    for _ in range(5):
+        _, _, _, _, info = env.step(np.array([-1.0, 0.0], np.float32))  # full brake
+    assert info["ego_speed"] == pytest.approx(v0 - 5 * 0.1 * 3.0, abs=1e-6)
+
+
+def test_render_rgb_array():
+    env = gym.make("DSTGrid-Highway-v0", config=SMALL_HIGHWAY, render_mode="rgb_array")
+    env.reset(seed=0)
+    env.step(1)
+    img = env.render()
+    assert img.dtype == np.uint8 and img.ndim == 3 and img.shape[2] == 3 and img.std() > 10
+
+
+def test_human_render_mode_runs_headless(monkeypatch):
+    monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")
+    monkeypatch.setenv("SDL_AUDIODRIVER", "dummy")
+    env = DSTGridEnv(SMALL_HIGHWAY, render_mode="human")
+    env.reset(seed=0)
+    assert env.render() is None and env._window is not None
+    env.step(1)
+    clone = pickle.loads(pickle.dumps(env))  # the window is dropped, not pickled
+    assert clone._window is None
+    env.close()
+    assert env._window is None

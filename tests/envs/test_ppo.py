@@ -1,0 +1,34 @@
+"""A tiny stable-baselines3 PPO CnnPolicy run on the image observation."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from stable_baselines3 import PPO
+
+import dstenv  # noqa: F401
+
+from .conftest import SMALL_HIGHWAY, needs_city
+
+
+def _ppo(env_id: str, config: dict, steps: int) -> PPO:
+    env = gym.make(env_id, config=config)
+    model = PPO("CnnPolicy", env, n_steps=64, batch_size=32, n_epochs=1, seed=0, device="cpu")
+    model.learn(total_timesteps=steps)
+    return model
+
+
+def test_ppo_cnn_policy_runs_on_highway_variant():
+    model = _ppo("DSTGrid-Highway-v0", SMALL_HIGHWAY, 128)
+    assert model.num_timesteps == 128
+    obs = np.zeros((4, 40, 40), np.uint8)
+    action, _ = model.predict(obs, deterministic=True)
+    assert 0 <= int(action) < 5
+
+
+@pytest.mark.slow
+@needs_city
+def test_ppo_cnn_policy_few_hundred_steps_rl_size():
+    model = _ppo("DSTGrid-Occluded-v0", {}, 320)
+    assert model.num_timesteps >= 320

@@ -1,0 +1,113 @@
+"""Readers: values from hand-written fixtures and the real sample; bad input -> KittiError."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from dstenv.kitti.readers import (
+    OBJECT_TYPES, KittiError, read_calib, read_labels, read_oxts, read_velodyne, split_root,
+    velodyne_path,
+)
+
+from .conftest import FIXTURES
+
+TR_VELO_CAM = np.array([[0, -1, 0, 0], [0, 0, -1, -0.08], [1, 0, 0, -0.27], [0, 0, 0, 1.0]])
+
+
+@pytest.mark.parametrize("name", ["calib_colons.txt", "calib_plain.txt", "calib_aliases.txt"])
+def test_calib_with_and_without_colons_and_aliases(name):
+    c = read_calib(FIXTURES / name)
+    np.testing.assert_array_equal(c.Tr_velo_cam, TR_VELO_CAM)
+    np.testing.assert_array_equal(c.R_rect, np.eye(4))
+    assert c.P2[0, 3] == 45.0 and c.P2.shape == (3, 4)
+    np.testing.assert_array_equal(c.Tr_imu_velo[:3, 3], [-0.8, 0.3, -0.8])
+    # Velodyne (10, 2, -1) -> camera (-2, 1 - 0.08, 10 - 0.27), and back
+    p = c.velo_to_rect @ [10.0, 2.0, -1.0, 1.0]
+    np.testing.assert_allclose(p[:3], [-2.0, 0.92, 9.73])
+    np.testing.assert_allclose(c.rect_to_velo @ p, [10.0, 2.0, -1.0, 1.0])
+
+
+def test_calib_without_tr_velo_cam_names_file_and_key():
+    with pytest.raises(KittiError, match=r"calib_no_tr_velo_cam\.txt: calibration has no Tr_velo_cam"):
+        read_calib(FIXTURES / "calib_no_tr_velo_cam.txt")
+
+
+def test_calib_short_row_names_line():
+    with pytest.raises(KittiError, match=r"calib_short_row\.txt:3: Tr_velo_cam needs 12 values, got 11"):
+        read_calib(FIXTURES / "calib_short_row.txt")
+
+
+def test_missing_calib_file(tmp_path):
+    with pytest.raises(KittiError, match="missing calibration file"):
+        read_calib(tmp_path / "nope.txt")
+
+
+def test_labels_wrong_column_count_names_line():
+    with pytest.raises(KittiError, match=r"label_bad_columns\.txt:3: expected 17 label columns, got 16"):
+        read_labels(FIXTURES / "label_bad_columns.txt")
+
+
+def test_labels_unknown_type():
+    with pytest.raises(KittiError, match=r"label_unknown_type\.txt:1: unknown object type 'Bus'"):
+        read_labels(FIXTURES / "label_unknown_type.txt")
+
+
+def test_oxts_wrong_column_count_names_line():
+    with pytest.raises(KittiError, match=r"oxts_bad_columns\.txt:2: expected 30 OXTS columns, got 29"):
+        read_oxts(FIXTURES / "oxts_bad_columns.txt")
+
+
+def test_velodyne_roundtrip_and_truncated(tmp_path):
+    pts = np.arange(40, dtype=np.float32).reshape(10, 4)
+    pts.tofile(tmp_path / "000000.bin")
+    np.testing.assert_array_equal(read_velodyne(tmp_path / "000000.bin"), pts)
+    (tmp_path / "000001.bin").write_bytes(pts.tobytes()[:-6])  # 154 bytes
+    with pytest.raises(KittiError, match=r"000001\.bin: 154 bytes is not a positive multiple of 16"):
+        read_velodyne(tmp_path / "000001.bin")
+    (tmp_path / "000002.bin").write_bytes(b"")
+    with pytest.raises(KittiError, match=r"000002\.bin: 0 bytes"):
+        read_velodyne(tmp_path / "000002.bin")
+    with pytest.raises(KittiError, match=r"000003\.bin: missing Velodyne scan"):
+        read_velodyne(tmp_path / "000003.bin")
+
+
+def test_split_root_accepts_both_levels(tiny_root, tmp_path):
+    assert split_root(tiny_root) == tiny_root / "training"
+    assert split_root(tiny_root / "training") == tiny_root / "training"
+    with pytest.raises(KittiError, match="no KITTI tracking data"):
+        split_root(tmp_path)
+
+
+# ---- the real sample -------------------------------------------------------------
+
+
+def test_real_point_counts(real_root):
+    split = split_root(real_root)
+    counts = []
+    for f in range(40):
+        path = velodyne_path(split, "0003", f)
+        pts = read_velodyne(path)
+        assert pts.shape == (path.stat().st_size // 16, 4)
+        counts.append(len(pts))
+    assert counts[0] == 115267  # 1844272 bytes / 16
+    assert 100_000 < min(counts) and max(counts) < 130_000  # an HDL-64E sweep
+    pts = read_velodyne(velodyne_path(split, "0003", 0))
+    assert 0.0 <= pts[:, 3].min() and pts[:, 3].max() <= 1.0  # reflectance
+
+
+def test_real_labels_and_calib(real_root):
+    split = split_root(real_root)
+    lab = read_labels(split / "label_02" / "0003.txt")
+    assert len(lab) == 250
+    dc = lab.is_dontcare
+    assert dc.sum() == 142
+    # DontCare rows: track -1, *dimensions* -1000 and location (-10, -1, -1)
+    assert np.all(lab.track[dc] == -1) and np.all(lab.hwl[dc] == -1000)
+    np.testing.assert_array_equal(lab.location[dc], np.tile([-10.0, -1.0, -1.0], (142, 1)))
+    assert set(lab.track[~dc]) == {0, 1, 2, 3}
+    assert np.all(lab.type[~dc] == OBJECT_TYPES.index("Car"))
+    np.testing.assert_allclose(lab.hwl[4], [1.381664, 1.510562, 4.101504])  # h, w, l (row 5)
+    c = read_calib(split / "calib" / "0003.txt")
+    assert c.Tr_velo_cam[0, 1] == pytest.approx(-0.9999714)
+    assert c.Tr_imu_velo[0, 3] == pytest.approx(-0.8086759)

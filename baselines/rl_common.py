@@ -56,24 +56,26 @@ def opt(default: Any, help: str) -> Any:  # noqa: A002  (argparse's word)
 def parse_args(cls: type[T], argv: Sequence[str] | None = None) -> T:
     """Parse ``argv`` into the dataclass ``cls``: one ``--flag-name`` per field.
 
-    ``bool`` fields take ``--flag`` / ``--no-flag``; ``list`` fields take one or more
-    values of the type of their default's first element (``int`` when empty).
+    Types come from the field annotations: ``bool`` fields take ``--flag`` /
+    ``--no-flag``; ``list[X]`` fields take one or more values of type ``X``.
     """
+    import typing
+
+    hints = typing.get_type_hints(cls)
     parser = argparse.ArgumentParser(description=(cls.__doc__ or "").strip().split("\n")[0])
     for f in dataclasses.fields(cls):  # type: ignore[arg-type]
         default = f.default if f.default is not dataclasses.MISSING else f.default_factory()
         flag = "--" + f.name.replace("_", "-")
         helptext = f"{f.metadata.get('help', '')} (default: {default!r})"
-        if isinstance(default, bool):
+        kind = hints[f.name]
+        if kind is bool:
             parser.add_argument(flag, dest=f.name, default=default, help=helptext,
                                 action=argparse.BooleanOptionalAction)
-        elif isinstance(default, list):
-            kind = type(default[0]) if default else int
+        elif typing.get_origin(kind) is list:
             parser.add_argument(flag, dest=f.name, default=default, help=helptext,
-                                nargs="+", type=kind)
+                                nargs="+", type=typing.get_args(kind)[0])
         else:
-            parser.add_argument(flag, dest=f.name, default=default, help=helptext,
-                                type=type(default))
+            parser.add_argument(flag, dest=f.name, default=default, help=helptext, type=kind)
     return cls(**vars(parser.parse_args(argv)))
 
 

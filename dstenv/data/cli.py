@@ -66,9 +66,13 @@ def _generate(args: argparse.Namespace) -> int:
     if args.cell_size is not None:
         grid["cell_size"] = args.cell_size
     config = scenario_config(args.scenario, overrides)
+    if config.get("world", {}).get("map", {}).get("kind") == "osm" and not args.quiet:
+        print("dstenv generate: note: this scenario has one fixed OSM map; its splits differ "
+              "in traffic and route, not in map", file=sys.stderr)
     try:
         spec = GenerateSpec(
-            config=config, frames=args.frames, seed=args.seed, scenario=args.scenario or "default",
+            config=config, frames=args.frames, seed=args.seed,
+            scenario=args.scenario or "(default config)",
             split=args.split, frames_per_shard=args.frames_per_shard,
             episode_length=args.episode_length, stride=args.stride,
             warmup=args.stride if args.warmup is None else args.warmup, masses=args.masses,

@@ -250,9 +250,9 @@ def generate(spec: GenerateSpec, out: str | Path, workers: int = 1, ray_address:
         raise ValueError(f"workers must be >= 1, got {workers}")
     tasks = plan(spec)
     done, todo = _prepare(out, tasks)
-    bar = tqdm(total=spec.frames, unit="frame", disable=not progress, dynamic_ncols=True,
-               desc="generate", smoothing=0.1)
-    bar.update(sum(e["frames"] for e in done.values()))
+    # resumed frames count as initial, so frames/s is the rate of this run only
+    bar = tqdm(total=spec.frames, initial=sum(e["frames"] for e in done.values()), unit="frame",
+               disable=not progress, dynamic_ncols=True, desc="generate", smoothing=0.1)
     try:
         if ray_address is not None:
             from dstenv.data.ray_backend import run_ray
@@ -309,6 +309,9 @@ def _run_pool(todo: list[ShardTask], out: Path, workers: int, update: Callable[[
         except BaseException:
             for fut in pending:
                 fut.cancel()
+            # stop the running shards now (their .partial files are overwritten on resume)
+            for proc in list(getattr(ex, "_processes", {}).values()):
+                proc.terminate()
             raise
     drain()
     return results

@@ -3,8 +3,8 @@
 ::
 
     dstenv kitti convert --root DIR --sequences 0003,0005 [--osm FILE] [--stride K]
-                         [--label-rule paper|smoothed] [--free-label navigable|ignore]
-                         [--split test] --out DIR
+                         [--warmup K] [--update-every K] [--label-rule paper|smoothed]
+                         [--free-label navigable|ignore] [--split test] --out DIR
     dstenv kitti render  --root DIR --sequence 0003 --frame 25 [...] --out frame.png
     dstenv kitti evaluate --data DIR [--checkpoint best.pt ...]
 
@@ -30,8 +30,9 @@ _NO_MAP = ("no map: GIS grid vacuous (all 0), map masses carry no information; "
 
 def _overrides(args: argparse.Namespace) -> dict[str, Any]:
     out: dict[str, Any] = {"labels": {}}
-    if args.stride is not None:
-        out["stride"] = args.stride
+    for key in ("stride", "warmup", "update_every"):
+        if getattr(args, key, None) is not None:
+            out[key] = getattr(args, key)
     if args.label_rule is not None:
         out["labels"]["rule"] = args.label_rule
     if args.free_label is not None:
@@ -64,7 +65,7 @@ def _convert(args: argparse.Namespace) -> int:
     from dstenv.cli import CLIError
     from dstenv.data.manifest import MANIFEST_NAME, scan_shards, shard_entry, write_manifest
     from dstenv.data.shards import ShardWriter
-    from dstenv.kitti.sequence import KittiSequence, kitti_config, convert_sequence
+    from dstenv.kitti.sequence import KittiSequence, convert_sequence, kitti_config
 
     out = Path(args.out)
     cfg = kitti_config(_overrides(args))
@@ -78,8 +79,9 @@ def _convert(args: argparse.Namespace) -> int:
     for name in args.sequences:
         seq = KittiSequence(args.root, name)
         gis_fn, note = _gis(args, seq)
-        print(f"sequence {seq.name}: {seq.n_frames} frames, stride {cfg['stride']}, "
-              f"labels {cfg['labels']['rule']}; {note}")
+        print(f"sequence {seq.name}: {seq.n_frames} frames, DST every {cfg['update_every']}, "
+              f"keep every {cfg['stride']} from {cfg['warmup']}, labels {cfg['labels']['rule']}; "
+              f"{note}")
         skipped: list[str] = []
         path = out / args.split / f"kitti-{seq.name}.h5"
         attrs = {
@@ -107,12 +109,15 @@ def _render(args: argparse.Namespace) -> int:
     from dstenv.cli import CLIError
     from dstenv.grid import GridSpec
     from dstenv.kitti.render import render_frame
-    from dstenv.kitti.sequence import KittiSequence, kitti_config, convert_sequence
+    from dstenv.kitti.sequence import KittiSequence, convert_sequence, kitti_config
 
-    cfg = kitti_config(_overrides(args))
-    if args.frame % cfg["stride"]:
-        raise CLIError(f"--frame {args.frame} is not converted with stride {cfg['stride']}; "
-                       f"pick a multiple of {cfg['stride']}")
+    over = _overrides(args)
+    every = over.get("update_every", 1)
+    if args.frame < 0 or args.frame % every:
+        raise CLIError(f"--frame {args.frame}: the filter runs every {every} frames; "
+                       f"pick a multiple of {every}")
+    over.update(warmup=args.frame, stride=every * 10**6)  # keep exactly this frame
+    cfg = kitti_config(over)
     seq = KittiSequence(args.root, args.sequence)
     gis_fn, note = _gis(args, seq)
     frame = None
@@ -124,9 +129,11 @@ def _render(args: argparse.Namespace) -> int:
         raise CLIError(f"sequence {seq.name}: frame {args.frame} was not converted "
                        f"(beyond {seq.n_frames} frames, or its scan was skipped)")
     boxes = seq.boxes.select(seq.boxes.frame == args.frame)
-    title = (f"KITTI tracking {seq.name} frame {args.frame} (stride {cfg['stride']}, "
-             f"{cfg['labels']['rule']} motion rule); {'map: ' + args.osm if args.osm else 'no map'}")
-    path = render_frame(frame, boxes, GridSpec(**cfg["grid"]), args.out, title, seq.scan(args.frame))
+    where = f"map: {args.osm}" if args.osm else "no map"
+    title = (f"KITTI tracking {seq.name} frame {args.frame} (DST every {every} scan(s), "
+             f"{cfg['labels']['rule']} motion rule); {where}")
+    spec = GridSpec(**cfg["grid"])
+    path = render_frame(frame, boxes, spec, args.out, title, seq.scan(args.frame))
     print(f"{note}\nwrote {path}")
     return 0
 
@@ -145,7 +152,8 @@ def _evaluate(args: argparse.Namespace) -> int:
     segs = [DSTSegmenter(DSTParams.default(), label="dst (stored BetP)")]
     segs += [load_segmenter(c, "cpu") for c in args.checkpoint]
     results = {}
-    header = f"{'segmenter':<24} {'cells':<8} {'mIoU':>6} " + " ".join(f"{c[:8]:>8}" for c in CLASSES)
+    names = " ".join(f"{c[:8]:>8}" for c in CLASSES)
+    header = f"{'segmenter':<24} {'cells':<8} {'mIoU':>6} {names}"
     print(f"{len(data)} frames from {args.data}\n{header}")
     for seg in segs:
         summary = evaluate(seg, batches(data, args.batch_size)).summary(CLASSES)
@@ -166,8 +174,8 @@ def _common(p: argparse.ArgumentParser) -> None:
                    help="KITTI tracking folder (holding training/ or velodyne/)")
     p.add_argument("--osm", metavar="FILE",
                    help="OpenStreetMap .osm of the drive area for the GIS grid (default: no map)")
-    p.add_argument("--stride", type=int, metavar="K",
-                   help="frames between DST updates (default 5 = 0.5 s; the paper: 10-20)")
+    p.add_argument("--update-every", type=int, metavar="K",
+                   help="run the DST filter on every K-th scan (default 1: 10 Hz)")
     p.add_argument("--label-rule", choices=("paper", "smoothed"),
                    help="moving rule: 10 cm frame to frame (paper) or a fitted speed (default)")
     p.add_argument("--free-label", choices=("navigable", "ignore"),
@@ -184,6 +192,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     _common(c)
     c.add_argument("--sequences", required=True, type=_sequences, metavar="LIST",
                    help="comma-separated sequence numbers, e.g. 0003,0005")
+    c.add_argument("--stride", type=int, metavar="K",
+                   help="keep one frame every K scans (default 5 = 0.5 s; the paper: 10-20)")
+    c.add_argument("--warmup", type=int, metavar="K", help="first kept frame (default 5)")
     c.add_argument("--split", default="test", help="split name stored in the shards (default test)")
     c.add_argument("--masses", action="store_true", help="also store the raw 32 DST masses")
     c.add_argument("--out", required=True, metavar="DIR", help="output dataset directory")
@@ -191,7 +202,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     r = ksub.add_parser("render", help="PNG of one converted frame")
     _common(r)
     r.add_argument("--sequence", required=True, help="sequence number, e.g. 0003")
-    r.add_argument("--frame", type=int, required=True, help="frame index (a multiple of the stride)")
+    r.add_argument("--frame", type=int, required=True, help="frame index to render")
     r.add_argument("--out", required=True, metavar="PNG")
     r.set_defaults(func=_render)
     e = ksub.add_parser("evaluate", help="score DST and trained checkpoints on converted shards")

@@ -57,7 +57,7 @@ __all__ = [
 ]
 
 FREE_LABELS: tuple[str, ...] = ("navigable", "ignore")
-_NAV, _STATIC, _MOVING = CLASSES.index("navigable"), CLASSES.index("static"), CLASSES.index("moving")
+_NAV, _STATIC, _MOVING = (CLASSES.index(c) for c in ("navigable", "static", "moving"))
 
 
 def scan_sensor_grid(

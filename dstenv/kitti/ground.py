@@ -78,7 +78,8 @@ def fit_ground_plane(points: np.ndarray, config: dict[str, Any] | None = None) -
     cfg = merge_config(default_ground_config(), config, "ground")
     xyz = np.asarray(points, dtype=np.float64)[:, :3]
     r = np.hypot(xyz[:, 0], xyz[:, 1])
-    cand = xyz[(r < cfg["fit_range"]) & (r > cfg["ego_radius"]) & (xyz[:, 2] < cfg["max_candidate_z"])]
+    near = (r < cfg["fit_range"]) & (r > cfg["ego_radius"])
+    cand = xyz[near & (xyz[:, 2] < cfg["max_candidate_z"])]
     if len(cand) < 3:
         raise KittiError(f"ground fit: only {len(cand)} candidate points near the road")
     rng = np.random.default_rng(cfg["seed"])

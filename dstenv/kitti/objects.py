@@ -58,7 +58,7 @@ class Boxes:
     def __len__(self) -> int:
         return int(self.frame.shape[0])
 
-    def select(self, mask: np.ndarray) -> "Boxes":
+    def select(self, mask: np.ndarray) -> Boxes:
         """The boxes where ``mask`` (``(K,) bool``) is true."""
         return Boxes(*(getattr(self, f)[mask] for f in self.__dataclass_fields__))
 
@@ -85,9 +85,9 @@ def boxes_in_velodyne(labels: Labels, calib: Calibration) -> Boxes:
         :class:`Boxes`, one per remaining row, in the rows' order.
     """
     obj = labels.select(~labels.is_dontcare)
-    h, w, l = obj.hwl[:, 0], obj.hwl[:, 1], obj.hwl[:, 2]
+    height, width, length = obj.hwl[:, 0], obj.hwl[:, 1], obj.hwl[:, 2]
     centre_cam = obj.location.copy()
-    centre_cam[:, 1] -= h / 2  # camera y points down: the centre is above the bottom face
+    centre_cam[:, 1] -= height / 2  # camera y points down: the centre is above the bottom face
     t = calib.rect_to_velo
     centre = centre_cam @ t[:3, :3].T + t[:3, 3]
     ry = obj.rotation_y
@@ -95,7 +95,7 @@ def boxes_in_velodyne(labels: Labels, calib: Calibration) -> Boxes:
     heading = heading_cam @ t[:3, :3].T
     return Boxes(
         frame=obj.frame, track=obj.track, type=obj.type, centre=centre,
-        length=l.copy(), width=w.copy(), height=h.copy(),
+        length=length.copy(), width=width.copy(), height=height.copy(),
         yaw=np.arctan2(heading[:, 1], heading[:, 0]),
     )
 

@@ -41,7 +41,9 @@ class MapAlignment:
             lat0, lon0 = (float(v) for v in meta["latlon_origin"])
             self.scale = float(meta["mercator_scale"])
         except (KeyError, TypeError, ValueError):
-            raise KittiError("OSM map has no georeference (meta latlon_origin, mercator_scale)")
+            raise KittiError(
+                "OSM map has no georeference (meta latlon_origin, mercator_scale)"
+            ) from None
         if "mercator_offset" in meta:
             self.origin = np.asarray(meta["mercator_offset"], dtype=np.float64).reshape(2)
         else:

@@ -90,7 +90,8 @@ class Trajectory:
     def world_to_latlon(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(lat, lon)`` in degrees of world points ``(..., 2)`` [m]."""
         xy = np.asarray(xy, dtype=np.float64)
-        return mercator_to_latlon(xy[..., 0] + self.origin[0], xy[..., 1] + self.origin[1], self.scale)
+        mx, my = xy[..., 0] + self.origin[0], xy[..., 1] + self.origin[1]
+        return mercator_to_latlon(mx, my, self.scale)
 
     def to_world(self, frame: int, points: np.ndarray) -> np.ndarray:
         """Velodyne points ``(P, 3)`` of one frame -> world ``(P, 3) float64``."""

@@ -75,7 +75,7 @@ class Labels:
     def __len__(self) -> int:
         return int(self.frame.shape[0])
 
-    def select(self, mask: np.ndarray) -> "Labels":
+    def select(self, mask: np.ndarray) -> Labels:
         """The rows where ``mask`` (``(K,) bool``) is true."""
         return Labels(*(getattr(self, f)[mask] for f in self.__dataclass_fields__))
 

@@ -66,7 +66,7 @@ def render_frame(
         ("labels (grey: ignore)", _rgb_labels(frame.labels)),
     ]
     corners = boxes.corners()
-    for ax, (name, img) in zip(axes, panels):
+    for ax, (name, img) in zip(axes, panels, strict=True):
         ax.set_facecolor("white")
         if img is None:
             if points is not None:

@@ -1,9 +1,11 @@
 """One KITTI tracking sequence -> labelled :class:`dstenv.frame.Frame` objects.
 
-Flow per used frame (every ``stride``-th one): Velodyne scan -> ground plane
-(RANSAC) -> sensor grid (ray casting) + GIS grid (OSM map cut at the OXTS pose, or
-vacuous) -> :class:`dstenv.dst.PerceptionGridFilter` with the relative pose since the
-previous used frame as ego motion -> BetP; labels from the boxes of that frame.
+Flow per filtered scan (every ``update_every``-th, default all: 10 Hz): Velodyne
+scan -> ground plane (RANSAC + polar walk) -> sensor grid (ray casting) + GIS grid
+(OSM map cut at the OXTS pose, or vacuous) -> :class:`dstenv.dst.PerceptionGridFilter`
+with the relative pose since the previous filtered scan as ego motion -> BetP. One
+frame every ``stride`` scans from ``warmup`` on is kept, with labels from the boxes
+of that frame (as ``dstenv generate --stride --warmup`` keeps simulator steps).
 
 A frame whose scan is missing, truncated or has no ground is skipped with a logged
 warning (the filter then moves straight from the previous used frame); anything
@@ -23,16 +25,25 @@ from dstenv.config import ConfigError, merge_config
 from dstenv.dst import DSTParams, PerceptionGridFilter
 from dstenv.frame import Frame
 from dstenv.grid import GridSpec, relative_pose
-from dstenv.kitti.ground import classify_points, default_ground_config, fit_ground_plane
 from dstenv.kitti.grids import FREE_LABELS, camera_fov, dontcare_cells, label_grid, scan_sensor_grid
+from dstenv.kitti.ground import classify_points, default_ground_config, fit_ground_plane
 from dstenv.kitti.objects import MOVING_RULES, boxes_in_velodyne, moving_flags, world_centres
 from dstenv.kitti.poses import oxts_to_trajectory
-from dstenv.sensing import visible_mask
 from dstenv.kitti.readers import (
-    KittiError, read_calib, read_labels, read_oxts, read_velodyne, split_root, velodyne_path,
+    KittiError,
+    read_calib,
+    read_labels,
+    read_oxts,
+    read_velodyne,
+    split_root,
+    velodyne_path,
 )
+from dstenv.sensing import visible_mask
 
-__all__ = ["FRAME_RATE", "default_config", "kitti_config", "sensor_from_scan", "KittiSequence", "convert_sequence"]
+__all__ = [
+    "FRAME_RATE", "default_config", "kitti_config", "kept_frames", "sensor_from_scan",
+    "KittiSequence", "convert_sequence",
+]
 
 log = logging.getLogger("dstenv.kitti")
 
@@ -44,9 +55,13 @@ def default_config() -> dict[str, Any]:
     """Converter settings (units in comments); override with :func:`merge_config`."""
     return {
         "grid": {"height": 256, "width": 256, "cell_size": 0.33},  # the paper's geometry [m]
-        # frames between DST updates: 5 = 0.5 s (8 grids from the 40-frame sample);
-        # the paper used 1-2 s (10-20)
-        "stride": 5,
+        # the filter runs on every `update_every`-th scan (1: 10 Hz, like the simulator's
+        # 0.1 s step); one frame every `stride` scans is kept, from frame `warmup` on, as
+        # `dstenv generate --stride --warmup` does. 5/5 keeps 7 frames of the 40-frame
+        # sample; the paper kept one every 1-2 s (stride 10-20)
+        "update_every": 1,  # [frames]
+        "stride": 5,  # [frames]
+        "warmup": 5,  # [frames] first kept frame (the filter has seen frames before it)
         "sensor": {
             "max_range": 60.0,  # [m] horizontal LIDAR range used for ray casting
             "azimuth_bin_deg": 0.2,  # [deg] rays stop at the first obstacle of their bin
@@ -78,13 +93,21 @@ def kitti_config(config: Mapping[str, Any] | None = None) -> dict[str, Any]:
     cfg = merge_config(default_config(), config, "kitti")
     lab = cfg["labels"]
     if lab["rule"] not in MOVING_RULES:
-        raise ConfigError(f"kitti.labels.rule: {lab['rule']!r}; choose from {', '.join(MOVING_RULES)}")
+        raise ConfigError(
+            f"kitti.labels.rule: {lab['rule']!r}; choose from {', '.join(MOVING_RULES)}"
+        )
     if lab["free_label"] not in FREE_LABELS:
         raise ConfigError(
             f"kitti.labels.free_label: {lab['free_label']!r}; choose from {', '.join(FREE_LABELS)}"
         )
-    if cfg["stride"] < 1:
-        raise ConfigError(f"kitti.stride: must be >= 1 frame, got {cfg['stride']}")
+    for key in ("stride", "update_every"):
+        if cfg[key] < 1:
+            raise ConfigError(f"kitti.{key}: must be >= 1 frame, got {cfg[key]}")
+    if cfg["warmup"] < 0:
+        raise ConfigError(f"kitti.warmup: must be >= 0, got {cfg['warmup']}")
+    if cfg["stride"] % cfg["update_every"] or cfg["warmup"] % cfg["update_every"]:
+        raise ConfigError("kitti.stride and kitti.warmup must be multiples of kitti.update_every "
+                          f"({cfg['update_every']}): kept frames must be filtered frames")
     for key in ("max_range", "azimuth_bin_deg"):
         if not cfg["sensor"][key] > 0:
             raise ConfigError(f"kitti.sensor.{key}: must be > 0, got {cfg['sensor'][key]}")
@@ -105,6 +128,11 @@ def sensor_from_scan(
         points, ground, obstacle, spec, sensor_cfg["max_range"], sensor_cfg["azimuth_bin_deg"],
         sensor_cfg["occluded_hits"], blocking=obstacle & (height >= sensor_cfg["block_height"]),
     )
+
+
+def kept_frames(n_frames: int, config: Mapping[str, Any]) -> list[int]:
+    """Frame indices a conversion keeps: ``warmup, warmup + stride, ...`` below ``n_frames``."""
+    return list(range(config["warmup"], n_frames, config["stride"]))
 
 
 class KittiSequence:
@@ -154,7 +182,9 @@ class KittiSequence:
         """``(P, 4) float32`` Velodyne points of one frame (raises :class:`KittiError`)."""
         return read_velodyne(self.scan_path(frame))
 
-    def moving(self, rule: str = "smoothed", threshold: float = 0.10, window: int = 5) -> np.ndarray:
+    def moving(
+        self, rule: str = "smoothed", threshold: float = 0.10, window: int = 5
+    ) -> np.ndarray:
         """``(K,) bool`` moving flag of every box (see :func:`moving_flags`)."""
         return moving_flags(self.boxes, self.world_xy, rule, threshold, window)
 
@@ -186,9 +216,10 @@ def convert_sequence(
     moving = seq.moving(lab["rule"], lab["threshold"], lab["window"])
     fov = camera_fov(seq.calib, spec, lab["image_width"])
     dontcare_boxes = seq.labels.select(seq.labels.is_dontcare)
+    keep = set(kept_frames(seq.n_frames, cfg))
     prev_pose: np.ndarray | None = None
     prev_betp: np.ndarray | None = None
-    for f in range(0, seq.n_frames, cfg["stride"]):
+    for f in range(0, seq.n_frames, cfg["update_every"]):
         try:
             points = seq.scan(f)
             plane = fit_ground_plane(points, cfg["ground"])
@@ -205,27 +236,28 @@ def convert_sequence(
         motion = None if prev_pose is None else relative_pose(prev_pose, pose)
         masses = dst.update(sensor, gis, motion)
         betp = dst.pignistic()
-        sel = seq.boxes.frame == f
-        dc = dontcare_cells(
-            points, obstacle, dontcare_boxes.bbox[dontcare_boxes.frame == f], seq.calib, spec,
-            lab["dontcare_dilation"],
-        )
-        labels = label_grid(
-            seq.boxes.select(sel), moving[sel], sensor, fov, dc, spec,
-            gis if gis_fn is not None else None, lab["free_label"],
-        )
-        yield Frame(
-            pignistic=betp,
-            pignistic_prev=betp.copy() if prev_betp is None else prev_betp,
-            labels=labels,
-            visible=visible_mask(sensor),
-            sensor=sensor,
-            gis=gis,
-            ego_pose=pose.copy(),
-            time=f / FRAME_RATE,
-            seed=int(seq.name),
-            step=f,
-            masses=masses,
-            extras={"plane": plane},
-        )
+        if f in keep:
+            sel = seq.boxes.frame == f
+            dc = dontcare_cells(
+                points, obstacle, dontcare_boxes.bbox[dontcare_boxes.frame == f], seq.calib,
+                spec, lab["dontcare_dilation"],
+            )
+            labels = label_grid(
+                seq.boxes.select(sel), moving[sel], sensor, fov, dc, spec,
+                gis if gis_fn is not None else None, lab["free_label"],
+            )
+            yield Frame(
+                pignistic=betp,
+                pignistic_prev=betp.copy() if prev_betp is None else prev_betp,
+                labels=labels,
+                visible=visible_mask(sensor),
+                sensor=sensor,
+                gis=gis,
+                ego_pose=pose.copy(),
+                time=f / FRAME_RATE,
+                seed=int(seq.name),
+                step=f,
+                masses=masses,
+                extras={"plane": plane},
+            )
         prev_pose, prev_betp = pose, betp

@@ -86,7 +86,8 @@ PRESETS: dict[str, dict[str, Any]] = {
     },
     # <= 30 min on a 2-core CPU: the README's main job
     "cpu": {
-        "data": {"frames": 1000, "grid": 128, "episode_length": 200, "stride": 10, "warmup": 10},
+        "data": {"scenario": "dense", "frames": 1000, "grid": 128, "episode_length": 200, "stride": 10,
+                 "warmup": 10},
         "tune": {"episodes": 8, "budget": 30},
         "models": ["unet-light"],
         "train": {"epochs": 8, "batch_size": 8, "lr": 2e-3, "crop": 96, "loss": "wce+lovasz"},
@@ -94,7 +95,7 @@ PRESETS: dict[str, dict[str, Any]] = {
     },
     # the full benchmark for a GPU: the paper's FCN-8s, more data, full-size grids
     "gpu": {
-        "data": {"frames": 20000, "grid": 256, "episode_length": 200, "stride": 10, "warmup": 10,
+        "data": {"scenario": "dense", "frames": 20000, "grid": 256, "episode_length": 200, "stride": 10, "warmup": 10,
                  "workers": 8},
         "tune": {"episodes": 32, "budget": 60},
         "models": ["fcn8s-vgg16", "unet-light", "unet-temporal"],

@@ -149,10 +149,17 @@ def load_osm(path: str | Path, *, resolution: float = 0.2, lane_width: float = 3
     scale = math.cos(math.radians(lat0))
     mx0, my0 = latlon_to_mercator(lat0, lon0, scale)
 
+    ids = np.fromiter(nodes.keys(), np.int64, len(nodes))
+    ll = np.array(list(nodes.values()), np.float64).reshape(-1, 2)
+    mx, my = latlon_to_mercator(ll[:, 0], ll[:, 1], scale)
+    pos = dict(zip(ids.tolist(), np.stack([mx - mx0, my - my0], -1)))
+    corners = np.stack(latlon_to_mercator([bounds[0], bounds[2]], [bounds[1], bounds[3]], scale),
+                       -1) - [mx0, my0]
+    (bx0, by0), (bx1, by1) = corners
+    box = shapely.box(bx0, by0, bx1, by1)
+
     def project(refs: list[int]) -> np.ndarray:
-        ll = np.array([nodes[r] for r in refs], np.float64).reshape(-1, 2)
-        mx, my = latlon_to_mercator(ll[:, 0], ll[:, 1], scale)
-        return np.stack([mx - mx0, my - my0], -1)
+        return np.array([pos[r] for r in refs], np.float64).reshape(-1, 2)
 
     clipped = dropped = 0
     by_id: dict[int, list[int]] = {}
@@ -173,14 +180,18 @@ def load_osm(path: str | Path, *, resolution: float = 0.2, lane_width: float = 3
                 dropped += 1
             elif kind in ROAD_LANES or tags["highway"].endswith("_link"):
                 refs2 = kept[::-1] if tags.get("oneway") == "-1" else kept
-                roads.append((refs2, *_width(tags, lane_width)))
+                width, fwd, bwd = _width(tags, lane_width)
+                for run in _inside_runs(refs2, pos, box):
+                    roads.append((run, width, fwd, bwd))
             elif kind in FOOT_TYPES:
-                foot.append(project(kept))
+                line = LineString(project(kept)).intersection(box)
+                foot += [np.asarray(g.coords) for g in getattr(line, "geoms", [line])
+                         if isinstance(g, LineString) and not g.is_empty]
     for members in rels:
         for ref, role in members:
             if role == "outer" and len(by_id.get(ref, [])) >= 3:
                 buildings.append(Polygon(project(by_id[ref])))
-    buildings = [b.buffer(0) if not b.is_valid else b for b in buildings]
+    buildings = [(b.buffer(0) if not b.is_valid else b).intersection(box) for b in buildings]
 
     # street graph: split vehicle ways at shared nodes and at their ends
     use: dict[int, int] = {}
@@ -207,7 +218,7 @@ def load_osm(path: str | Path, *, resolution: float = 0.2, lane_width: float = 3
                 half[n] = max(half.get(n, 0.0), width / 2)
     node_xy = np.zeros((len(gid), 2))
     for ref, n in gid.items():
-        node_xy[n] = project([ref])[0]
+        node_xy[n] = pos[ref]
     trims = np.array([half.get(n, 3.0) + 1.5 for n in range(len(gid))])
     builder = NetworkBuilder()
     degree = add_road_lanes(builder, len(gid), edges, trims, lane_width)
@@ -221,18 +232,10 @@ def load_osm(path: str | Path, *, resolution: float = 0.2, lane_width: float = 3
     phase = rng.uniform(0, 2 * (tr["signal_green"] + 3.0), len(gid))
 
     # rasters: roads win over (erroneously) overlapping buildings, so lanes stay clear
-    # extent: the bounds and every kept way (ways often run past the bounds)
-    corners = np.stack(latlon_to_mercator([bounds[0], bounds[2]], [bounds[1], bounds[3]], scale),
-                       -1) - [mx0, my0]
-    geom = np.vstack([corners, node_xy.reshape(-1, 2)] + [np.asarray(b.exterior.coords)
-                                                          for b in buildings if not b.is_empty
-                                                          and isinstance(b, Polygon)])
-    (x_lo, y_lo), (x_hi, y_hi) = geom.min(0) - margin, geom.max(0) + margin
-    for e in edges:
-        x_lo, y_lo = min(x_lo, e.poly[:, 0].min() - margin), min(y_lo, e.poly[:, 1].min() - margin)
-        x_hi, y_hi = max(x_hi, e.poly[:, 0].max() + margin), max(y_hi, e.poly[:, 1].max() + margin)
-    origin = (float(x_lo), float(y_lo))
-    shape = (int(np.ceil((y_hi - y_lo) / resolution)), int(np.ceil((x_hi - x_lo) / resolution)))
+    # rasters over the extract's bounds; roads win over (erroneously) overlapping buildings
+    origin = (float(bx0 - margin), float(by0 - margin))
+    shape = (int(np.ceil((by1 - by0 + 2 * margin) / resolution)),
+             int(np.ceil((bx1 - bx0 + 2 * margin) / resolution)))
     raster = np.full(shape, MapClass.INTERMEDIATE, np.uint8)
     surface = np.full(shape, Surface.YARD, np.uint8)
     road_polys = [LineString(e.poly).buffer(h, cap_style="round", join_style="round")
@@ -259,6 +262,33 @@ def load_osm(path: str | Path, *, resolution: float = 0.2, lane_width: float = 3
                "mercator_scale": scale, "mercator_offset": (float(mx0), float(my0)),
                "surface": surface, "clipped_ways": int(clipped), "dropped_ways": int(dropped)}
     return wm
+
+
+def _inside_runs(refs: list[int], pos: dict, box: Any) -> list[list[int]]:
+    """Pieces of a way inside ``box``. A piece that leaves the box ends exactly on its
+    edge, at a new node (negative id, position added to ``pos``)."""
+    inside = [bool(box.covers(shapely.Point(pos[r]))) for r in refs]
+    n, runs, k = len(refs), [], 0
+    while k < n:
+        if not inside[k] and not (k + 1 < n and inside[k + 1]):
+            k += 1
+            continue
+        j = k + 1
+        while j < n and inside[j]:
+            j += 1
+        end = min(j, n - 1)
+        run = list(refs[k:end + 1])
+        for e, nxt in ((0, 1), (len(run) - 1, len(run) - 2)):
+            if not inside[k + e]:
+                a = np.asarray(pos[run[nxt]])
+                cut = np.asarray(LineString([a, pos[run[e]]]).intersection(box).coords)
+                new = -(len(pos) + 1)
+                pos[new] = cut[np.argmax(np.hypot(*(cut - a).T))]
+                run[e] = new
+        if len(run) >= 2:
+            runs.append(run)
+        k = j
+    return runs
 
 
 def _paint(raster: np.ndarray, geom: Any, origin, res: float, value: int) -> None:

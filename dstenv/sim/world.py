@@ -111,6 +111,48 @@ class World:
         self.steps += 1
         self._update_flags()
 
+    def add_agent(self, kind: AgentKind, lane: int, s: float, speed: float = 0.0,
+                  route: tuple[int, ...] = ()) -> int:
+        """Put a moving agent on ``lane`` at arc length ``s`` [m] (hand-built scenes).
+
+        Args:
+            kind: car, cyclist or pedestrian (vehicles need a road lane, pedestrians a
+                sidewalk lane).
+            lane: lane id in ``map.lanes``; s: [m]; speed: initial speed [m/s].
+            route: lanes to follow after ``lane`` (random successors after them).
+
+        Returns:
+            The agent's index in :attr:`agents`.
+        """
+        net, tr = self._map.lanes, self.config["traffic"]
+        if not 0 <= lane < len(net):
+            raise ValueError(f"add_agent: no lane {lane} (the map has {len(net)})")
+        walk = kind == AgentKind.PEDESTRIAN
+        if (net.kind[lane] in (LaneKind.SIDEWALK, LaneKind.CROSSING)) != walk:
+            raise ValueError(f"add_agent: a {AgentKind(kind).name.lower()} cannot use lane {lane} "
+                             f"({LaneKind(net.kind[lane]).name.lower()})")
+        (l_lo, l_hi), (w_lo, w_hi), amax, bcomf, headway, jam = spawn.BODY[AgentKind(kind)]
+        v0 = {AgentKind.CAR: tr["speed_limit"], AgentKind.CYCLIST: tr["cyclist_speed"],
+              AgentKind.PEDESTRIAN: tr["pedestrian_speed"]}[AgentKind(kind)]
+        lat = -(net.lane_width / 2 - 0.8) if kind == AgentKind.CYCLIST else 0.0
+        x, y, h = lane_pose(net.pts, net.hdg, net.start, net.npts, net.ds, lane, s)
+        plan = spawn.plan_route(net, lane, self.rng, ROUTE_LEN, tr["crossing_prob"], tuple(route))
+        st = self._state
+        i = spawn.add_row(st, kind, (x - lat * np.sin(h), y + lat * np.cos(h)), h,
+                          (l_lo + l_hi) / 2, (w_lo + w_hi) / 2, speed=speed, route=plan, s=s,
+                          lat=lat, idm=(v0, amax, bcomf, headway, jam), at=len(st["v"]) - 1)
+        self._update_flags()
+        return i
+
+    def place_ego(self, lane: int, s: float, speed: float = 0.0) -> None:
+        """Move the ego onto ``lane`` at arc length ``s`` [m] with ``speed`` [m/s]."""
+        net, st = self._map.lanes, self._state
+        x, y, h = lane_pose(net.pts, net.hdg, net.start, net.npts, net.ds, lane, s)
+        st["xy"][-1], st["yaw"][-1], st["v"][-1], st["s"][-1] = (x, y), h, speed, s
+        st["route"][-1] = spawn.plan_route(net, lane, self.rng, ROUTE_LEN)
+        st["grant"][-1] = -1
+        self._update_flags()
+
     # ------------------------------------------------------------------ views
     @property
     def map(self) -> WorldMap:
@@ -124,6 +166,11 @@ class World:
         return Agents(st["xy"][:-1].copy(), st["yaw"][:-1].copy(), st["v"][:-1].copy(),
                       2 * st["hl"][:-1], 2 * st["hw"][:-1], st["akind"][:-1].copy(),
                       st["parked"][:-1].copy())
+
+    @property
+    def agent_lanes(self) -> np.ndarray:
+        """``(N,) int64`` current lane of each agent (-1: parked)."""
+        return self._state["route"][:-1, 0].copy()
 
     @property
     def ego_pose(self) -> np.ndarray:

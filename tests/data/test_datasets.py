@@ -103,6 +103,7 @@ def test_corrupt_chunk_at_read_time(tmp_path, make_frame, shard_attrs):
     with pytest.warns(RuntimeWarning, match=r"c\.h5: frame 1"):
         item = skipping[1]  # the damaged shard is dropped: the next readable frame comes
     np.testing.assert_array_equal(item["labels"].numpy(), frames[2].labels)
-    assert int(skipping[0]["labels"][0, 0]) == 255  # later reads skip the bad shard
+    # later reads skip the bad shard without reading it again
+    np.testing.assert_array_equal(skipping[0]["labels"].numpy(), frames[2].labels)
     with pytest.warns(RuntimeWarning), pytest.raises(ShardError, match="no readable frame"):
         ShardDataset([path], on_error="skip")[1]

@@ -10,7 +10,7 @@ from gymnasium.utils.env_checker import check_env as gym_check_env
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 import dstenv  # noqa: F401
-from dstenv.config import list_scenarios
+from dstenv.config import list_scenarios, load_scenario, scenario_path
 from dstenv.envs.registration import VARIANTS
 
 from .conftest import SMALL_CITY, SMALL_GRID, city_available
@@ -26,8 +26,13 @@ def _ids() -> list:
         marks = []
         if not (highway or city_available()):
             marks.append(pytest.mark.skip(reason="dstenv.sim.World not available"))
-        if kwargs.get("scenario", scenarios[0] if scenarios else None) not in scenarios:
-            marks.append(pytest.mark.skip(reason=f"scenario {kwargs['scenario']!r} not shipped"))
+        scenario = kwargs.get("scenario")
+        if scenario is not None and scenario not in scenarios:
+            marks.append(pytest.mark.skip(reason=f"scenario {scenario!r} not shipped"))
+        elif scenario is not None:
+            osm = load_scenario(scenario)["world"]["map"].get("osm_file", "")
+            if osm and not (scenario_path(scenario).parent / osm).is_file():
+                marks.append(pytest.mark.skip(reason=f"OSM file {osm!r} not shipped"))
         out.append(pytest.param(env_id, marks=marks))
     return out
 

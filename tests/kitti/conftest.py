@@ -56,10 +56,12 @@ def _scan(k: int) -> np.ndarray:
             (POLE[0], POLE[1], POLE[2], POLE[2])]
     keep = np.ones(len(ground), bool)
     parts = []
-    for cx, cy, l, w in objs:
+    for cx, cy, length, width in objs:
         cx -= k  # world -> Velodyne frame (the ego is at (k, 0), yaw 0)
-        keep &= ~((np.abs(ground[:, 0] - cx) < l / 2) & (np.abs(ground[:, 1] - cy) < w / 2))
-        parts.append(_box_points(cx, cy, l, w, POLE[3] if l == POLE[2] else CAR[2]))
+        inside = (np.abs(ground[:, 0] - cx) < length / 2) & (np.abs(ground[:, 1] - cy) < width / 2)
+        keep &= ~inside
+        height = POLE[3] if length == POLE[2] else CAR[2]
+        parts.append(_box_points(cx, cy, length, width, height))
     pts = np.concatenate([ground[keep], *parts])
     return np.concatenate([pts, np.full((len(pts), 1), 0.5)], axis=1).astype(np.float32)
 
@@ -72,10 +74,10 @@ def _project(xyz: np.ndarray) -> np.ndarray:
 
 
 def _label_row(k: int, track: int, cx: float, cy: float) -> str:
-    l, w, h = CAR
+    length, width, height = CAR
     # bottom-face centre in the camera frame: (-y, -z - 0.08, x - 0.27); ry = -pi/2 - yaw
     loc = (-cy, -SENSOR_Z - 0.08, cx - 0.27)
-    return (f"{k} {track} Car 0 0 0.0 500.0 150.0 700.0 250.0 {h} {w} {l} "
+    return (f"{k} {track} Car 0 0 0.0 500.0 150.0 700.0 250.0 {height} {width} {length} "
             f"{loc[0]:.6f} {loc[1]:.6f} {loc[2]:.6f} {-np.pi / 2:.6f}")
 
 

@@ -17,7 +17,7 @@ from .conftest import FIXTURES
 
 def _convert(tiny_root, out, *extra):
     return main(["kitti", "convert", "--root", str(tiny_root), "--sequences", "0001",
-                 "--stride", "2", "--out", str(out), *extra])
+                 "--stride", "2", "--warmup", "0", "--out", str(out), *extra])
 
 
 def test_convert_writes_shards_and_manifest(tiny_root, tmp_path, capsys):
@@ -70,18 +70,21 @@ def test_every_scan_missing_is_an_error(tiny_root, tmp_path, capsys):
     for p in (tiny_root / "training" / "velodyne" / "0001").glob("*.bin"):
         p.unlink()
     assert _convert(tiny_root, tmp_path / "o") == 2
-    assert "no usable frame (3 skipped)" in capsys.readouterr().err
+    assert "no usable frame (6 skipped)" in capsys.readouterr().err
     assert not list((tmp_path / "o").rglob("*.h5*"))
 
 
 def test_render_and_evaluate(tiny_root, tmp_path, capsys):
     png = tmp_path / "f.png"
-    assert main(["kitti", "render", "--root", str(tiny_root), "--sequence", "1", "--frame", "4",
-                 "--stride", "2", "--out", str(png)]) == 0
+    assert main(["kitti", "render", "--root", str(tiny_root), "--sequence", "1", "--frame", "3",
+                 "--out", str(png)]) == 0
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert main(["kitti", "render", "--root", str(tiny_root), "--sequence", "1", "--frame", "3",
-                 "--stride", "2", "--out", str(png)]) == 2
+                 "--update-every", "2", "--out", str(png)]) == 2
     assert "pick a multiple of 2" in capsys.readouterr().err
+    assert main(["kitti", "render", "--root", str(tiny_root), "--sequence", "1", "--frame", "9",
+                 "--out", str(png)]) == 2
+    assert "frame 9 was not converted" in capsys.readouterr().err
     out = tmp_path / "ds"
     assert _convert(tiny_root, out) == 0
     capsys.readouterr()

@@ -109,7 +109,7 @@ def test_dontcare_cells_from_projected_points():
 def test_synthetic_labels_and_occupancy(tiny_root):
     seq = KittiSequence(tiny_root, "0001")
     spec = GridSpec()
-    for frame in convert_sequence(seq, {"stride": 1}):
+    for frame in convert_sequence(seq, {"stride": 1, "warmup": 0}):
         boxes = seq.boxes.select(seq.boxes.frame == frame.step)
         masks = box_mask(boxes, spec)
         for k in range(len(boxes)):
@@ -131,7 +131,7 @@ def test_real_cars_on_occupied_cells(real_root):
     seq = KittiSequence(real_root, "0003")
     spec = GridSpec()
     near, free, shifted = [], [], []
-    for frame in convert_sequence(seq, {"stride": 4}):
+    for frame in convert_sequence(seq, {"stride": 4, "warmup": 0, "update_every": 4}):
         occ = frame.sensor == SensorState.OCCUPIED
         near_occ = binary_dilation(occ)
         boxes = seq.boxes.select(seq.boxes.frame == frame.step)

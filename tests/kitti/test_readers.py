@@ -6,7 +6,13 @@ import numpy as np
 import pytest
 
 from dstenv.kitti.readers import (
-    OBJECT_TYPES, KittiError, read_calib, read_labels, read_oxts, read_velodyne, split_root,
+    OBJECT_TYPES,
+    KittiError,
+    read_calib,
+    read_labels,
+    read_oxts,
+    read_velodyne,
+    split_root,
     velodyne_path,
 )
 
@@ -29,12 +35,14 @@ def test_calib_with_and_without_colons_and_aliases(name):
 
 
 def test_calib_without_tr_velo_cam_names_file_and_key():
-    with pytest.raises(KittiError, match=r"calib_no_tr_velo_cam\.txt: calibration has no Tr_velo_cam"):
+    msg = r"calib_no_tr_velo_cam\.txt: calibration has no Tr_velo_cam"
+    with pytest.raises(KittiError, match=msg):
         read_calib(FIXTURES / "calib_no_tr_velo_cam.txt")
 
 
 def test_calib_short_row_names_line():
-    with pytest.raises(KittiError, match=r"calib_short_row\.txt:3: Tr_velo_cam needs 12 values, got 11"):
+    msg = r"calib_short_row\.txt:3: Tr_velo_cam needs 12 values, got 11"
+    with pytest.raises(KittiError, match=msg):
         read_calib(FIXTURES / "calib_short_row.txt")
 
 
@@ -44,7 +52,8 @@ def test_missing_calib_file(tmp_path):
 
 
 def test_labels_wrong_column_count_names_line():
-    with pytest.raises(KittiError, match=r"label_bad_columns\.txt:3: expected 17 label columns, got 16"):
+    msg = r"label_bad_columns\.txt:3: expected 17 label columns, got 16"
+    with pytest.raises(KittiError, match=msg):
         read_labels(FIXTURES / "label_bad_columns.txt")
 
 
@@ -54,7 +63,8 @@ def test_labels_unknown_type():
 
 
 def test_oxts_wrong_column_count_names_line():
-    with pytest.raises(KittiError, match=r"oxts_bad_columns\.txt:2: expected 30 OXTS columns, got 29"):
+    msg = r"oxts_bad_columns\.txt:2: expected 30 OXTS columns, got 29"
+    with pytest.raises(KittiError, match=msg):
         read_oxts(FIXTURES / "oxts_bad_columns.txt")
 
 
@@ -63,7 +73,8 @@ def test_velodyne_roundtrip_and_truncated(tmp_path):
     pts.tofile(tmp_path / "000000.bin")
     np.testing.assert_array_equal(read_velodyne(tmp_path / "000000.bin"), pts)
     (tmp_path / "000001.bin").write_bytes(pts.tobytes()[:-6])  # 154 bytes
-    with pytest.raises(KittiError, match=r"000001\.bin: 154 bytes is not a positive multiple of 16"):
+    msg = r"000001\.bin: 154 bytes is not a positive multiple of 16"
+    with pytest.raises(KittiError, match=msg):
         read_velodyne(tmp_path / "000001.bin")
     (tmp_path / "000002.bin").write_bytes(b"")
     with pytest.raises(KittiError, match=r"000002\.bin: 0 bytes"):

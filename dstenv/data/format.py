@@ -1,0 +1,73 @@
+"""Constants and helpers of the shard format (documented in :mod:`dstenv.data.shards`)."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from dstenv.dst.frame import CLASSES, NUM_CLASSES, NUM_SETS
+
+__all__ = [
+    "FORMAT", "FORMAT_VERSION", "QUANT_SCALE", "QUANT_MAX_ERROR", "N_CLASSES", "N_MASSES",
+    "FRAME_FIELDS", "ShardError", "class_names", "partial_path",
+]
+
+FORMAT = "dstenv-shard"
+FORMAT_VERSION = 1
+#: uint8 quantisation: ``q = rint(QUANT_SCALE * p)``.
+QUANT_SCALE = 255
+#: Largest absolute error of a dequantised probability.
+QUANT_MAX_ERROR = 1.0 / (2 * QUANT_SCALE)
+# frames are buffered and written in blocks (fewer HDF5 calls); chunks stay one per frame
+BUFFER_FRAMES = 16
+BUFFER_BYTES = 32 << 20
+N_CLASSES = NUM_CLASSES  # 5
+N_MASSES = NUM_SETS  # 32
+
+# per-frame datasets by trailing shape: (H, W) grids, (5, H, W) probabilities, scalars
+GRID_FIELDS = {"labels": np.uint8, "visible": np.bool_, "sensor": np.uint8, "gis": np.uint8}
+PROB_FIELDS = ("pignistic", "pignistic_prev")
+SCALAR_FIELDS = {"time": np.float64, "seed": np.int64, "step": np.int64}
+#: Every dataset a valid shard holds (``masses`` is optional).
+FRAME_FIELDS: tuple[str, ...] = (
+    *PROB_FIELDS, *GRID_FIELDS, "ego_pose", *SCALAR_FIELDS, "class_counts",
+)
+
+
+class ShardError(ValueError):
+    """A shard file is missing, truncated, corrupt or inconsistent (message names the file)."""
+
+
+def class_names() -> tuple[str, ...]:
+    """Class names in channel order, from :data:`dstenv.dst.CLASSES` (the one definition)."""
+    return tuple(str(c) for c in CLASSES)
+
+
+def partial_path(path: str | Path) -> Path:
+    """The temporary name a shard is written under before the final rename."""
+    path = Path(path)
+    return path.with_name(path.name + ".partial")
+
+
+def encode_attr(value: Any) -> tuple[Any, bool]:
+    """Value to store as an HDF5 attribute, and whether it was JSON-encoded."""
+    if isinstance(value, Mapping) or (
+        isinstance(value, (list, tuple))
+        and not all(isinstance(v, (int, float, np.integer, np.floating)) for v in value)
+    ):
+        return json.dumps(value, sort_keys=True, allow_nan=False), True
+    if isinstance(value, (list, tuple)):
+        return np.asarray(value), False
+    if value is None:
+        return json.dumps(None), True
+    return value, False
+
+
+def short_error(exc: BaseException) -> str:
+    """First line of an exception message (HDF5 errors can be multi-line)."""
+    text = str(exc).strip().splitlines()
+    return text[0] if text else type(exc).__name__

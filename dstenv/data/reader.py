@@ -1,0 +1,176 @@
+"""Reading shards: :class:`ShardReader` (format in :mod:`dstenv.data.shards`)."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+
+from dstenv.data.format import (
+    FORMAT, FORMAT_VERSION, FRAME_FIELDS, GRID_FIELDS, N_CLASSES, N_MASSES, PROB_FIELDS,
+    SCALAR_FIELDS, ShardError, short_error,
+)
+from dstenv.frame import Frame
+
+__all__ = ["ShardReader"]
+
+
+class ShardReader:
+    """Random access to the frames of one shard, validated on open.
+
+    Args:
+        path: a shard file.
+
+    Raises:
+        ShardError: ``"<path>: <problem>"`` if the file is missing, not HDF5,
+            truncated, of another format version, lacks a dataset, or has
+            inconsistent shapes.
+
+    Use as a context manager or call :meth:`close`. ``reader[i]`` is a :class:`Frame`
+    (probabilities dequantised to float32); :meth:`get` reads selected arrays only.
+    """
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        if not self.path.is_file():
+            raise ShardError(f"{self.path}: no such shard file")
+        try:
+            # 16 MiB chunk cache: one 256x256 masses chunk is 8 MiB
+            self._file = h5py.File(self.path, "r", rdcc_nbytes=16 << 20)
+        except OSError as exc:
+            raise ShardError(f"{self.path}: not a readable HDF5 file (truncated or corrupt?): "
+                             f"{short_error(exc)}") from None
+        try:
+            self.attrs = self._read_attrs()
+            self._validate()
+        except ShardError:
+            self._file.close()
+            raise
+        except (OSError, KeyError, ValueError, TypeError) as exc:
+            self._file.close()
+            raise ShardError(f"{self.path}: unreadable shard metadata: "
+                             f"{short_error(exc)}") from None
+
+    def _read_attrs(self) -> dict[str, Any]:
+        raw = dict(self._file.attrs)
+        if raw.get("format") != FORMAT:
+            raise ShardError(f"{self.path}: not a dstenv shard "
+                             f"(attribute format={raw.get('format')!r})")
+        if int(raw.get("format_version", -1)) != FORMAT_VERSION:
+            raise ShardError(f"{self.path}: shard format_version {raw.get('format_version')} is "
+                             f"not supported (this dstenv reads {FORMAT_VERSION})")
+        out: dict[str, Any] = {}
+        json_keys = set(json.loads(raw.pop("json_attrs", "[]")))
+        for key, value in raw.items():
+            if key in json_keys:
+                out[key] = json.loads(value)
+            elif isinstance(value, np.ndarray):
+                out[key] = value.tolist()
+            elif isinstance(value, np.generic):
+                out[key] = value.item()
+            else:
+                out[key] = value
+        return out
+
+    def _validate(self) -> None:
+        a = self.attrs
+        for key in ("n_frames", "grid_shape", "prob_scale", "classes", "cell_size", "complete"):
+            if key not in a:
+                raise ShardError(f"{self.path}: attribute {key!r} missing")
+        if not a["complete"]:
+            raise ShardError(f"{self.path}: shard marked incomplete")
+        n = int(a["n_frames"])
+        h, w = (int(v) for v in a["grid_shape"])
+        expected = {
+            **{k: (n, N_CLASSES, h, w) for k in PROB_FIELDS},
+            **{k: (n, h, w) for k in GRID_FIELDS},
+            "ego_pose": (n, 3), **{k: (n,) for k in SCALAR_FIELDS},
+            "class_counts": (n, N_CLASSES),
+        }
+        if a.get("has_masses"):
+            expected["masses"] = (n, N_MASSES, h, w)
+        for name, shape in expected.items():
+            if name not in self._file:
+                raise ShardError(f"{self.path}: dataset {name!r} missing")
+            got = self._file[name].shape
+            if got != shape:
+                raise ShardError(f"{self.path}: dataset {name!r} has shape {got}, expected {shape}")
+        self.n_frames = n
+        self.grid_shape: tuple[int, int] = (h, w)
+        self.cell_size = float(a["cell_size"])
+        self.classes: tuple[str, ...] = tuple(a["classes"])
+        self.has_masses = bool(a.get("has_masses"))
+        self._scale = float(a["prob_scale"])
+
+    def __len__(self) -> int:
+        return self.n_frames
+
+    def get(self, index: int, names: Iterable[str]) -> dict[str, np.ndarray]:
+        """Read selected arrays of frame ``index``.
+
+        Args:
+            index: frame index, ``-len <= index < len``.
+            names: dataset names (see the module table); probabilities come back as
+                ``float32`` in [0, 1] whatever the stored dtype.
+
+        Raises:
+            IndexError: index out of range.
+            ShardError: a chunk fails its checksum or cannot be read.
+        """
+        if not -self.n_frames <= index < self.n_frames:
+            raise IndexError(f"{self.path}: frame {index} out of range (0..{self.n_frames - 1})")
+        index %= self.n_frames
+        if not self._file:
+            raise ValueError(f"{self.path}: reader is closed")
+        out: dict[str, np.ndarray] = {}
+        for name in names:
+            if name not in self._file:
+                raise KeyError(f"{self.path}: no dataset {name!r}")
+            try:
+                value = self._file[name][index]
+            except (OSError, ValueError) as exc:
+                raise ShardError(f"{self.path}: frame {index}: cannot read {name!r} "
+                                 f"(corrupt chunk?): {short_error(exc)}") from None
+            if name in PROB_FIELDS:
+                value = value.astype(np.float32)
+                if self._scale != 1:
+                    value /= np.float32(self._scale)
+            out[name] = value
+        return out
+
+    def __getitem__(self, index: int) -> Frame:
+        names = [*FRAME_FIELDS] + (["masses"] if self.has_masses else [])
+        d = self.get(index, names)
+        return Frame(
+            pignistic=d["pignistic"], pignistic_prev=d["pignistic_prev"], labels=d["labels"],
+            visible=d["visible"], sensor=d["sensor"], gis=d["gis"], ego_pose=d["ego_pose"],
+            time=float(d["time"]), seed=int(d["seed"]), step=int(d["step"]),
+            masses=d.get("masses"),
+        )
+
+    def class_counts(self) -> np.ndarray:
+        """``(5,) int64`` cells of each class summed over the shard's frames."""
+        try:
+            return self._file["class_counts"][()].sum(axis=0).astype(np.int64)
+        except OSError as exc:
+            raise ShardError(f"{self.path}: cannot read class_counts: {short_error(exc)}") from None
+
+    def verify(self, names: Sequence[str] | None = None) -> None:
+        """Read every chunk (checksums included); raise :class:`ShardError` on the first bad one."""
+        for name in names or [n for n in self._file]:
+            for i in range(self.n_frames):
+                self.get(i, [name])
+
+    def close(self) -> None:
+        """Close the file (idempotent)."""
+        self._file.close()
+
+    def __enter__(self) -> ShardReader:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

@@ -1,0 +1,241 @@
+"""Writing shards: :class:`ShardWriter` (format in :mod:`dstenv.data.shards`)."""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Mapping
+from pathlib import Path
+from types import TracebackType
+from typing import Any
+
+import h5py
+import numpy as np
+
+from dstenv import __version__
+from dstenv.data.format import (
+    BUFFER_BYTES, BUFFER_FRAMES, FORMAT, FORMAT_VERSION, GRID_FIELDS, N_CLASSES, N_MASSES,
+    PROB_FIELDS, QUANT_SCALE, SCALAR_FIELDS, class_names, encode_attr, partial_path,
+)
+from dstenv.frame import IGNORE_INDEX, Frame
+
+__all__ = ["ShardWriter"]
+
+
+class ShardWriter:
+    """Write frames to one shard; a context manager that commits on a clean exit.
+
+    Args:
+        path: final file name (``.h5``); the data go to ``path + ".partial"`` first.
+        attrs: root attributes. ``config`` (dict) and ``seed`` (int) are required;
+            ``cell_size`` [m] is taken from ``attrs`` or ``config["grid"]["cell_size"]``.
+        quantize: store probabilities as uint8 (error <= 1/510) instead of float32.
+        masses: also store ``frame.masses`` (``(32, H, W) float32``, every frame must
+            have them).
+        compression: ``"gzip"``, ``"lzf"`` or ``None``.
+        compression_opts: gzip level (0-9).
+
+    Raises:
+        ValueError: on missing attributes or a frame of the wrong shape or dtype.
+
+    Example (any producer, e.g. the KITTI converter)::
+
+        with ShardWriter(out / "train" / "shard-00000.h5",
+                         {"config": config, "seed": 0, "split": "train"}) as w:
+            for frame in frames:
+                w.add(frame)
+        write_manifest(out)          # dstenv.data.manifest: scans and lists the shards
+    """
+
+    def __init__(
+        self,
+        path: str | Path,
+        attrs: Mapping[str, Any],
+        *,
+        quantize: bool = True,
+        masses: bool = False,
+        compression: str | None = "gzip",
+        compression_opts: int | None = 6,
+    ) -> None:
+        self.path = Path(path)
+        self.tmp_path = partial_path(self.path)
+        missing = [k for k in ("config", "seed") if k not in attrs]
+        if missing:
+            raise ValueError(f"{self.path}: shard attrs lack {', '.join(missing)}")
+        self.attrs = dict(attrs)
+        if "cell_size" not in self.attrs:
+            try:
+                self.attrs["cell_size"] = float(self.attrs["config"]["grid"]["cell_size"])
+            except (KeyError, TypeError):
+                raise ValueError(
+                    f"{self.path}: give attrs['cell_size'] or config['grid']['cell_size']"
+                ) from None
+        if compression not in ("gzip", "lzf", None):
+            raise ValueError(f"compression must be 'gzip', 'lzf' or None, got {compression!r}")
+        self.quantize = quantize
+        self.masses = masses
+        self._filters: dict[str, Any] = {"compression": compression, "fletcher32": True}
+        if compression == "gzip":
+            self._filters["compression_opts"] = compression_opts
+        self._file: h5py.File | None = None
+        self._shape: tuple[int, int] | None = None
+        self._pending: list[dict[str, Any]] = []
+        self._pending_bytes = 0
+        self.n_frames = 0
+
+    def __enter__(self) -> ShardWriter:
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._file = h5py.File(self.tmp_path, "w", track_order=False)
+        return self
+
+    def _create(self, h: int, w: int) -> None:
+        f = self._file
+        assert f is not None
+        prob_dtype = np.uint8 if self.quantize else np.float32
+        specs: dict[str, tuple[tuple[int, ...], Any]] = {
+            **{k: ((N_CLASSES, h, w), prob_dtype) for k in PROB_FIELDS},
+            **{k: ((h, w), dt) for k, dt in GRID_FIELDS.items()},
+            "ego_pose": ((3,), np.float64),
+            **{k: ((), dt) for k, dt in SCALAR_FIELDS.items()},
+            "class_counts": ((N_CLASSES,), np.int64),
+        }
+        if self.masses:
+            specs["masses"] = ((N_MASSES, h, w), np.float32)
+        for name, (tail, dtype) in specs.items():
+            # grids: one frame per chunk (random access); small per-frame records: 64 per
+            # chunk, since a chunk per scalar would cost more index than data
+            rows = 1 if len(tail) >= 2 else 64
+            f.create_dataset(
+                name, shape=(0, *tail), maxshape=(None, *tail), chunks=(rows, *tail),
+                dtype=dtype, track_times=False, **self._filters,
+            )
+        self._shape = (h, w)
+
+    def add(self, frame: Frame) -> None:
+        """Append one frame (arrays as documented in :class:`dstenv.frame.Frame`)."""
+        if self._file is None:
+            raise RuntimeError("ShardWriter.add() outside a 'with' block")
+        h, w = frame.labels.shape
+        if self._shape is None:
+            self._create(h, w)
+        values = self._check(frame)
+        self._pending.append(values)
+        self._pending_bytes += sum(np.asarray(v).nbytes for v in values.values())
+        self.n_frames += 1
+        if len(self._pending) >= BUFFER_FRAMES or self._pending_bytes >= BUFFER_BYTES:
+            self._flush(self._file)
+
+    def _flush(self, f: h5py.File) -> None:
+        """Write buffered frames: one resize and one write per dataset (still 1 chunk/frame)."""
+        if not self._pending:
+            return
+        start, k = self.n_frames - len(self._pending), len(self._pending)
+        for name in self._pending[0]:
+            ds = f[name]
+            ds.resize(start + k, axis=0)
+            ds[start:start + k] = np.stack([np.asarray(v[name]) for v in self._pending])
+        self._pending, self._pending_bytes = [], 0
+
+    def _check(self, frame: Frame) -> dict[str, Any]:
+        h, w = self._shape  # type: ignore[misc]
+        out: dict[str, Any] = {}
+        for name in PROB_FIELDS:
+            p = np.asarray(getattr(frame, name))
+            _expect(self.path, name, p, (N_CLASSES, h, w))
+            if not np.all(np.isfinite(p)):
+                raise ValueError(f"{self.path}: frame {self.n_frames}: {name} has NaN/inf")
+            out[name] = (
+                np.rint(np.clip(p, 0.0, 1.0) * QUANT_SCALE).astype(np.uint8)
+                if self.quantize else p.astype(np.float32)
+            )
+        for name, dtype in GRID_FIELDS.items():
+            a = np.asarray(getattr(frame, name))
+            _expect(self.path, name, a, (h, w))
+            out[name] = a.astype(dtype)
+        labels = out["labels"]
+        bad = (labels >= N_CLASSES) & (labels != IGNORE_INDEX)
+        if bad.any():
+            raise ValueError(f"{self.path}: labels hold value {int(labels[bad][0])}; allowed "
+                             f"0..{N_CLASSES - 1} and {IGNORE_INDEX}")
+        out["ego_pose"] = np.asarray(frame.ego_pose, dtype=np.float64)
+        _expect(self.path, "ego_pose", out["ego_pose"], (3,))
+        out["time"], out["seed"], out["step"] = float(frame.time), int(frame.seed), int(frame.step)
+        out["class_counts"] = np.bincount(labels.ravel(), minlength=256)[:N_CLASSES]
+        if self.masses:
+            if frame.masses is None:
+                raise ValueError(f"{self.path}: masses=True but frame {self.n_frames} has none")
+            m = np.asarray(frame.masses)
+            _expect(self.path, "masses", m, (N_MASSES, h, w))
+            out["masses"] = m.astype(np.float32)
+        return out
+
+    def _write_attrs(self, f: h5py.File) -> None:
+        assert self._shape is not None
+        attrs: dict[str, Any] = dict(self.attrs)
+        attrs.update(
+            format=FORMAT,
+            format_version=FORMAT_VERSION,
+            dstenv_version=__version__,
+            classes=list(class_names()),
+            grid_shape=list(self._shape),
+            prob_dtype="uint8" if self.quantize else "float32",
+            prob_scale=QUANT_SCALE if self.quantize else 1,
+            has_masses=bool(self.masses),
+            n_frames=self.n_frames,
+            complete=True,
+        )
+        json_keys = []
+        for key in sorted(attrs):
+            value, encoded = encode_attr(attrs[key])
+            f.attrs[key] = value
+            if encoded:
+                json_keys.append(key)
+        f.attrs["json_attrs"] = json.dumps(json_keys)
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        f, self._file = self._file, None
+        if f is None:
+            return
+        if exc_type is None and self.n_frames == 0:
+            f.close()
+            self.tmp_path.unlink(missing_ok=True)
+            raise ValueError(f"{self.path}: no frames added; refusing to write an empty shard")
+        try:
+            if exc_type is None:
+                self._flush(f)
+                self._write_attrs(f)
+                f.flush()
+                fd = f.id.get_vfd_handle()
+                os.fsync(fd)
+        finally:
+            f.close()
+        if exc_type is not None:
+            self.tmp_path.unlink(missing_ok=True)
+            return
+        try:
+            os.replace(self.tmp_path, self.path)
+        except OSError:
+            self.tmp_path.unlink(missing_ok=True)
+            raise
+        _fsync_dir(self.path.parent)
+
+
+def _fsync_dir(directory: Path) -> None:
+    try:
+        fd = os.open(directory, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+def _expect(path: Path, name: str, a: np.ndarray, shape: tuple[int, ...]) -> None:
+    if a.shape != shape:
+        raise ValueError(f"{path}: frame field {name!r} has shape {a.shape}, expected {shape}")

@@ -1,0 +1,97 @@
+"""``dstenv bench world``: one simulation step of the whole chain at 256 x 256 cells.
+
+world step (traffic + ego autopilot) + LIDAR sweep (1800 beams) + sensor grid +
+GIS grid + label grid + visible mask, in a generated city with about 40 agents.
+Each part is timed alone and the chain as a whole; every figure is also given as
+a ratio to a reference computation (``np.sin`` over 256 x 256 floats) run in the
+same process, so the numbers compare across machines. Goal: chain <= 2 ms.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from dstenv.grid import GridSpec
+from dstenv.sim.world import World
+
+__all__ = ["run", "BENCH_CONFIG"]
+
+#: a 3 x 3 block city with about 40 agents (moving, parked, pedestrians)
+BENCH_CONFIG = {
+    "map": {"blocks_x": 3, "blocks_y": 3},
+    "traffic": {"cars": 14, "cyclists": 2, "pedestrians": 12, "parked_density": 0.15},
+}
+
+
+def _median_ms(fn: Callable[[], Any], repeats: int) -> float:
+    for _ in range(3):
+        fn()  # compile / warm caches
+    times = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t)
+    return float(np.median(times) * 1e3)
+
+
+def run(args: argparse.Namespace) -> dict[str, Any]:
+    """Time the world step and the sensing chain; return ``{name: {"ms", "x_ref"}}``."""
+    quick = bool(getattr(args, "quick", False))
+    repeats = int(getattr(args, "repeats", 0) or 0) or (30 if quick else 300)
+    world = World(BENCH_CONFIG, seed=0)
+    for _ in range(20):  # let traffic settle
+        world.step()
+    spec = GridSpec()
+    ref = np.random.default_rng(1).random(spec.shape)
+    rng = np.random.default_rng(0)
+    cases: dict[str, Callable[[], Any]] = {"reference np.sin(256x256)": lambda: np.sin(ref),
+                                           "world step": world.step}
+    try:
+        from dstenv.sensing import Lidar, gis_grid, label_grid, visible_mask
+    except ImportError:  # sensing not part of this build: the world step alone
+        Lidar = None
+    if Lidar is not None:
+        lidar = Lidar()
+
+        def sweep():
+            return lidar.sweep(world.map, world.agents, world.ego_pose, rng)
+
+        def chain():
+            world.step()
+            agents, pose = world.agents, world.ego_pose
+            s = lidar.sweep(world.map, agents, pose, rng)
+            sensor = s.sensor_grid(spec)
+            gis_grid(world.map, pose, spec)
+            label_grid(world.map, agents, pose, spec)
+            visible_mask(sensor)
+
+        last = sweep()
+        cases.update({
+            "LIDAR sweep (1800 beams)": sweep,
+            "sensor grid": lambda: last.sensor_grid(spec),
+            "GIS grid": lambda: gis_grid(world.map, world.ego_pose, spec),
+            "label grid": lambda: label_grid(world.map, world.agents, world.ego_pose, spec),
+            "step + sweep + grids + labels": chain,
+        })
+    print(f"world: {len(world.agents)} agents ({int((~world.agents.parked).sum())} mobile), "
+          f"{len(world.map.lanes)} lanes, map {world.map.raster.shape[1]}x"
+          f"{world.map.raster.shape[0]} cells; grid {spec.height}x{spec.width}")
+    results: dict[str, Any] = {"agents": len(world.agents)}
+    ref_ms = None
+    for name, fn in cases.items():
+        ms = _median_ms(fn, repeats)
+        ref_ms = ref_ms or ms
+        results[name] = {"ms": ms, "x_ref": ms / ref_ms}
+        print(f"{name:34s} {ms:8.3f} ms  {ms / ref_ms:7.2f} x ref")
+    if Lidar is None:
+        print("dstenv.sensing not available: world step only")
+    return results
+
+
+if __name__ == "__main__":
+    run(argparse.Namespace(repeats=0, quick=False))

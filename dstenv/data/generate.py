@@ -24,9 +24,11 @@ from itertools import islice
 from pathlib import Path
 from typing import Any
 
-from dstenv.data.manifest import MANIFEST_NAME, scan_shards, shard_entry, write_manifest
+from dstenv.data.manifest import scan_shards, shard_entry, write_manifest
 from dstenv.data.sampling import SPLIT_BUCKETS, SPLITS, episode_seeds, frame_steps, iter_frames
-from dstenv.data.shards import FORMAT_VERSION, ShardError, ShardReader, ShardWriter
+from dstenv.data.shards import (
+    FORMAT_VERSION, ShardError, ShardReader, ShardWriter, partial_path,
+)
 
 __all__ = ["GenerateError", "GenerateSpec", "ShardTask", "plan", "write_shard", "generate"]
 
@@ -296,28 +298,27 @@ def _run_pool(todo: list[ShardTask], out: Path, workers: int, update: Callable[[
         if n:
             update(n)
 
-    with cf.ProcessPoolExecutor(min(workers, len(todo)), mp_context=ctx,
-                                initializer=_init_worker, initargs=(q,)) as ex:
-        pending = {ex.submit(_worker_task, t, str(out)): t for t in todo}
-        try:
-            while pending:
-                finished, _ = cf.wait(pending, timeout=0.25, return_when=cf.FIRST_COMPLETED)
-                drain()
-                for fut in finished:
-                    task = pending.pop(fut)
-                    results[task.file] = fut.result()
-        except BaseException:
-            for fut in pending:
-                fut.cancel()
-            # stop the running shards now (their .partial files are overwritten on resume)
-            for proc in list(getattr(ex, "_processes", {}).values()):
-                proc.terminate()
-            raise
+    try:
+        with cf.ProcessPoolExecutor(min(workers, len(todo)), mp_context=ctx,
+                                    initializer=_init_worker, initargs=(q,)) as ex:
+            pending = {ex.submit(_worker_task, t, str(out)): t for t in todo}
+            try:
+                while pending:
+                    finished, _ = cf.wait(pending, timeout=0.25, return_when=cf.FIRST_COMPLETED)
+                    drain()
+                    for fut in finished:
+                        task = pending.pop(fut)
+                        results[task.file] = fut.result()
+            except BaseException:
+                for fut in pending:
+                    fut.cancel()
+                # stop the shards still running now rather than finishing them
+                for proc in list(getattr(ex, "_processes", {}).values()):
+                    proc.terminate()
+                raise
+    except BaseException:
+        for task in todo:  # workers are gone: their unfinished files are garbage
+            partial_path(out / task.file).unlink(missing_ok=True)
+        raise
     drain()
     return results
-
-
-def manifest_path(out: str | Path) -> Path:
-    """Where :func:`generate` writes the manifest."""
-    return Path(out) / MANIFEST_NAME
-

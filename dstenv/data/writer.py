@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 from collections.abc import Mapping
 from pathlib import Path
 from types import TracebackType
@@ -15,7 +16,7 @@ import numpy as np
 from dstenv import __version__
 from dstenv.data.format import (
     BUFFER_BYTES, BUFFER_FRAMES, FORMAT, FORMAT_VERSION, GRID_FIELDS, N_CLASSES, N_MASSES,
-    PROB_FIELDS, QUANT_SCALE, SCALAR_FIELDS, class_names, encode_attr, partial_path,
+    PROB_FIELDS, QUANT_SCALE, SCALAR_FIELDS, class_names, encode_attr, partial_path, short_error,
 )
 from dstenv.frame import IGNORE_INDEX, Frame
 
@@ -123,7 +124,19 @@ class ShardWriter:
         self._pending_bytes += sum(np.asarray(v).nbytes for v in values.values())
         self.n_frames += 1
         if len(self._pending) >= BUFFER_FRAMES or self._pending_bytes >= BUFFER_BYTES:
-            self._flush(self._file)
+            try:
+                self._flush(self._file)
+            except (OSError, RuntimeError) as exc:
+                raise self._write_error(exc) from None
+
+    def _write_error(self, exc: BaseException) -> OSError:
+        """A one-line OSError for an HDF5 write failure (HDF5 reports errno in its text)."""
+        match = re.search(r"errno = (\d+)", str(exc))
+        code = int(match.group(1)) if match else getattr(exc, "errno", None)
+        reason = os.strerror(code) if code else short_error(exc)
+        err = OSError(f"{self.path}: cannot write shard: {reason}")
+        err.errno = code
+        return err
 
     def _flush(self, f: h5py.File) -> None:
         """Write buffered frames: one resize and one write per dataset (still 1 chunk/frame)."""
@@ -199,28 +212,34 @@ class ShardWriter:
         f, self._file = self._file, None
         if f is None:
             return
-        if exc_type is None and self.n_frames == 0:
-            f.close()
-            self.tmp_path.unlink(missing_ok=True)
+        if exc_type is not None:
+            self._discard(f)
+            return
+        if self.n_frames == 0:
+            self._discard(f)
             raise ValueError(f"{self.path}: no frames added; refusing to write an empty shard")
         try:
-            if exc_type is None:
-                self._flush(f)
-                self._write_attrs(f)
-                f.flush()
-                fd = f.id.get_vfd_handle()
-                os.fsync(fd)
-        finally:
+            self._flush(f)
+            self._write_attrs(f)
+            f.flush()
+            os.fsync(f.id.get_vfd_handle())
             f.close()
-        if exc_type is not None:
-            self.tmp_path.unlink(missing_ok=True)
-            return
-        try:
             os.replace(self.tmp_path, self.path)
-        except OSError:
-            self.tmp_path.unlink(missing_ok=True)
+        except (OSError, RuntimeError) as exc:
+            self._discard(f)
+            raise self._write_error(exc) from None
+        except BaseException:
+            self._discard(f)
             raise
         _fsync_dir(self.path.parent)
+
+    def _discard(self, f: h5py.File) -> None:
+        """Close (ignoring HDF5 errors after a failed write) and delete the partial file."""
+        try:
+            f.close()
+        except (OSError, RuntimeError):
+            pass
+        self.tmp_path.unlink(missing_ok=True)
 
 
 def _fsync_dir(directory: Path) -> None:

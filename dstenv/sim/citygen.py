@@ -132,6 +132,17 @@ def generate_city(cfg: dict[str, Any], traffic: dict[str, Any],
         fill_rect(surface, fx0, fx1, fy0, fy1, org, res, Surface.SIDEWALK)
         fill_rect(surface, fx0 + curb + sw, fx1 - curb - sw, fy0 + curb + sw, fy1 - curb - sw,
                   org, res, Surface.YARD)
+    # beyond the ring road: one-sided strips of frontage facing it (bottom, right, top, left)
+    x_in, x_out = xs[0] - hwx[0], xs[-1] + hwx[-1]
+    y_in, y_out = ys[0] - hwy[0], ys[-1] + hwy[-1]
+    strips = [((x_in, x_out, 0.0, y_in), 2), ((x_out, width, y_in, y_out), 3),
+              ((x_in, x_out, y_out, height), 0), ((0.0, x_in, y_in, y_out), 1)]
+    strips = [(s, side) for s, side in strips if min(s[1] - s[0], s[3] - s[2]) > curb + sw + 4]
+    for box, side in strips:
+        start, along, inward, length = _sides(box)[side]
+        a, b = start, start + along * length + inward * (curb + sw)
+        fill_rect(surface, min(a[0], b[0]), max(a[0], b[0]), min(a[1], b[1]), max(a[1], b[1]),
+                  org, res, Surface.SIDEWALK)
     for i, j in zip(*np.nonzero(vseg)):
         for r in (raster, surface):
             fill_rect(r, xs[i] - hwx[i], xs[i] + hwx[i], ys[j] - hwy[j], ys[j + 1] + hwy[j + 1],
@@ -147,9 +158,13 @@ def generate_city(cfg: dict[str, Any], traffic: dict[str, Any],
     slots = []
     for face in faces:
         slots += _parking(surface, face, cfg, rng, res)
+    for box, side in strips:
+        slots += _parking(surface, box, cfg, rng, res, (side,))
     buildings = []
     for face in faces:
         buildings += _buildings(face, cfg, rng)
+    for box, side in strips:
+        buildings += _buildings(box, cfg, rng, side)
     for b in buildings:
         for r, v in ((raster, MapClass.BUILDING), (surface, Surface.BUILDING)):
             fill_rect(r, b[:, 0].min(), b[:, 0].max(), b[:, 1].min(), b[:, 1].max(), org, res, v)
@@ -205,12 +220,12 @@ def _sides(face):
             (np.array([x0, y1]), np.array([0, -1.0]), np.array([1.0, 0]), y1 - y0)]
 
 
-def _parking(surface, face, cfg, rng, res) -> list[tuple[float, float, float]]:
+def _parking(surface, face, cfg, rng, res, sides=(0, 1, 2, 3)) -> list[tuple[float, float, float]]:
     """Parking strips along some block sides; returns the slots (x, y, yaw)."""
     curb, sw = cfg["curb_strip_width"], cfg["sidewalk_width"]
     keep_clear = curb + sw + 10.0  # [m] no parking near junctions (crosswalks, turns)
     slots = []
-    for start, along, inward, length in _sides(face):
+    for start, along, inward, length in [_sides(face)[k] for k in sides]:
         n = int((length - 2 * keep_clear) // SLOT_LENGTH)
         if n < 1 or rng.random() >= cfg["parking_prob"]:
             continue
@@ -226,23 +241,27 @@ def _parking(surface, face, cfg, rng, res) -> list[tuple[float, float, float]]:
     return slots
 
 
-def _buildings(face, cfg, rng) -> list[np.ndarray]:
-    """Rows of buildings along the four sides of a block, without overlaps."""
+def _buildings(face, cfg, rng, side: int | None = None) -> list[np.ndarray]:
+    """Rows of buildings along the four sides of a block (or only along ``side`` of a
+    one-sided frontage strip), without overlaps."""
     front = cfg["curb_strip_width"] + cfg["sidewalk_width"]
     x0, x1, y0, y1 = face
     inner = (x0 + front, x1 - front, y0 + front, y1 - front)
+    if side is not None:  # only the street side has a sidewalk
+        inner = tuple(face[k] + (front if k == (2, 1, 3, 0)[side] else 0) *
+                      (1 if k in (0, 2) else -1) for k in range(4))
     if inner[1] - inner[0] < 4 or inner[3] - inner[2] < 4:
         return []
     boxes: list[tuple[float, float, float, float]] = []
-    for si in rng.permutation(4):
+    for si in (rng.permutation(4) if side is None else [side]):
         start, along, inward, length = _sides(inner)[si]
         depth_room = (inner[3] - inner[2]) if along[0] != 0 else (inner[1] - inner[0])
         setback = rng.uniform(cfg["setback_min"], cfg["setback_max"])
+        room = depth_room / 2 - setback if side is None else depth_room - setback - 2.0
         pos = 0.0
         while pos < length - cfg["building_width_min"]:
             w = min(rng.uniform(cfg["building_width_min"], cfg["building_width_max"]), length - pos)
-            d = min(rng.uniform(cfg["building_depth_min"], cfg["building_depth_max"]),
-                    depth_room / 2 - setback)
+            d = min(rng.uniform(cfg["building_depth_min"], cfg["building_depth_max"]), room)
             sb = setback + rng.uniform(0, 0.6)
             if rng.random() < cfg["building_coverage"] and d > 3.0:
                 a = start + along * pos + inward * sb

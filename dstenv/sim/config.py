@@ -24,7 +24,7 @@ def default_config() -> dict[str, Any]:
             "osm_file": "",  # path of a .osm / .osm.bz2 file (kind = "osm"); relative
             #                  paths are resolved against the scenario file's directory
             "resolution": 0.2,  # [m] map raster cell size
-            "margin": 12.0,  # [m] free space around the street grid / OSM extent
+            "margin": 35.0,  # [m] frontage beyond the outer streets / free space around an OSM extent
             "blocks_x": 5,  # number of blocks along x (procedural)
             "blocks_y": 5,  # number of blocks along y (procedural)
             "block_min": 50.0,  # [m] smallest street spacing (centre line to centre line)

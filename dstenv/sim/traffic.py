@@ -254,7 +254,11 @@ def traffic_step(net, st, idm, rules, t, dt, u, ego_auto):
                 if abs(lon) > 0.3:
                     continue
                 ca, sa = abs(np.cos(yaw[j] - h)), abs(np.sin(yaw[j] - h))
-                if abs(-ex * sh + ey * ch) < hw[i] + hl[j] * sa + hw[j] * ca + margin:
+                # the safety margin is kept from moving bodies ahead; a standing body, or
+                # one level with the agent, blocks only if the path really meets it (so
+                # two agents never wait for each other)
+                side = margin if path[p, 3] >= hl[i] and v[j] > 0.1 else 0.0
+                if abs(-ex * sh + ey * ch) < hw[i] + hl[j] * sa + hw[j] * ca + side:
                     g = path[p, 3] + lon - hl[i] - (hl[j] * ca + hw[j] * sa)
                     if g < gap:
                         gap, vlead = g, max(v[j] * np.cos(yaw[j] - h), 0.0)

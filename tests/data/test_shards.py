@@ -145,3 +145,15 @@ def test_missing_dataset_and_wrong_shape(tmp_path, frames, shard_attrs):
         f["x"] = 1
     with pytest.raises(ShardError, match="not a dstenv shard"):
         ShardReader(tmp_path / "plain.h5")
+
+
+def test_hdf5_write_failure_becomes_one_line_oserror(tmp_path, frames, shard_attrs, monkeypatch):
+    def full(self, f):
+        raise RuntimeError("Unable to flush file (file write failed: time = x\n, errno = 28, "
+                           "error message = 'No space left on device')")
+
+    monkeypatch.setattr(ShardWriter, "_flush", full)
+    path = tmp_path / "full.h5"
+    with pytest.raises(OSError, match=r"full\.h5: cannot write shard: No space left on device$"):
+        _write(path, frames, shard_attrs)
+    assert not list(tmp_path.iterdir())

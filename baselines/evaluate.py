@@ -74,7 +74,7 @@ class PPOPolicy:
     def make_env(self, args: EnvArgs) -> gym.Env:
         """The evaluation env with this checkpoint's observation."""
         a = self.meta["args"]
-        env = make_env(args, a["obs"], a["ego_speed"])
+        env = make_env(args, a["obs"], a["ego_state"])
         if env.observation_space != self.model.observation_space:
             env.close()
             raise ValueError(f"{self.path}: trained on observations {self.model.observation_space}"

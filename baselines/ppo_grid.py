@@ -2,13 +2,14 @@
 
 The agent sees the env's grid observation (``--obs``: ``pignistic`` 5 x H x W,
 ``fcn10`` 10 x H x W, ``masses`` 32 x H x W floats, or the ``image`` uint8 mode)
-plus, by default, its own speed (``--ego-speed``; one ego-centred grid does not
-show it). Feature extractors (``--extractor``):
+plus, by default, an ego vector (``--ego-state speed+route``: its speed and the
+route 5..40 m ahead, :class:`rl_common.EgoStateObservation`; one ego-centred grid
+shows neither). Feature extractors (``--extractor``):
 
 * ``grid-cnn``: :class:`GridCNN`, four small strided convolutions for float grids
   of a few channels (84 x 84 -> 6 x 6), then one linear layer;
 * ``nature-cnn``: stable-baselines3's ``CnnPolicy`` (NatureCNN) on ``--obs image``
-  (``MultiInputPolicy`` when the speed is appended).
+  (``MultiInputPolicy`` with the ego vector).
 
 Outputs in ``--out``: ``model.zip`` (written atomically, also every
 ``--checkpoint-every`` steps), ``model.json`` (arguments, timesteps done, wall time,
@@ -54,7 +55,8 @@ class Args(EnvArgs):
     obs: str = opt("pignistic", "observation type: pignistic | fcn10 | masses | image")
     extractor: str = opt("grid-cnn", "grid-cnn (custom, float grids) | nature-cnn (SB3 "
                                      "CnnPolicy, needs --obs image)")
-    ego_speed: bool = opt(True, "append the ego speed to the observation")
+    ego_state: str = opt("speed+route", "ego vector beside the grid: none | speed | "
+                                        "speed+route (the route 5..40 m ahead)")
     features_dim: int = opt(256, "size of the extracted feature vector")
     total_timesteps: int = opt(100_000, "environment steps over all envs")
     max_wall_time: float = opt(0.0, "[s] stop training (and save) after this; 0 = no limit")
@@ -88,7 +90,7 @@ class GridCNN(BaseFeaturesExtractor):
 
     Args:
         observation_space: a ``Box`` ``(C, H, W)``, or a ``Dict`` with key ``"grid"``
-            (that ``Box``) and flat ``Box`` vectors (e.g. ``"speed"``) concatenated
+            (that ``Box``) and flat ``Box`` vectors (e.g. ``"ego"``) concatenated
             after the convolutions.
         features_dim: output size.
     """
@@ -168,7 +170,7 @@ def make_vec_env(args: Args) -> VecEnv:
         raise ValueError(f"--vec-env: expected subproc or dummy, got {args.vec_env!r}")
 
     def thunk() -> gym.Env:
-        return make_env(args, args.obs, args.ego_speed, monitor=True)
+        return make_env(args, args.obs, args.ego_state, monitor=True)
 
     cls = SubprocVecEnv if args.vec_env == "subproc" and args.n_envs > 1 else DummyVecEnv
     return cls([thunk] * args.n_envs)

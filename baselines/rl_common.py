@@ -36,7 +36,8 @@ from gymnasium import spaces
 import dstenv  # noqa: F401  (registers the DSTGrid-* ids)
 
 __all__ = [
-    "opt", "parse_args", "to_argv", "EnvArgs", "env_config", "make_env", "EgoSpeedObservation",
+    "opt", "parse_args", "to_argv", "EnvArgs", "env_config", "make_env", "EGO_STATES",
+    "EgoStateObservation",
     "RouteProgress", "Policy", "EpisodeResult", "run_episode", "summarize",
     "evaluate_policy", "write_results_csv",
     "atomic_write_bytes", "atomic_write_text", "machine_info",
@@ -124,28 +125,31 @@ def env_config(args: EnvArgs, observation: str | None = None) -> dict[str, Any]:
     return cfg
 
 
-def make_env(args: EnvArgs, observation: str | None = None, ego_speed: bool = False,
+def make_env(args: EnvArgs, observation: str | None = None, ego_state: str = "none",
              monitor: bool = False, world: Any = None) -> gym.Env:
-    """Build one environment: ``gym.make`` + :class:`RouteProgress` (+ ego speed, Monitor).
+    """Build one environment: ``gym.make`` + :class:`RouteProgress` (+ ego state, Monitor).
 
     Args:
         args: environment arguments.
         observation: ``config["observation"]["type"]``; ``None`` keeps the env's.
-        ego_speed: wrap with :class:`EgoSpeedObservation`.
+        ego_state: one of :data:`EGO_STATES`: ``"none"`` keeps the env's observation;
+            ``"speed"`` / ``"speed+route"`` wrap it in :class:`EgoStateObservation`.
         monitor: wrap with stable-baselines3's ``Monitor`` (episode statistics
             including ``collision``, ``off_road`` and ``route_progress`` in
             ``info["episode"]``).
         world: a world source for the env's ``world=`` argument (``None``: the env
             builds its own).
     """
+    if ego_state not in EGO_STATES:
+        raise ValueError(f"ego state: expected one of {EGO_STATES}, got {ego_state!r}")
     kwargs: dict[str, Any] = {"config": env_config(args, observation)}
     if args.max_episode_steps > 0:
         kwargs["max_episode_steps"] = args.max_episode_steps
     if world is not None:
         kwargs["world"] = world
     env: gym.Env = RouteProgress(gym.make(args.env_id, **kwargs))
-    if ego_speed:
-        env = EgoSpeedObservation(env)
+    if ego_state != "none":
+        env = EgoStateObservation(env, with_route=ego_state == "speed+route")
     if monitor:
         from stable_baselines3.common.monitor import Monitor
 
@@ -185,26 +189,58 @@ class RouteProgress(gym.Wrapper):
         return obs, reward, terminated, truncated, info
 
 
-class EgoSpeedObservation(gym.Wrapper):
-    """Observation ``{"grid": env observation, "speed": (1,) float32}``.
+EGO_STATES = ("none", "speed", "speed+route")
 
-    The grid alone does not tell the agent how fast it drives (one ego-centred
-    frame), and the discrete meta-actions step a target speed, so the speed
-    ``ego_speed / world.ego.max_speed`` (clipped to [0, 1]) is appended, as
-    highway-env's kinematics observations do.
+
+class EgoStateObservation(gym.Wrapper):
+    """Observation ``{"grid": env observation, "ego": (1 + 2 K,) float32}``.
+
+    One ego-centred grid shows neither how fast the ego drives nor where its route
+    goes at the next junction, and the discrete meta-actions step a target speed
+    along that route. The ``ego`` vector gives both, as a navigation system would:
+
+    * ``ego[0]``: ego speed / ``world.ego.max_speed``, clipped to [0, 1];
+    * ``ego[1:]`` (``with_route``): the route ``route_step, 2 route_step, ...,
+      K route_step`` metres ahead, as ego-frame ``(x, y)`` pairs divided by
+      ``K route_step`` (so in [-1, 1]), from the world's ``route_polyline``;
+      zeros for worlds without a route (highway-env scenes).
+
+    Args:
+        env: the env (``DSTGridEnv`` inside).
+        with_route: append the route points.
+        route_points: K.
+        route_step: [m] spacing of the route points.
     """
 
-    def __init__(self, env: gym.Env) -> None:
+    def __init__(self, env: gym.Env, with_route: bool = True, route_points: int = 8,
+                 route_step: float = 5.0) -> None:
         super().__init__(env)
         self._scale = float(env.unwrapped.config["world"]["ego"]["max_speed"])
+        self._k = route_points if with_route else 0
+        self._step = float(route_step)
         self.observation_space = spaces.Dict({
             "grid": env.observation_space,
-            "speed": spaces.Box(0.0, 1.0, (1,), dtype=np.float32),
+            "ego": spaces.Box(-1.0, 1.0, (1 + 2 * self._k,), dtype=np.float32),
         })
+
+    def _route(self, info: dict[str, Any]) -> np.ndarray:
+        world = self.env.unwrapped.pipeline.world
+        ahead = self._k * self._step
+        if not hasattr(world, "route_polyline"):
+            return np.zeros(2 * self._k, np.float32)
+        pts = world.route_polyline(ahead=ahead, spacing=self._step)[1:self._k + 1]
+        x, y, yaw = info["ego_pose"]
+        d = pts - np.array([x, y])
+        c, s = np.cos(yaw), np.sin(yaw)
+        local = np.stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]], axis=1)
+        return np.clip(local / ahead, -1.0, 1.0).astype(np.float32).reshape(-1)
 
     def _obs(self, obs: np.ndarray, info: dict[str, Any]) -> dict[str, np.ndarray]:
         v = np.clip(info["ego_speed"] / self._scale, 0.0, 1.0)
-        return {"grid": obs, "speed": np.array([v], np.float32)}
+        parts = [np.array([v], np.float32)]
+        if self._k:
+            parts.append(self._route(info))
+        return {"grid": obs, "ego": np.concatenate(parts)}
 
     def reset(self, **kwargs: Any) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         obs, info = self.env.reset(**kwargs)

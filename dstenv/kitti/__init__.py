@@ -14,7 +14,13 @@ from dstenv.kitti.ground import classify_points, default_ground_config, fit_grou
 from dstenv.kitti.objects import Boxes, boxes_in_velodyne, moving_flags
 from dstenv.kitti.poses import Trajectory, oxts_to_trajectory
 from dstenv.kitti.readers import (
-    OBJECT_TYPES, Calibration, KittiError, Labels, read_calib, read_labels, read_oxts,
+    OBJECT_TYPES,
+    Calibration,
+    KittiError,
+    Labels,
+    read_calib,
+    read_labels,
+    read_oxts,
     read_velodyne,
 )
 from dstenv.kitti.sequence import KittiSequence, convert_sequence, default_config, kitti_config

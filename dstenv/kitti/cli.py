@@ -65,6 +65,7 @@ def _convert(args: argparse.Namespace) -> int:
     from dstenv.cli import CLIError
     from dstenv.data.manifest import MANIFEST_NAME, scan_shards, shard_entry, write_manifest
     from dstenv.data.shards import ShardWriter
+    from dstenv.dst import CLASSES
     from dstenv.kitti.sequence import KittiSequence, convert_sequence, kitti_config
 
     out = Path(args.out)
@@ -96,8 +97,11 @@ def _convert(args: argparse.Namespace) -> int:
                 raise CLIError(f"sequence {seq.name}: no usable frame ({len(skipped)} skipped)")
         for msg in skipped:
             print(f"  warning: {msg}")
-        entries.append(shard_entry(out, path))
-        print(f"  wrote {path} ({writer.n_frames} frames)")
+        entry = shard_entry(out, path)
+        entries.append(entry)
+        counts = dict(zip(CLASSES, entry["class_counts"], strict=True))
+        print(f"  wrote {path} ({writer.n_frames} frames; labelled cells: "
+              + ", ".join(f"{k} {v}" for k, v in counts.items()) + ")")
     meta = {"command": "kitti convert", "root": str(args.root), "sequences": args.sequences,
             "osm": args.osm or None, "config": cfg}
     write_manifest(out, entries, meta)

@@ -9,7 +9,8 @@ with the same rotation, so a slightly tilted calibration is honoured.
 Motion rules (per object and frame; see :func:`moving_flags`):
 
 * ``"paper"``: moving if its world position moved more than ``threshold``
-  (10 cm) since the previous labelled frame of its track. Pose noise of the OXTS
+  (10 cm) since the previous labelled frame of its track (per frame interval:
+  a track unlabelled for k - 1 frames may move k x 10 cm). Pose noise of the OXTS
   (the sample's ego speed jitters by about 1 m/s frame to frame) makes parked cars
   jump by 5-10 cm, so this rule flickers.
 * ``"smoothed"``: a least-squares line through the track's world positions over

@@ -205,9 +205,10 @@ def convert_sequence(
         skipped: if given, one message per skipped frame is appended.
 
     Yields:
-        :class:`dstenv.frame.Frame` with ``step`` = KITTI frame index,
-        ``time`` = frame / 10 Hz, ``seed`` = the sequence number, and
-        ``extras["moving_rule"]``-independent arrays: ``extras["plane"]`` ``(4,)``.
+        :class:`dstenv.frame.Frame` per kept frame (:func:`kept_frames`), with
+        ``step`` = KITTI frame index, ``time`` = frame / 10 Hz, ``seed`` = the
+        sequence number, ``masses`` the raw grid and ``extras["plane"]`` the
+        ``(4,)`` ground plane of the scan.
     """
     cfg = kitti_config(config)
     spec = GridSpec(**cfg["grid"])

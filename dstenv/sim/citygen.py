@@ -39,8 +39,9 @@ def generate_city(cfg: dict[str, Any], traffic: dict[str, Any],
     nx, ny = cfg["blocks_x"] + 1, cfg["blocks_y"] + 1
     if nx < 2 or ny < 2:
         raise ValueError("map.blocks_x and map.blocks_y must be >= 1")
-    xs = margin + np.concatenate([[0], np.cumsum(rng.uniform(cfg["block_min"], cfg["block_max"], nx - 1))])
-    ys = margin + np.concatenate([[0], np.cumsum(rng.uniform(cfg["block_min"], cfg["block_max"], ny - 1))])
+    spans = rng.uniform(cfg["block_min"], cfg["block_max"], nx + ny - 2)
+    xs = margin + np.concatenate([[0], np.cumsum(spans[:nx - 1])])
+    ys = margin + np.concatenate([[0], np.cumsum(spans[nx - 1:])])
     lanes_x = rng.integers(cfg["lanes_min"], cfg["lanes_max"] + 1, nx)
     lanes_y = rng.integers(cfg["lanes_min"], cfg["lanes_max"] + 1, ny)
     hwx, hwy = lanes_x * lw, lanes_y * lw  # half widths of the streets [m]
@@ -116,7 +117,8 @@ def generate_city(cfg: dict[str, Any], traffic: dict[str, Any],
                 for along, a, b in ((1.9, left_cell, right_cell), (3.1, right_cell, left_cell)):
                     base = node_xy[n] + d * (reach[n] + along)
                     sgn = 1.0 if a == left_cell else -1.0
-                    crossings.append((face_of[a], face_of[b], base + sgn * p * lat, base - sgn * p * lat))
+                    crossings.append((face_of[a], face_of[b], base + sgn * p * lat,
+                                      base - sgn * p * lat))
                 zebras.append((node_xy[n] + d * (reach[n] + 2.5), d, hw))
     add_block_rings(builder, faces, inset, crossings)
     network = builder.build(node_xy, control, phase, lw)
@@ -156,10 +158,11 @@ def generate_city(cfg: dict[str, Any], traffic: dict[str, Any],
     for centre, d, hw in zebras:
         _zebra(surface, centre, d, hw, res)
     slots = []
+    walk_ends = np.array([p for c in crossings for p in c[2:]]).reshape(-1, 2)
     for face in faces:
-        slots += _parking(surface, face, cfg, rng, res)
+        slots += _parking(surface, face, cfg, rng, res, walk_ends)
     for box, side in strips:
-        slots += _parking(surface, box, cfg, rng, res, (side,))
+        slots += _parking(surface, box, cfg, rng, res, walk_ends, (side,))
     buildings = []
     for face in faces:
         buildings += _buildings(face, cfg, rng)
@@ -184,8 +187,10 @@ def _fillet(raster, surface, face, r, res):
     """Round the kerb at the four corners of a block (radius ``r``)."""
     x0, x1, y0, y1 = face
     for cx, cy, sx, sy in ((x0, y0, 1, 1), (x1, y0, -1, 1), (x0, y1, 1, -1), (x1, y1, -1, -1)):
-        c_lo, c_hi = int(np.floor(min(cx, cx + sx * r) / res)), int(np.ceil(max(cx, cx + sx * r) / res))
-        r_lo, r_hi = int(np.floor(min(cy, cy + sy * r) / res)), int(np.ceil(max(cy, cy + sy * r) / res))
+        c_lo, c_hi = (int(np.floor(min(cx, cx + sx * r) / res)),
+                      int(np.ceil(max(cx, cx + sx * r) / res)))
+        r_lo, r_hi = (int(np.floor(min(cy, cy + sy * r) / res)),
+                      int(np.ceil(max(cy, cy + sy * r) / res)))
         cols, rows = np.arange(c_lo, c_hi), np.arange(r_lo, r_hi)
         xc, yc = (cols + 0.5) * res, (rows + 0.5) * res
         inside_x = (xc - cx) * sx >= 0
@@ -220,8 +225,10 @@ def _sides(face):
             (np.array([x0, y1]), np.array([0, -1.0]), np.array([1.0, 0]), y1 - y0)]
 
 
-def _parking(surface, face, cfg, rng, res, sides=(0, 1, 2, 3)) -> list[tuple[float, float, float]]:
-    """Parking strips along some block sides; returns the slots (x, y, yaw)."""
+def _parking(surface, face, cfg, rng, res, avoid: np.ndarray,
+             sides=(0, 1, 2, 3)) -> list[tuple[float, float, float]]:
+    """Parking strips along some block sides, with no slot across a crosswalk (``avoid``:
+    ``(K, 2)`` crosswalk ends); paints the slots and returns them as (x, y, yaw)."""
     curb, sw = cfg["curb_strip_width"], cfg["sidewalk_width"]
     keep_clear = curb + sw + 10.0  # [m] no parking near junctions (crosswalks, turns)
     slots = []
@@ -230,13 +237,15 @@ def _parking(surface, face, cfg, rng, res, sides=(0, 1, 2, 3)) -> list[tuple[flo
         if n < 1 or rng.random() >= cfg["parking_prob"]:
             continue
         s0 = (length - n * SLOT_LENGTH) / 2
-        a = start + along * s0
-        b = start + along * (s0 + n * SLOT_LENGTH) + inward * curb
-        fill_rect(surface, min(a[0], b[0]), max(a[0], b[0]), min(a[1], b[1]), max(a[1], b[1]),
-                  (0.0, 0.0), res, Surface.PARKING)
         yaw = float(np.arctan2(-along[1], -along[0]))  # with the adjacent traffic (right-hand)
         for k in range(n):
             c = start + along * (s0 + (k + 0.5) * SLOT_LENGTH) + inward * curb / 2
+            if len(avoid) and np.hypot(*(avoid - c).T).min() < SLOT_LENGTH / 2 + curb + sw:
+                continue
+            a = c - along * SLOT_LENGTH / 2 - inward * curb / 2
+            b = c + along * SLOT_LENGTH / 2 + inward * curb / 2
+            fill_rect(surface, min(a[0], b[0]), max(a[0], b[0]), min(a[1], b[1]),
+                      max(a[1], b[1]), (0.0, 0.0), res, Surface.PARKING)
             slots.append((float(c[0]), float(c[1]), yaw))
     return slots
 

@@ -24,7 +24,7 @@ def default_config() -> dict[str, Any]:
             "osm_file": "",  # path of a .osm / .osm.bz2 file (kind = "osm"); relative
             #                  paths are resolved against the scenario file's directory
             "resolution": 0.2,  # [m] map raster cell size
-            "margin": 35.0,  # [m] frontage beyond the outer streets / free space around an OSM extent
+            "margin": 35.0,  # [m] frontage beyond the outer streets / space around an OSM map
             "blocks_x": 5,  # number of blocks along x (procedural)
             "blocks_y": 5,  # number of blocks along y (procedural)
             "block_min": 50.0,  # [m] smallest street spacing (centre line to centre line)
@@ -61,9 +61,9 @@ def default_config() -> dict[str, Any]:
             "signal_green": 12.0,  # [s] green time per phase (plus 3 s all-red)
             "stop_duration": 1.5,  # [s] standstill required at a stop sign
             "halt_rate": 0.01,  # [1/s] chance per second that a car halts in its lane
-            "halt_duration": 6.0,  # [s] mean duration of such a halt (exponential)
+            "halt_duration": 6.0,  # [s] mean duration of such a halt (exponential, at most 4x)
             "pause_rate": 0.03,  # [1/s] chance per second that a pedestrian stands still
-            "pause_duration": 5.0,  # [s] mean pause of a pedestrian
+            "pause_duration": 5.0,  # [s] mean pause of a pedestrian (exponential, at most 4x)
             "crossing_prob": 0.4,  # [-] chance a pedestrian takes a crosswalk it reaches
         },
         "ego": {

@@ -13,7 +13,8 @@ __all__ = ["bicycle_step", "pure_pursuit", "box_corners", "boxes_overlap", "foot
 
 
 def bicycle_step(x: float, y: float, yaw: float, v: float, accel: float, steer: float,
-                 wheelbase: float, dt: float, max_speed: float) -> tuple[float, float, float, float]:
+                 wheelbase: float, dt: float,
+                 max_speed: float) -> tuple[float, float, float, float]:
     """One step of the kinematic bicycle model about the vehicle's centre.
 
     The slip angle is ``beta = atan(tan(steer) / 2)`` (centre midway between the

@@ -15,7 +15,8 @@ import numba as nb
 import numpy as np
 
 __all__ = ["LaneKind", "Control", "Turn", "LaneNetwork", "NetworkBuilder", "lane_pose",
-           "project_on_lane", "resample", "offset_polyline", "cut_polyline", "bezier", "fillet_curve"]
+           "project_on_lane", "resample", "offset_polyline", "cut_polyline", "bezier",
+           "fillet_curve"]
 
 SPACING = 0.5  # [m] largest distance between resampled lane points
 CONFLICT_DIST = 2.6  # [m] connectors closer than this somewhere conflict
@@ -301,11 +302,14 @@ class NetworkBuilder:
         for members in by_node.values():
             for ia, a in enumerate(members):
                 for b in members[ia + 1:]:
-                    same = (set(pred.get(a, [])) & set(pred.get(b, []))) or \
-                        (set(self.links[a]) & set(self.links[b]))
+                    # from the same lane: one behind the other, car following keeps them
+                    # apart; into the same lane: they merge, so they conflict
+                    if set(pred.get(a, [])) & set(pred.get(b, [])):
+                        continue
+                    merge = set(self.links[a]) & set(self.links[b])
                     pa, pb = self.polys[a][::2], self.polys[b][::2]
                     d2 = ((pa[:, None, :] - pb[None, :, :]) ** 2).sum(-1).min()
-                    if same or d2 < CONFLICT_DIST ** 2:
+                    if merge or d2 < CONFLICT_DIST ** 2:
                         out[a].append(b)
                         out[b].append(a)
         return out

@@ -66,7 +66,8 @@ def _parse(path: Path) -> tuple[dict, list, list, tuple | None]:
                 elif tag == "way":
                     tags = {t.get("k"): t.get("v") for t in el.iter("tag")}
                     if "building" in tags or "highway" in tags:
-                        ways.append((int(el.get("id")), [int(n.get("ref")) for n in el.iter("nd")], tags))
+                        refs = [int(n.get("ref")) for n in el.iter("nd")]
+                        ways.append((int(el.get("id")), refs, tags))
                 elif tag == "relation":
                     tags = {t.get("k"): t.get("v") for t in el.iter("tag")}
                     if "building" in tags and tags.get("type") == "multipolygon":
@@ -74,7 +75,8 @@ def _parse(path: Path) -> tuple[dict, list, list, tuple | None]:
                                    if m.get("type") == "way"]
                         rels.append(members)
                 elif tag == "bounds":
-                    bounds = tuple(float(el.get(k)) for k in ("minlat", "minlon", "maxlat", "maxlon"))
+                    bounds = tuple(float(el.get(k))
+                                   for k in ("minlat", "minlon", "maxlat", "maxlon"))
                 if tag in ("node", "way", "relation"):
                     el.clear()
     except ET.ParseError as exc:
@@ -241,7 +243,8 @@ def load_osm(path: str | Path, *, resolution: float = 0.2, lane_width: float = 3
     road_polys = [LineString(e.poly).buffer(h, cap_style="round", join_style="round")
                   for e, h in zip(edges, edge_half)]
     for line in foot:
-        _paint(surface, LineString(line).buffer(FOOT_WIDTH / 2), origin, resolution, Surface.SIDEWALK)
+        _paint(surface, LineString(line).buffer(FOOT_WIDTH / 2), origin, resolution,
+               Surface.SIDEWALK)
     road_union = shapely.union_all(road_polys) if road_polys else Polygon()
     polys = []
     for b in buildings:
@@ -294,7 +297,8 @@ def _inside_runs(refs: list[int], pos: dict, box: Any) -> list[list[int]]:
 def _paint(raster: np.ndarray, geom: Any, origin, res: float, value: int) -> None:
     for part in getattr(geom, "geoms", [geom]):
         if isinstance(part, Polygon) and not part.is_empty:
-            rings = [np.asarray(part.exterior.coords)] + [np.asarray(r.coords) for r in part.interiors]
+            rings = [np.asarray(part.exterior.coords)]
+            rings += [np.asarray(r.coords) for r in part.interiors]
             fill_polygon(raster, rings, origin, res, value)
 
 

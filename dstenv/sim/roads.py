@@ -100,12 +100,14 @@ def add_road_lanes(builder: NetworkBuilder, n_nodes: int, edges: list[RoadEdge],
             made = _connect(builder, node, degree[node], by_edge, a, ea, ka, na, ha, pa, False,
                             right_radius)
             if not made:  # e.g. a middle lane at a T: let it turn anyway
-                _connect(builder, node, degree[node], by_edge, a, ea, ka, na, ha, pa, True, right_radius)
+                _connect(builder, node, degree[node], by_edge, a, ea, ka, na, ha, pa, True,
+                         right_radius)
     return degree
 
 
 def _connect(builder: NetworkBuilder, node: int, deg: int, by_edge: dict, a: int, ea: int,
-             ka: int, na: int, ha: float, pa: np.ndarray, relaxed: bool, right_radius: float) -> bool:
+             ka: int, na: int, ha: float, pa: np.ndarray, relaxed: bool,
+             right_radius: float) -> bool:
     made = False
     for eb, outs in by_edge.items():
         if eb == ea and deg > 1:

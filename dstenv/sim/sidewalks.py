@@ -18,7 +18,8 @@ LANE_OFFSET = 0.6  # [m] half the distance between the two walking lines of a si
 CORNER_RADIUS = 1.0  # [m] rounding of a ring's corners
 
 
-def rounded_rect(x0: float, x1: float, y0: float, y1: float, r: float = CORNER_RADIUS) -> np.ndarray:
+def rounded_rect(x0: float, x1: float, y0: float, y1: float,
+                 r: float = CORNER_RADIUS) -> np.ndarray:
     """Closed counter-clockwise ring around a box with rounded corners: ``(K, 2)``."""
     r = min(r, (x1 - x0) / 3, (y1 - y0) / 3)
     a = np.linspace(0, np.pi / 2, 5)

@@ -245,7 +245,8 @@ def respawn(world_map: WorldMap, st: dict[str, np.ndarray], i: int, rng: np.rand
     w = net.length[lanes] / net.length[lanes].sum()
     for _ in range(30):
         ln = int(rng.choice(lanes, p=w))
-        pos = rng.uniform(keep["hl"] + 0.5, max(net.length[ln] - keep["hl"] - 0.5, keep["hl"] + 0.6))
+        lo = keep["hl"] + 0.5
+        pos = rng.uniform(lo, max(net.length[ln] - lo, lo + 0.1))
         x, y, h = lane_pose(net.pts, net.hdg, net.start, net.npts, net.ds, ln, pos)
         if np.hypot(x - st["xy"][-1, 0], y - st["xy"][-1, 1]) < min_ego_dist:
             continue

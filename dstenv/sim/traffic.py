@@ -6,7 +6,8 @@ lanes planned in ``route[i, 1:]``. One step:
 1. releases junction grants of agents that left the junction;
 2. the front agent of each approach lane requests its connector; requests are
    granted oldest first if the junction's rule allows (green light / full stop at
-   a stop sign), no granted connector conflicts and the exit lane has room;
+   a stop sign), no granted or older waiting connector conflicts and the exit lane
+   has room (vehicles from one lane may follow each other through);
 3. each agent looks along its route for the nearest body (agent or ego) inside
    its corridor, an ungranted stop line or a blocked crosswalk, and takes the
    IDM acceleration towards it;
@@ -31,6 +32,7 @@ CAR, CYCLIST, PEDESTRIAN = 0, 1, 2  # AgentKind codes (kept numeric for numba)
 K_ROAD, K_CONN, K_WALK, K_CROSS = 0, 1, 2, 3  # LaneKind codes
 C_NONE, C_YIELD, C_STOP, C_SIGNAL = 0, 1, 2, 3  # Control codes
 ALL_RED = 3.0  # [s] clearance time between signal phases
+AMBER = 3.0  # [s] end of a green phase in which no new vehicle is let in
 PATH_MAX = 200  # points in an agent's look-ahead path
 
 
@@ -77,9 +79,10 @@ def route_point(route, s, d, pts, hdg, start, npts, ds, length):
 def _green(group, t, phase, green):
     cycle = 2.0 * (green + ALL_RED)
     tt = (t + phase) % cycle
+    open_for = max(green - AMBER, 1.0)
     if group == 0:
-        return tt < green
-    return cycle / 2 <= tt < cycle / 2 + green
+        return tt < open_for
+    return cycle / 2 <= tt < cycle / 2 + open_for
 
 
 @nb.njit(cache=True)
@@ -142,7 +145,7 @@ def traffic_step(net, st, idm, rules, t, dt, u, ego_auto):
                 and lkind[l0] != K_CONN and node_control[node[c]] != C_NONE and grant[i] != c \
                 and front[l0] == i:
             d = length[l0] - s[i] - hl[i]
-            if d < max(10.0, v[i] * v[i] / 4.0 + 6.0):
+            if d < max(6.0, v[i] * v[i] / 6.0 + 3.0):  # comfortable braking distance + 3 m
                 asking = True
                 if v[i] < 0.1 and d < 3.0:
                     stop_clock[i] += dt
@@ -152,6 +155,8 @@ def traffic_step(net, st, idm, rules, t, dt, u, ego_auto):
         elif req_t[i] == np.inf:
             req_t[i] = t
     order = np.argsort(req_t)
+    waiting = np.full(nb_rows, -1)  # connectors of older requests that may go but wait
+    n_wait = 0
     for oi in range(nb_rows):
         i = order[oi]
         if req_t[i] == np.inf:
@@ -163,17 +168,18 @@ def traffic_step(net, st, idm, rules, t, dt, u, ego_auto):
             ok = _green(group[c], t, node_phase[n], green)
         elif node_control[n] == C_STOP:
             ok = stop_clock[i] >= stop_dur
-        for k in range(nb_rows):
-            if not ok:
-                break
-            g = held[k]
+        if not ok:
+            continue
+        # no overtaking: a request never jumps an older conflicting one that waits
+        for k in range(nb_rows + n_wait):
+            g = held[k] if k < nb_rows else waiting[k - nb_rows]
             if g < 0:
                 continue
-            if g == c:
-                ok = False
             for q in range(conf_ptr[c], conf_ptr[c + 1]):
                 if conf[q] == g:
                     ok = False
+            if not ok:
+                break
         if ok:  # the exit lane must have room (never block the box)
             ex = succ[succ_ptr[c]]
             room = length[ex]
@@ -188,6 +194,9 @@ def traffic_step(net, st, idm, rules, t, dt, u, ego_auto):
             held[i] = c
             req_t[i] = np.inf
             stop_clock[i] = 0.0
+        else:
+            waiting[n_wait] = c
+            n_wait += 1
     # 3. car following along the route
     acc = np.zeros(nb_rows)
     gaps = np.full(nb_rows, 1e9)
@@ -270,7 +279,8 @@ def traffic_step(net, st, idm, rules, t, dt, u, ego_auto):
         else:
             a = amax * (1.0 - (v[i] / vlim) ** 4)
         if gap < 1e8:
-            sstar = jam + max(0.0, v[i] * headway + v[i] * (v[i] - vlead) / (2 * np.sqrt(amax * bcomf)))
+            dyn = v[i] * headway + v[i] * (v[i] - vlead) / (2 * np.sqrt(amax * bcomf))
+            sstar = jam + max(0.0, dyn)
             a -= amax * (sstar / max(gap, 0.01)) ** 2
         acc[i] = min(max(a, -3.0 if ped else -9.0), amax)
         gaps[i] = gap
@@ -307,8 +317,8 @@ def traffic_step(net, st, idm, rules, t, dt, u, ego_auto):
             halt[i] -= dt
         elif akind[i] == PEDESTRIAN:
             if lkind[route[i, 0]] == K_WALK and u[i, 1] < pause_rate * dt:
-                halt[i] = -pause_mean * np.log(max(u[i, 2], 1e-9))
+                halt[i] = min(-pause_mean * np.log(max(u[i, 2], 1e-9)), 4.0 * pause_mean)
         elif akind[i] == CAR and lkind[route[i, 0]] == K_ROAD and \
                 length[route[i, 0]] - s[i] > 25.0 and u[i, 1] < halt_rate * dt:
-            halt[i] = -halt_mean * np.log(max(u[i, 2], 1e-9))
+            halt[i] = min(-halt_mean * np.log(max(u[i, 2], 1e-9)), 4.0 * halt_mean)
     return acc[ego]

@@ -216,10 +216,11 @@ class World:
         st, net = self._state, self._map.lanes
         route, s_old = st["route"][-1], st["s"][-1]
         x, y, yaw = st["xy"][-1, 0], st["xy"][-1, 1], st["yaw"][-1]
-        s, lat, dist = project_on_lane(net.pts, net.start, net.npts, net.ds, route[0], x, y, s_old, 5.0)
+        geo = (net.pts, net.start, net.npts, net.ds)
+        s, lat, dist = project_on_lane(*geo, route[0], x, y, s_old, 5.0)
         gain = s - s_old
         if s >= net.length[route[0]] - 1e-6 and route[1] >= 0:
-            s1, lat1, d1 = project_on_lane(net.pts, net.start, net.npts, net.ds, route[1], x, y, 0.0, 5.0)
+            s1, lat1, d1 = project_on_lane(*geo, route[1], x, y, 0.0, 5.0)
             if d1 <= dist + 1e-9:
                 gain = net.length[route[0]] - s_old + s1
                 s, lat, dist = s1, lat1, d1
@@ -233,7 +234,7 @@ class World:
             if found is not None:
                 lane, s = found
                 route[:] = spawn.plan_route(net, lane, self.rng, len(route))
-                _, lat, _ = project_on_lane(net.pts, net.start, net.npts, net.ds, lane, x, y, s, 1.0)
+                _, lat, _ = project_on_lane(*geo, lane, x, y, s, 1.0)
                 gain = 0.0
         st["s"][-1] = s
         self._lane_offset = float(lat)

@@ -46,4 +46,4 @@ def test_saved_model_loads_and_evaluates(tmp_path, env_flags: list[str]) -> None
     strip = lambda b: [ln for ln in b.splitlines() if ln.startswith("| ")]  # noqa: E731
     assert strip(again) == strip(block)
     meta = json.loads((out / "model.json").read_text())
-    assert meta["args"]["obs"] == "pignistic" and meta["args"]["ego_speed"] is True
+    assert meta["args"]["obs"] == "pignistic" and meta["args"]["ego_state"] == "speed+route"

@@ -36,14 +36,14 @@ def test_grid_cnn_shapes() -> None:
     net = GridCNN(box, features_dim=64)
     assert net(torch.rand(3, 5, 84, 84)).shape == (3, 64)
     d = spaces.Dict({"grid": spaces.Box(0.0, 1.0, (10, 40, 40), np.float32),
-                     "speed": spaces.Box(0.0, 1.0, (1,), np.float32)})
+                     "ego": spaces.Box(-1.0, 1.0, (3,), np.float32)})
     net = GridCNN(d, features_dim=32)
-    out = net({"grid": torch.rand(2, 10, 40, 40), "speed": torch.rand(2, 1)})
+    out = net({"grid": torch.rand(2, 10, 40, 40), "ego": torch.rand(2, 3)})
     assert out.shape == (2, 32) and (out >= 0).all()
-    # the speed reaches the features: changing only it changes the output
+    # the ego vector reaches the features: changing only it changes the output
     g = torch.rand(1, 10, 40, 40)
-    assert not torch.equal(net({"grid": g, "speed": torch.zeros(1, 1)}),
-                           net({"grid": g, "speed": torch.ones(1, 1) * 50}))
+    assert not torch.equal(net({"grid": g, "ego": torch.zeros(1, 3)}),
+                           net({"grid": g, "ego": torch.ones(1, 3) * 50}))
     with pytest.raises(ValueError, match="GridCNN"):
         GridCNN(spaces.Box(0.0, 1.0, (40, 40), np.float32))
 
@@ -52,7 +52,7 @@ def test_extractor_choice(env_flags: list[str]) -> None:
     from rl_common import parse_args
 
     args = parse_args(Args, [*env_flags, "--obs", "image", "--extractor", "nature-cnn",
-                             "--no-ego-speed", "--n-envs", "1", "--vec-env", "dummy"])
+                             "--ego-state", "none", "--n-envs", "1", "--vec-env", "dummy"])
     env = make_vec_env(args)
     try:
         model = build_model(args, env)

@@ -6,9 +6,10 @@ import math
 from dataclasses import dataclass
 
 import gymnasium as gym
+import numpy as np
 import pytest
 
-from rl_common import (EgoSpeedObservation, EnvArgs, EpisodeResult, atomic_write_text,
+from rl_common import (EnvArgs, EpisodeResult, atomic_write_text,
                        env_config, make_env, opt, parse_args, summarize, to_argv)
 
 
@@ -57,27 +58,38 @@ def test_summarize_hand_computed() -> None:
         summarize([])
 
 
-def test_wrappers_report_speed_and_route_progress(small_config: dict) -> None:
+def test_wrappers_report_speed_route_and_progress(small_config: dict) -> None:
     import json
 
     args = EnvArgs(env_config=json.dumps(small_config))
-    env = make_env(args, "pignistic", ego_speed=True)
+    env = make_env(args, "pignistic", ego_state="speed+route")
     assert isinstance(env.observation_space, gym.spaces.Dict)
     assert env.observation_space["grid"].shape == (5, 40, 40)
+    assert env.observation_space["ego"].shape == (17,)
     obs, info = env.reset(seed=3)
     world = env.unwrapped.pipeline.world
     scale = env.unwrapped.config["world"]["ego"]["max_speed"]
     for _ in range(15):
         obs, _, terminated, truncated, info = env.step(2)
         assert env.observation_space.contains(obs)
-        assert obs["speed"][0] == pytest.approx(min(info["ego_speed"] / scale, 1.0), abs=1e-6)
+        ego = obs["ego"]
+        assert ego[0] == pytest.approx(min(info["ego_speed"] / scale, 1.0), abs=1e-6)
+        # route points k * 5 m ahead (scaled by 40 m): the chord is at most the arc,
+        # and the first one lies ahead of the ego
+        dist = np.hypot(ego[1::2], ego[2::2]) * 40.0
+        assert np.all(dist <= 5.0 * np.arange(1, 9) + 0.5)
+        assert ego[1] > 0.05
         # the progress reward term divided by its weight adds up to the world's odometer
         assert info["route_progress"] == pytest.approx(world.route_progress, abs=1e-6)
         if terminated or truncated:
             break
     assert info["route_progress"] > 0.0
     env.close()
-    assert isinstance(env.env, gym.Wrapper) and isinstance(env, EgoSpeedObservation)
+    speed_only = make_env(args, "image", ego_state="speed")
+    assert speed_only.observation_space["ego"].shape == (1,)
+    speed_only.close()
+    with pytest.raises(ValueError, match="ego state"):
+        make_env(args, ego_state="route")
 
 
 def test_atomic_write_leaves_no_temp_file(tmp_path) -> None:

@@ -36,7 +36,8 @@ def cross_map(control: Control = Control.STOP) -> WorldMap:
         for sy in (1, -1):
             xs, ys = sorted((sx * a, sx * b)), sorted((sy * a, sy * b))
             fill_rect(raster, *xs, *ys, org, RES, MapClass.BUILDING)
-            buildings.append(np.array([[xs[0], ys[0]], [xs[1], ys[0]], [xs[1], ys[1]], [xs[0], ys[1]]]))
+            buildings.append(np.array([[xs[0], ys[0]], [xs[1], ys[0]], [xs[1], ys[1]],
+                                       [xs[0], ys[1]]]))
     return WorldMap(raster=raster, origin=org, resolution=RES, buildings=buildings, lanes=net)
 
 

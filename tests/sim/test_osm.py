@@ -71,7 +71,8 @@ def test_widths_from_tags_in_raster_cells(tiny):
     area = 0.5 * abs((p[:, 0] * q[:, 1] - p[:, 1] * q[:, 0]).sum())  # shoelace
     assert area == pytest.approx((0.0001 * DEG) ** 2, rel=1e-3)
     # everything else is intermediate
-    assert m.raster[int((-30 - y0) / m.resolution), int((-30 - x0) / m.resolution)] == MapClass.INTERMEDIATE
+    corner = m.raster[int((-30 - y0) / m.resolution), int((-30 - x0) / m.resolution)]
+    assert corner == MapClass.INTERMEDIATE
 
 
 def test_dangling_node_is_clipped_not_fatal(tiny):
@@ -101,7 +102,8 @@ def test_georeference_follows_kitti_mercator(tiny):
     assert float(mx) == pytest.approx(0.0005 * DEG) and float(my) == pytest.approx(0.0, abs=1e-9)
     scale = math.cos(math.radians(48.0))
     _, my48 = latlon_to_mercator(48.0, 0.0, scale)
-    assert float(my48) == pytest.approx(scale * EARTH_RADIUS * math.log(math.tan(138.0 * math.pi / 360)))
+    expected = scale * EARTH_RADIUS * math.log(math.tan(138.0 * math.pi / 360))
+    assert float(my48) == pytest.approx(expected)
 
 
 def test_bz2_gives_the_same_map(tiny, tmp_path):
@@ -139,6 +141,7 @@ def test_shared_extracts(name):
     counts = np.bincount(m.raster.ravel(), minlength=4)
     assert counts[MapClass.ROAD] > 0 and counts[MapClass.BUILDING] > 0
     assert len(m.buildings) > 10 and (m.lanes.kind == LaneKind.ROAD).sum() > 20
-    road = np.vstack([m.lanes.polyline(k) for k in np.flatnonzero(m.lanes.kind <= LaneKind.CONNECTOR)])
+    vehicle = np.flatnonzero(m.lanes.kind <= LaneKind.CONNECTOR)
+    road = np.vstack([m.lanes.polyline(k) for k in vehicle])
     x0, x1, y0, y1 = m.bounds
     assert ((road[:, 0] >= x0) & (road[:, 0] < x1) & (road[:, 1] >= y0) & (road[:, 1] < y1)).all()

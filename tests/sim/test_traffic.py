@@ -99,7 +99,8 @@ def test_follower_keeps_distance_behind_stopped_leader():
     for _ in range(150):
         w.step(HOLD)
         a = w.agents
-        gap = abs(w._state["s"][lead] - w._state["s"][follow]) - (a.length[lead] + a.length[follow]) / 2
+        gap = abs(w._state["s"][lead] - w._state["s"][follow])
+        gap -= (a.length[lead] + a.length[follow]) / 2
         assert gap > 0.5
     assert w.agents.speed[follow] < 0.1  # queued: static
     assert 1.0 < gap < 4.0  # about the jam distance (2 m)

@@ -36,7 +36,8 @@ def test_same_seed_gives_bit_identical_worlds_and_trajectories():
     assert all(np.array_equal(a, b) for a, b in zip(s1, s2))
     assert p1 == p2
     other = World(SMALL, seed=8)
-    assert other.map.raster.shape != m1.raster.shape or not np.array_equal(other.map.raster, m1.raster)
+    assert other.map.raster.shape != m1.raster.shape or \
+        not np.array_equal(other.map.raster, m1.raster)
 
 
 def test_reset_with_the_same_seed_replays_the_episode():
@@ -66,7 +67,8 @@ def test_agents_never_overlap_nor_enter_buildings_and_autopilot_stays_on_road():
         assert not (lookup(w.map, corners.reshape(-1, 2)) == MapClass.BUILDING).any()
         assert not w.collision and not w.off_road
         walkers = a.kind == AgentKind.PEDESTRIAN
-        kinds_seen_crossing |= bool((w.map.lanes.kind[w.agent_lanes[walkers]] == LaneKind.CROSSING).any())
+        on = w.map.lanes.kind[w.agent_lanes[walkers]]
+        kinds_seen_crossing |= bool((on == LaneKind.CROSSING).any())
     assert w.route_progress > 60.0
     assert kinds_seen_crossing  # pedestrians do cross streets
 
@@ -165,7 +167,8 @@ def test_bad_values_are_named(override, key):
 
 
 def test_unknown_key_lists_allowed_keys():
-    with pytest.raises(ConfigError, match=r"world\.traffic\.carz: unknown key 'carz'; allowed keys: .*cars"):
+    with pytest.raises(ConfigError,
+                       match=r"world\.traffic\.carz: unknown key 'carz'; allowed keys: .*cars"):
         World({"traffic": {"carz": 3}}, seed=0)
 
 

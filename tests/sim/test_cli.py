@@ -1,0 +1,29 @@
+"""``dstenv render`` and the world benchmark (smoke runs; no timings asserted)."""
+
+import argparse
+
+import numpy as np
+
+from dstenv.cli import main
+from dstenv.sim.bench import run
+
+
+def test_render_writes_a_png(tmp_path):
+    out = tmp_path / "scene.png"
+    assert main(["render", "--scenario", "parking", "--seed", "1", "--steps", "3",
+                 "--extent", "40", "--out", str(out)]) == 0
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert not list(tmp_path.glob("*.png.tmp*"))
+
+
+def test_render_unknown_scenario_is_a_clean_error(tmp_path, capsys):
+    assert main(["render", "--scenario", "atlantis", "--out", str(tmp_path / "x.png")]) == 2
+    err = capsys.readouterr().err
+    assert "unknown scenario 'atlantis'" in err and "default" in err
+
+
+def test_world_benchmark_reports_each_stage():
+    res = run(argparse.Namespace(quick=True, repeats=2))
+    assert 30 <= res["agents"] <= 50
+    for key in ("world step", "reference np.sin(256x256)"):
+        assert res[key]["ms"] > 0 and np.isfinite(res[key]["x_ref"])

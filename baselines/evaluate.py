@@ -51,6 +51,7 @@ class Args(EnvArgs):
     deterministic: bool = opt(True, "PPO: take the most likely action")
     readme: str = opt("baselines/README.md", "Markdown file to update; '' = do not write")
     csv: str = opt("", "write every episode of every policy to this CSV file")
+    torch_threads: int = opt(1, "torch CPU threads for the PPO policies")
 
 
 class PPOPolicy:
@@ -161,6 +162,9 @@ def write_readme(path: str | Path, block: str) -> None:
 def run(args: Args, command: str) -> str:
     """Evaluate every policy of ``args``; returns the Markdown block (written when
     ``args.readme``)."""
+    import torch
+
+    torch.set_num_threads(args.torch_threads)
     seeds = range(args.seed, args.seed + args.episodes)
     rows: list[tuple[str, dict[str, float], dict[str, Any] | None]] = []
     episodes: list[tuple[str, list[EpisodeResult]]] = []

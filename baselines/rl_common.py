@@ -45,6 +45,9 @@ __all__ = [
 
 T = TypeVar("T")
 
+#: ``--ego-state`` values: what :class:`EgoStateObservation` adds beside the grid.
+EGO_STATES = ("none", "speed", "speed+route")
+
 
 # -- arguments -----------------------------------------------------------------------------
 def opt(default: Any, help: str) -> Any:  # noqa: A002  (argparse's word)
@@ -187,9 +190,6 @@ class RouteProgress(gym.Wrapper):
         self._pose = pose
         info["route_progress"] = self._total
         return obs, reward, terminated, truncated, info
-
-
-EGO_STATES = ("none", "speed", "speed+route")
 
 
 class EgoStateObservation(gym.Wrapper):

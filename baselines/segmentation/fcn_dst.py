@@ -50,16 +50,36 @@ class Args:
 
 def main(args: Args) -> dict[str, float]:
     out = Path(args.out)
-    config = scenario_config(args.scenario or None, {"grid": {"height": args.grid, "width": args.grid}})
-    spec = GenerateSpec(config=config, frames=args.frames, seed=args.seed, episode_length=args.episode_length,
-                        stride=args.stride, warmup=args.stride)
+    config = scenario_config(
+        args.scenario or None, {"grid": {"height": args.grid, "width": args.grid}}
+    )
+    spec = GenerateSpec(
+        config=config,
+        frames=args.frames,
+        seed=args.seed,
+        episode_length=args.episode_length,
+        stride=args.stride,
+        warmup=args.stride,
+    )
     generate(spec, out / "data")
 
     train_ds = ShardDataset(out / "data", split="train")
     val_ds = ShardDataset(out / "data", split="val")
     test_ds = ShardDataset(out / "data", split="test")
-    train({"model": args.model, "epochs": args.epochs, "batch_size": args.batch_size, "lr": args.lr,
-           "loss": args.loss, "seed": args.seed, "device": args.device}, train_ds, val_ds, out / "model")
+    train(
+        {
+            "model": args.model,
+            "epochs": args.epochs,
+            "batch_size": args.batch_size,
+            "lr": args.lr,
+            "loss": args.loss,
+            "seed": args.seed,
+            "device": args.device,
+        },
+        train_ds,
+        val_ds,
+        out / "model",
+    )
 
     scores = {}
     for seg in (create_segmenter("dst"), load_segmenter(out / "model" / "best.pt")):
@@ -67,13 +87,19 @@ def main(args: Args) -> dict[str, float]:
         summary = meter.summary(CLASSES)
         scores[seg.label] = summary["all"]["miou"]
         ious = " ".join(f"{c} {summary['all']['iou'][c] or 0:.3f}" for c in CLASSES)
-        print(f"{seg.label:16s} mIoU {summary['all']['miou']:.3f} | visible mIoU "
-              f"{summary['visible']['miou']:.3f} | {ious}")
+        print(
+            f"{seg.label:16s} mIoU {summary['all']['miou']:.3f} | visible mIoU "
+            f"{summary['visible']['miou']:.3f} | {ious}"
+        )
     return scores
 
 
 if __name__ == "__main__":
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     for f in dataclasses.fields(Args):
-        parser.add_argument(f"--{f.name.replace('_', '-')}", type=type(f.default), default=f.default)
+        parser.add_argument(
+            f"--{f.name.replace('_', '-')}", type=type(f.default), default=f.default
+        )
     main(Args(**vars(parser.parse_args())))

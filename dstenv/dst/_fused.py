@@ -2,336 +2,353 @@
 
 import numba as nb
 import numpy as np
+from numba.core.compiler import CompilerBase, DefaultPassBuilder
 
 REACHABLE = np.array([1, 2, 3, 4, 8, 9, 10, 12, 15, 16, 24, 25, 26, 28, 31], dtype=np.int64)
-CASE_SETS = [[31], [4, 31], [25, 31], [26, 31], [3, 31], [3, 4, 31], [1, 3, 25, 31], [2, 3, 26, 31], [28, 31], [4, 28, 31], [24, 25, 28, 31], [24, 26, 28, 31]]
+SM_SETS = [1, 2, 3, 4, 24, 25, 26, 28, 31]
+PRM = ('alpha', 'keep', 'dinc', 'ddec', 'g_occ', 'g_conf', 'cs', 'ncs', 'cm', 'ncm')
+ROW_PLANES = REACHABLE.size + 1  # row buffer: the past masses, then zeta
 
 
-@nb.njit(cache=True, nogil=True, error_model='numpy')
-def fused_update(m_prev, z_prev, sensor, gis, dx, dy, dyaw, cell, warp_on,
-                 alpha, dinc, ddec, g_occ, g_conf, wsm, sm_free, sm_occ,
-                 m_out, z_out, betp):  # pragma: no cover - compiled
-    h, w = z_prev.shape
+class NoAliasCompiler(CompilerBase):
+    """numba's nopython pipeline with every pointer argument marked ``noalias``.
+
+    Lets LLVM vectorise loops over many arrays without run-time overlap checks.
+    Only for kernels whose array arguments never overlap (the filter owns them all).
+    """
+
+    def define_pipelines(self):
+        self.state.flags.noalias = True
+        return [DefaultPassBuilder.define_nopython_pipeline(self.state)]
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def row_sources(i, h, w, warp_on, geo, src):  # pragma: no cover - compiled
+    """Spec step 1 for row i: src[j] = flat index of the previous cell that cell (i, j)
+    comes from, by the float64 formula of reference.source_cells (no fastmath here, so
+    both pick the same cells); cells from outside read the vacuous pad h * w + j."""
+    ct, st, dx, dy, cell = geo[0], geo[1], geo[2], geo[3], geo[4]
     i0, j0 = h // 2, w // 2
-    ct, st = np.cos(dyaw), np.sin(dyaw)
-    keep = 1.0 - alpha
     inv = 1.0 / cell
-    for i in range(h):
-        x = (i0 - i) * cell
-        for j in range(w):
-            si, sj = np.int64(i), np.int64(j)
-            if warp_on:
-                y = (j0 - j) * cell
-                si = int(np.floor(i0 - (ct * x - st * y + dx) * inv + 0.5))
-                sj = int(np.floor(j0 - (st * x + ct * y + dy) * inv + 0.5))
-            if 0 <= si < h and 0 <= sj < w:
-                p0 = np.float64(m_prev[1, si, sj])  # {N}
-                p1 = np.float64(m_prev[2, si, sj])  # {W}
-                p2 = np.float64(m_prev[3, si, sj])  # {N,W}
-                p3 = np.float64(m_prev[4, si, sj])  # {I}
-                p4 = np.float64(m_prev[8, si, sj])  # {S}
-                p5 = np.float64(m_prev[9, si, sj])  # {N,S}
-                p6 = np.float64(m_prev[10, si, sj])  # {W,S}
-                p7 = np.float64(m_prev[12, si, sj])  # {I,S}
-                p8 = np.float64(m_prev[15, si, sj])  # {N,W,I,S}
-                p9 = np.float64(m_prev[16, si, sj])  # {M}
-                p10 = np.float64(m_prev[24, si, sj])  # {S,M}
-                p11 = np.float64(m_prev[25, si, sj])  # {N,S,M}
-                p12 = np.float64(m_prev[26, si, sj])  # {W,S,M}
-                p13 = np.float64(m_prev[28, si, sj])  # {I,S,M}
-                p14 = np.float64(m_prev[31, si, sj])  # Omega
-                z = np.float64(z_prev[si, sj])
-            else:
-                p0 = p1 = p2 = p3 = p4 = p5 = p6 = p7 = p8 = p9 = p10 = p11 = p12 = p13 = 0.0
-                p14 = 1.0
-                z = 0.0
-            case = sensor[i, j] * 4 + gis[i, j]
+    x = (i0 - i) * cell
+    for j in range(w):
+        if warp_on:
+            y = (j0 - j) * cell
+            si = np.floor(i0 - (ct * x - st * y + dx) * inv + 0.5)
+            sj = np.floor(j0 - (st * x + ct * y + dy) * inv + 0.5)
+            inside = (si >= 0) & (si < h) & (sj >= 0) & (sj < w)
+            src[j] = np.int64(si) * w + np.int64(sj) if inside else h * w + j
+        else:
+            src[j] = i * w + j
+
+
+@nb.njit(cache=True, nogil=True, error_model='numpy', fastmath={'contract'},
+         pipeline_class=NoAliasCompiler)
+def fused_row(i, m_prev, z_prev, sensor, gis, warp_on, geo, prm,
+              m_out, z_out, betp, rb, src):  # pragma: no cover - compiled
+    h, w = sensor.shape
+    alpha, keep, dinc, ddec, g_occ, g_conf, cs, ncs, cm, ncm = prm[0], prm[1], prm[2], prm[3], prm[4], prm[5], prm[6], prm[7], prm[8], prm[9]
+    zero, one = np.float32(0.0), np.float32(1.0)
+    r2, r3, r4, r5 = np.float32(0.5), np.float32(0.3333333333333333), np.float32(0.25), np.float32(0.2)
+    row_sources(i, h, w, warp_on, geo, src)
+    row = i * w
+    single = True
+    for j in range(1, w):
+        if src[j] != src[j - 1] + 1:
+            single = False
+            break
+    if single:
+        off = src[0]
+        for t in range(w):
+            s, u, at = np.uint64(off + t), np.uint64(t), np.uint64(row + t)
+            p0 = m_prev[1, s]  # {N}
+            p1 = m_prev[2, s]  # {W}
+            p2 = m_prev[3, s]  # {N,W}
+            p3 = m_prev[4, s]  # {I}
+            p4 = m_prev[8, s]  # {S}
+            p5 = m_prev[9, s]  # {N,S}
+            p6 = m_prev[10, s]  # {W,S}
+            p7 = m_prev[12, s]  # {I,S}
+            p8 = m_prev[15, s]  # {N,W,I,S}
+            p9 = m_prev[16, s]  # {M}
+            p10 = m_prev[24, s]  # {S,M}
+            p11 = m_prev[25, s]  # {N,S,M}
+            p12 = m_prev[26, s]  # {W,S,M}
+            p13 = m_prev[28, s]  # {I,S,M}
+            p14 = m_prev[31, s]  # Omega
+            z = z_prev[s]
+            sv, gv = sensor[i, u], gis[i, u]
+            # 2. sensor and map
+            ms3 = cs if (sv == 1) else zero  # {N,W}
+            ms28 = cs if (sv == 2) else zero  # {I,S,M}
+            ms31 = one if (sv == 0) else ncs  # Omega
+            mg4 = cm if (gv == 1) else zero  # {I}
+            mg25 = cm if (gv == 2) else zero  # {N,S,M}
+            mg26 = cm if (gv == 3) else zero  # {W,S,M}
+            mg31 = one if (gv == 0) else ncm  # Omega
+            k = ms3 * mg4  # conflict K
+            total = k >= one  # total conflict: m_sm is vacuous, as in rules.dempster
+            norm = zero if total else one / (one - k)
+            w1 = (ms3 * mg25) * norm  # m_sm({N})
+            w2 = (ms3 * mg26) * norm  # m_sm({W})
+            w3 = (ms3 * mg31) * norm  # m_sm({N,W})
+            w4 = (ms28 * mg4 + ms31 * mg4) * norm  # m_sm({I})
+            w24 = (ms28 * mg25 + ms28 * mg26) * norm  # m_sm({S,M})
+            w25 = (ms31 * mg25) * norm  # m_sm({N,S,M})
+            w26 = (ms31 * mg26) * norm  # m_sm({W,S,M})
+            w28 = (ms28 * mg31) * norm  # m_sm({I,S,M})
+            w31 = one if total else (ms31 * mg31) * norm  # m_sm(Omega)
             # 3. conflicts, 4. accumulator
             mf = p0 + p1 + p2
             mo = p3 + p4 + p7 + p9 + p10 + p13
-            conflict = mf * sm_occ[case] + mo * sm_free[case]
-            if conflict > g_conf:
-                z = max(0.0, z - ddec)
-            elif mo >= g_occ:
-                z = min(1.0, z + dinc)
-            z_out[i, j] = z
+            sm_free = w1 + w2 + w3
+            sm_occ = w4 + w24 + w28
+            conflict = mf * sm_occ + mo * sm_free
+            z_dec = max(zero, z - ddec)
+            z_inc = min(one, z + dinc)
+            z = z_dec if conflict > g_conf else (z_inc if mo >= g_occ else z)
+            z_out[at] = z
             # 5. specialisation (A -> A minus {M}), 6. discounting
-            t = z * p10
-            p4 += t
-            p10 -= t
-            t = z * p11
-            p5 += t
-            p11 -= t
-            t = z * p12
-            p6 += t
-            p12 -= t
-            t = z * p13
-            p7 += t
-            p13 -= t
-            t = z * p14
-            p8 += t
-            p14 -= t
-            p0 *= keep
-            p1 *= keep
-            p2 *= keep
-            p3 *= keep
-            p4 *= keep
-            p5 *= keep
-            p6 *= keep
-            p7 *= keep
-            p8 *= keep
-            p9 *= keep
-            p10 *= keep
-            p11 *= keep
-            p12 *= keep
-            p13 *= keep
-            p14 *= keep
-            p14 += alpha
-            # 7. modified conjunctive combination, one branch per (sensor, map) case
-            if case == 0:  # sensor 0, map 0
-                w0 = wsm[case, 0]  # m_sm(Omega)
-                o0 = w0 * (p0)
-                o1 = w0 * (p1)
-                o2 = w0 * (p2)
-                o3 = w0 * (p3)
-                o4 = w0 * (p4)
-                o5 = w0 * (p5)
-                o6 = w0 * (p6)
-                o7 = w0 * (p7)
-                o8 = w0 * (p8)
-                o9 = w0 * (p9)
-                o10 = w0 * (p10)
-                o11 = w0 * (p11)
-                o12 = w0 * (p12)
-                o13 = w0 * (p13)
-                o14 = w0 * (p14)
-            elif case == 1:  # sensor 0, map 1
-                w0 = wsm[case, 0]  # m_sm({I})
-                w1 = wsm[case, 1]  # m_sm(Omega)
-                o0 = w1 * (p0)
-                o1 = w1 * (p1)
-                o2 = w1 * (p2)
-                o3 = w0 * (p3 + p7 + p8 + p13 + p14) + w1 * (p3)
-                o4 = w1 * (p4)
-                o5 = w1 * (p5)
-                o6 = w1 * (p6)
-                o7 = w1 * (p7)
-                o8 = w1 * (p8)
-                o9 = w0 * (p0 + p1 + p2) + w1 * (p9)
-                o10 = w1 * (p10)
-                o11 = w1 * (p11)
-                o12 = w1 * (p12)
-                o13 = w1 * (p13)
-                o14 = w0 * (p4 + p5 + p6 + p9 + p10 + p11 + p12) + w1 * (p14)
-            elif case == 2:  # sensor 0, map 2
-                w0 = wsm[case, 0]  # m_sm({N,S,M})
-                w1 = wsm[case, 1]  # m_sm(Omega)
-                o0 = w0 * (p0 + p2) + w1 * (p0)
-                o1 = w1 * (p1)
-                o2 = w1 * (p2)
-                o3 = w1 * (p3)
-                o4 = w0 * (p4 + p6 + p7) + w1 * (p4)
-                o5 = w0 * (p5 + p8) + w1 * (p5)
-                o6 = w1 * (p6)
-                o7 = w1 * (p7)
-                o8 = w1 * (p8)
-                o9 = w0 * (p9) + w1 * (p9)
-                o10 = w0 * (p10 + p12 + p13) + w1 * (p10)
-                o11 = w0 * (p11 + p14) + w1 * (p11)
-                o12 = w1 * (p12)
-                o13 = w1 * (p13)
-                o14 = w0 * (p1 + p3) + w1 * (p14)
-            elif case == 3:  # sensor 0, map 3
-                w0 = wsm[case, 0]  # m_sm({W,S,M})
-                w1 = wsm[case, 1]  # m_sm(Omega)
-                o0 = w1 * (p0)
-                o1 = w0 * (p1 + p2) + w1 * (p1)
-                o2 = w1 * (p2)
-                o3 = w1 * (p3)
-                o4 = w0 * (p4 + p5 + p7) + w1 * (p4)
-                o5 = w1 * (p5)
-                o6 = w0 * (p6 + p8) + w1 * (p6)
-                o7 = w1 * (p7)
-                o8 = w1 * (p8)
-                o9 = w0 * (p9) + w1 * (p9)
-                o10 = w0 * (p10 + p11 + p13) + w1 * (p10)
-                o11 = w1 * (p11)
-                o12 = w0 * (p12 + p14) + w1 * (p12)
-                o13 = w1 * (p13)
-                o14 = w0 * (p0 + p3) + w1 * (p14)
-            elif case == 4:  # sensor 1, map 0
-                w0 = wsm[case, 0]  # m_sm({N,W})
-                w1 = wsm[case, 1]  # m_sm(Omega)
-                o0 = w0 * (p0 + p5 + p11) + w1 * (p0)
-                o1 = w0 * (p1 + p6 + p12) + w1 * (p1)
-                o2 = w0 * (p2 + p8 + p14) + w1 * (p2)
-                o3 = w1 * (p3)
-                o4 = w1 * (p4)
-                o5 = w1 * (p5)
-                o6 = w1 * (p6)
-                o7 = w1 * (p7)
-                o8 = w1 * (p8)
-                o9 = w1 * (p9)
-                o10 = w1 * (p10)
-                o11 = w1 * (p11)
-                o12 = w1 * (p12)
-                o13 = w1 * (p13)
-                o14 = w0 * (p3 + p4 + p7 + p9 + p10 + p13) + w1 * (p14)
-            elif case == 5:  # sensor 1, map 1
-                w0 = wsm[case, 0]  # m_sm({N,W})
-                w1 = wsm[case, 1]  # m_sm({I})
-                w2 = wsm[case, 2]  # m_sm(Omega)
-                o0 = w0 * (p0 + p5 + p11) + w2 * (p0)
-                o1 = w0 * (p1 + p6 + p12) + w2 * (p1)
-                o2 = w0 * (p2 + p8 + p14) + w2 * (p2)
-                o3 = w1 * (p3 + p7 + p8 + p13 + p14) + w2 * (p3)
-                o4 = w2 * (p4)
-                o5 = w2 * (p5)
-                o6 = w2 * (p6)
-                o7 = w2 * (p7)
-                o8 = w2 * (p8)
-                o9 = w1 * (p0 + p1 + p2) + w2 * (p9)
-                o10 = w2 * (p10)
-                o11 = w2 * (p11)
-                o12 = w2 * (p12)
-                o13 = w2 * (p13)
-                o14 = w0 * (p3 + p4 + p7 + p9 + p10 + p13) + w1 * (p4 + p5 + p6 + p9 + p10 + p11 + p12) + w2 * (p14)
-            elif case == 6:  # sensor 1, map 2
-                w0 = wsm[case, 0]  # m_sm({N})
-                w1 = wsm[case, 1]  # m_sm({N,W})
-                w2 = wsm[case, 2]  # m_sm({N,S,M})
-                w3 = wsm[case, 3]  # m_sm(Omega)
-                o0 = w0 * (p0 + p2 + p5 + p8 + p11 + p14) + w1 * (p0 + p5 + p11) + w2 * (p0 + p2) + w3 * (p0)
-                o1 = w1 * (p1 + p6 + p12) + w3 * (p1)
-                o2 = w1 * (p2 + p8 + p14) + w3 * (p2)
-                o3 = w3 * (p3)
-                o4 = w2 * (p4 + p6 + p7) + w3 * (p4)
-                o5 = w2 * (p5 + p8) + w3 * (p5)
-                o6 = w3 * (p6)
-                o7 = w3 * (p7)
-                o8 = w3 * (p8)
-                o9 = w2 * (p9) + w3 * (p9)
-                o10 = w2 * (p10 + p12 + p13) + w3 * (p10)
-                o11 = w2 * (p11 + p14) + w3 * (p11)
-                o12 = w3 * (p12)
-                o13 = w3 * (p13)
-                o14 = w0 * (p1 + p3 + p4 + p6 + p7 + p9 + p10 + p12 + p13) + w1 * (p3 + p4 + p7 + p9 + p10 + p13) + w2 * (p1 + p3) + w3 * (p14)
-            elif case == 7:  # sensor 1, map 3
-                w0 = wsm[case, 0]  # m_sm({W})
-                w1 = wsm[case, 1]  # m_sm({N,W})
-                w2 = wsm[case, 2]  # m_sm({W,S,M})
-                w3 = wsm[case, 3]  # m_sm(Omega)
-                o0 = w1 * (p0 + p5 + p11) + w3 * (p0)
-                o1 = w0 * (p1 + p2 + p6 + p8 + p12 + p14) + w1 * (p1 + p6 + p12) + w2 * (p1 + p2) + w3 * (p1)
-                o2 = w1 * (p2 + p8 + p14) + w3 * (p2)
-                o3 = w3 * (p3)
-                o4 = w2 * (p4 + p5 + p7) + w3 * (p4)
-                o5 = w3 * (p5)
-                o6 = w2 * (p6 + p8) + w3 * (p6)
-                o7 = w3 * (p7)
-                o8 = w3 * (p8)
-                o9 = w2 * (p9) + w3 * (p9)
-                o10 = w2 * (p10 + p11 + p13) + w3 * (p10)
-                o11 = w3 * (p11)
-                o12 = w2 * (p12 + p14) + w3 * (p12)
-                o13 = w3 * (p13)
-                o14 = w0 * (p0 + p3 + p4 + p5 + p7 + p9 + p10 + p11 + p13) + w1 * (p3 + p4 + p7 + p9 + p10 + p13) + w2 * (p0 + p3) + w3 * (p14)
-            elif case == 8:  # sensor 2, map 0
-                w0 = wsm[case, 0]  # m_sm({I,S,M})
-                w1 = wsm[case, 1]  # m_sm(Omega)
-                o0 = w1 * (p0)
-                o1 = w1 * (p1)
-                o2 = w1 * (p2)
-                o3 = w0 * (p3) + w1 * (p3)
-                o4 = w0 * (p4 + p5 + p6) + w1 * (p4)
-                o5 = w1 * (p5)
-                o6 = w1 * (p6)
-                o7 = w0 * (p7 + p8) + w1 * (p7)
-                o8 = w1 * (p8)
-                o9 = w0 * (p0 + p1 + p2 + p9) + w1 * (p9)
-                o10 = w0 * (p10 + p11 + p12) + w1 * (p10)
-                o11 = w1 * (p11)
-                o12 = w1 * (p12)
-                o13 = w0 * (p13 + p14) + w1 * (p13)
-                o14 = w1 * (p14)
-            elif case == 9:  # sensor 2, map 1
-                w0 = wsm[case, 0]  # m_sm({I})
-                w1 = wsm[case, 1]  # m_sm({I,S,M})
-                w2 = wsm[case, 2]  # m_sm(Omega)
-                o0 = w2 * (p0)
-                o1 = w2 * (p1)
-                o2 = w2 * (p2)
-                o3 = w0 * (p3 + p7 + p8 + p13 + p14) + w1 * (p3) + w2 * (p3)
-                o4 = w1 * (p4 + p5 + p6) + w2 * (p4)
-                o5 = w2 * (p5)
-                o6 = w2 * (p6)
-                o7 = w1 * (p7 + p8) + w2 * (p7)
-                o8 = w2 * (p8)
-                o9 = w0 * (p0 + p1 + p2) + w1 * (p0 + p1 + p2 + p9) + w2 * (p9)
-                o10 = w1 * (p10 + p11 + p12) + w2 * (p10)
-                o11 = w2 * (p11)
-                o12 = w2 * (p12)
-                o13 = w1 * (p13 + p14) + w2 * (p13)
-                o14 = w0 * (p4 + p5 + p6 + p9 + p10 + p11 + p12) + w2 * (p14)
-            elif case == 10:  # sensor 2, map 2
-                w0 = wsm[case, 0]  # m_sm({S,M})
-                w1 = wsm[case, 1]  # m_sm({N,S,M})
-                w2 = wsm[case, 2]  # m_sm({I,S,M})
-                w3 = wsm[case, 3]  # m_sm(Omega)
-                o0 = w1 * (p0 + p2) + w3 * (p0)
-                o1 = w3 * (p1)
-                o2 = w3 * (p2)
-                o3 = w2 * (p3) + w3 * (p3)
-                o4 = w0 * (p4 + p5 + p6 + p7 + p8) + w1 * (p4 + p6 + p7) + w2 * (p4 + p5 + p6) + w3 * (p4)
-                o5 = w1 * (p5 + p8) + w3 * (p5)
-                o6 = w3 * (p6)
-                o7 = w2 * (p7 + p8) + w3 * (p7)
-                o8 = w3 * (p8)
-                o9 = w0 * (p0 + p1 + p2 + p9) + w1 * (p9) + w2 * (p0 + p1 + p2 + p9) + w3 * (p9)
-                o10 = w0 * (p10 + p11 + p12 + p13 + p14) + w1 * (p10 + p12 + p13) + w2 * (p10 + p11 + p12) + w3 * (p10)
-                o11 = w1 * (p11 + p14) + w3 * (p11)
-                o12 = w3 * (p12)
-                o13 = w2 * (p13 + p14) + w3 * (p13)
-                o14 = w0 * (p3) + w1 * (p1 + p3) + w3 * (p14)
-            elif case == 11:  # sensor 2, map 3
-                w0 = wsm[case, 0]  # m_sm({S,M})
-                w1 = wsm[case, 1]  # m_sm({W,S,M})
-                w2 = wsm[case, 2]  # m_sm({I,S,M})
-                w3 = wsm[case, 3]  # m_sm(Omega)
-                o0 = w3 * (p0)
-                o1 = w1 * (p1 + p2) + w3 * (p1)
-                o2 = w3 * (p2)
-                o3 = w2 * (p3) + w3 * (p3)
-                o4 = w0 * (p4 + p5 + p6 + p7 + p8) + w1 * (p4 + p5 + p7) + w2 * (p4 + p5 + p6) + w3 * (p4)
-                o5 = w3 * (p5)
-                o6 = w1 * (p6 + p8) + w3 * (p6)
-                o7 = w2 * (p7 + p8) + w3 * (p7)
-                o8 = w3 * (p8)
-                o9 = w0 * (p0 + p1 + p2 + p9) + w1 * (p9) + w2 * (p0 + p1 + p2 + p9) + w3 * (p9)
-                o10 = w0 * (p10 + p11 + p12 + p13 + p14) + w1 * (p10 + p11 + p13) + w2 * (p10 + p11 + p12) + w3 * (p10)
-                o11 = w3 * (p11)
-                o12 = w1 * (p12 + p14) + w3 * (p12)
-                o13 = w2 * (p13 + p14) + w3 * (p13)
-                o14 = w0 * (p3) + w1 * (p0 + p3) + w3 * (p14)
-            else:
-                o0 = o1 = o2 = o3 = o4 = o5 = o6 = o7 = o8 = o9 = o10 = o11 = o12 = o13 = o14 = 0.0
-            m_out[1, i, j] = o0
-            m_out[2, i, j] = o1
-            m_out[3, i, j] = o2
-            m_out[4, i, j] = o3
-            m_out[8, i, j] = o4
-            m_out[9, i, j] = o5
-            m_out[10, i, j] = o6
-            m_out[12, i, j] = o7
-            m_out[15, i, j] = o8
-            m_out[16, i, j] = o9
-            m_out[24, i, j] = o10
-            m_out[25, i, j] = o11
-            m_out[26, i, j] = o12
-            m_out[28, i, j] = o13
-            m_out[31, i, j] = o14
-            betp[0, i, j] = o0 + o2 * 0.5 + o5 * 0.5 + o8 * 0.25 + o11 * 0.3333333333333333 + o14 * 0.2
-            betp[1, i, j] = o1 + o2 * 0.5 + o6 * 0.5 + o8 * 0.25 + o12 * 0.3333333333333333 + o14 * 0.2
-            betp[2, i, j] = o3 + o7 * 0.5 + o8 * 0.25 + o13 * 0.3333333333333333 + o14 * 0.2
-            betp[3, i, j] = o4 + o5 * 0.5 + o6 * 0.5 + o7 * 0.5 + o8 * 0.25 + o10 * 0.5 + o11 * 0.3333333333333333 + o12 * 0.3333333333333333 + o13 * 0.3333333333333333 + o14 * 0.2
-            betp[4, i, j] = o9 + o10 * 0.5 + o11 * 0.3333333333333333 + o12 * 0.3333333333333333 + o13 * 0.3333333333333333 + o14 * 0.2
+            t10 = z * p10
+            p4 = p4 + t10
+            p10 = p10 - t10
+            t11 = z * p11
+            p5 = p5 + t11
+            p11 = p11 - t11
+            t12 = z * p12
+            p6 = p6 + t12
+            p12 = p12 - t12
+            t13 = z * p13
+            p7 = p7 + t13
+            p13 = p13 - t13
+            t14 = z * p14
+            p8 = p8 + t14
+            p14 = p14 - t14
+            p0 = p0 * keep
+            p1 = p1 * keep
+            p2 = p2 * keep
+            p3 = p3 * keep
+            p4 = p4 * keep
+            p5 = p5 * keep
+            p6 = p6 * keep
+            p7 = p7 * keep
+            p8 = p8 * keep
+            p9 = p9 * keep
+            p10 = p10 * keep
+            p11 = p11 * keep
+            p12 = p12 * keep
+            p13 = p13 * keep
+            p14 = p14 * keep
+            p14 = p14 + alpha
+            # 7. modified conjunctive combination
+            o0 = w1 * (p0 + p2 + p5 + p8 + p11 + p14) + w3 * (p0 + p5 + p11) + w25 * (p0 + p2) + w31 * p0
+            o1 = w2 * (p1 + p2 + p6 + p8 + p12 + p14) + w3 * (p1 + p6 + p12) + w26 * (p1 + p2) + w31 * p1
+            o2 = w3 * (p2 + p8 + p14) + w31 * p2
+            o3 = w4 * (p3 + p7 + p8 + p13 + p14) + w28 * p3 + w31 * p3
+            o4 = w24 * (p4 + p5 + p6 + p7 + p8) + w25 * (p4 + p6 + p7) + w26 * (p4 + p5 + p7) + w28 * (p4 + p5 + p6) + w31 * p4
+            o5 = w25 * (p5 + p8) + w31 * p5
+            o6 = w26 * (p6 + p8) + w31 * p6
+            o7 = w28 * (p7 + p8) + w31 * p7
+            o8 = w31 * p8
+            o9 = w4 * (p0 + p1 + p2) + w24 * (p0 + p1 + p2 + p9) + w25 * p9 + w26 * p9 + w28 * (p0 + p1 + p2 + p9) + w31 * p9
+            o10 = w24 * (p10 + p11 + p12 + p13 + p14) + w25 * (p10 + p12 + p13) + w26 * (p10 + p11 + p13) + w28 * (p10 + p11 + p12) + w31 * p10
+            o11 = w25 * (p11 + p14) + w31 * p11
+            o12 = w26 * (p12 + p14) + w31 * p12
+            o13 = w28 * (p13 + p14) + w31 * p13
+            o14 = w1 * (p1 + p3 + p4 + p6 + p7 + p9 + p10 + p12 + p13) + w2 * (p0 + p3 + p4 + p5 + p7 + p9 + p10 + p11 + p13) + w3 * (p3 + p4 + p7 + p9 + p10 + p13) + w4 * (p4 + p5 + p6 + p9 + p10 + p11 + p12) + w24 * p3 + w25 * (p1 + p3) + w26 * (p0 + p3) + w31 * p14
+            m_out[1, at] = o0
+            m_out[2, at] = o1
+            m_out[3, at] = o2
+            m_out[4, at] = o3
+            m_out[8, at] = o4
+            m_out[9, at] = o5
+            m_out[10, at] = o6
+            m_out[12, at] = o7
+            m_out[15, at] = o8
+            m_out[16, at] = o9
+            m_out[24, at] = o10
+            m_out[25, at] = o11
+            m_out[26, at] = o12
+            m_out[28, at] = o13
+            m_out[31, at] = o14
+            # BetP: each set's share 1/|A| once, then the sum per class
+            q2 = o2 * r2
+            q5 = o5 * r2
+            q6 = o6 * r2
+            q7 = o7 * r2
+            q8 = o8 * r4
+            q10 = o10 * r2
+            q11 = o11 * r3
+            q12 = o12 * r3
+            q13 = o13 * r3
+            q14 = o14 * r5
+            betp[0, at] = o0 + q2 + q5 + q8 + q11 + q14
+            betp[1, at] = o1 + q2 + q6 + q8 + q12 + q14
+            betp[2, at] = o3 + q7 + q8 + q13 + q14
+            betp[3, at] = o4 + q5 + q6 + q7 + q8 + q10 + q11 + q12 + q13 + q14
+            betp[4, at] = o9 + q10 + q11 + q12 + q13 + q14
+        return
+    # copy each run of consecutive sources with a plain loop; unsigned indices
+    # skip numba's negative-index wraparound, which would defeat vectorisation
+    a = 0
+    for j in range(1, w + 1):
+        if j < w and src[j] == src[j - 1] + 1:
+            continue
+        off = src[a] - a
+        for t in range(a, j):
+            s, u = np.uint64(off + t), np.uint64(t)
+            rb[0, u] = m_prev[1, s]
+            rb[1, u] = m_prev[2, s]
+            rb[2, u] = m_prev[3, s]
+            rb[3, u] = m_prev[4, s]
+            rb[4, u] = m_prev[8, s]
+            rb[5, u] = m_prev[9, s]
+            rb[6, u] = m_prev[10, s]
+            rb[7, u] = m_prev[12, s]
+            rb[8, u] = m_prev[15, s]
+            rb[9, u] = m_prev[16, s]
+            rb[10, u] = m_prev[24, s]
+            rb[11, u] = m_prev[25, s]
+            rb[12, u] = m_prev[26, s]
+            rb[13, u] = m_prev[28, s]
+            rb[14, u] = m_prev[31, s]
+            rb[15, u] = z_prev[s]
+        a = j
+    for t in range(w):
+        u, at = np.uint64(t), np.uint64(row + t)
+        p0 = rb[0, u]  # {N}
+        p1 = rb[1, u]  # {W}
+        p2 = rb[2, u]  # {N,W}
+        p3 = rb[3, u]  # {I}
+        p4 = rb[4, u]  # {S}
+        p5 = rb[5, u]  # {N,S}
+        p6 = rb[6, u]  # {W,S}
+        p7 = rb[7, u]  # {I,S}
+        p8 = rb[8, u]  # {N,W,I,S}
+        p9 = rb[9, u]  # {M}
+        p10 = rb[10, u]  # {S,M}
+        p11 = rb[11, u]  # {N,S,M}
+        p12 = rb[12, u]  # {W,S,M}
+        p13 = rb[13, u]  # {I,S,M}
+        p14 = rb[14, u]  # Omega
+        z = rb[15, u]
+        sv, gv = sensor[i, u], gis[i, u]
+        # 2. sensor and map
+        ms3 = cs if (sv == 1) else zero  # {N,W}
+        ms28 = cs if (sv == 2) else zero  # {I,S,M}
+        ms31 = one if (sv == 0) else ncs  # Omega
+        mg4 = cm if (gv == 1) else zero  # {I}
+        mg25 = cm if (gv == 2) else zero  # {N,S,M}
+        mg26 = cm if (gv == 3) else zero  # {W,S,M}
+        mg31 = one if (gv == 0) else ncm  # Omega
+        k = ms3 * mg4  # conflict K
+        total = k >= one  # total conflict: m_sm is vacuous, as in rules.dempster
+        norm = zero if total else one / (one - k)
+        w1 = (ms3 * mg25) * norm  # m_sm({N})
+        w2 = (ms3 * mg26) * norm  # m_sm({W})
+        w3 = (ms3 * mg31) * norm  # m_sm({N,W})
+        w4 = (ms28 * mg4 + ms31 * mg4) * norm  # m_sm({I})
+        w24 = (ms28 * mg25 + ms28 * mg26) * norm  # m_sm({S,M})
+        w25 = (ms31 * mg25) * norm  # m_sm({N,S,M})
+        w26 = (ms31 * mg26) * norm  # m_sm({W,S,M})
+        w28 = (ms28 * mg31) * norm  # m_sm({I,S,M})
+        w31 = one if total else (ms31 * mg31) * norm  # m_sm(Omega)
+        # 3. conflicts, 4. accumulator
+        mf = p0 + p1 + p2
+        mo = p3 + p4 + p7 + p9 + p10 + p13
+        sm_free = w1 + w2 + w3
+        sm_occ = w4 + w24 + w28
+        conflict = mf * sm_occ + mo * sm_free
+        z_dec = max(zero, z - ddec)
+        z_inc = min(one, z + dinc)
+        z = z_dec if conflict > g_conf else (z_inc if mo >= g_occ else z)
+        z_out[at] = z
+        # 5. specialisation (A -> A minus {M}), 6. discounting
+        t10 = z * p10
+        p4 = p4 + t10
+        p10 = p10 - t10
+        t11 = z * p11
+        p5 = p5 + t11
+        p11 = p11 - t11
+        t12 = z * p12
+        p6 = p6 + t12
+        p12 = p12 - t12
+        t13 = z * p13
+        p7 = p7 + t13
+        p13 = p13 - t13
+        t14 = z * p14
+        p8 = p8 + t14
+        p14 = p14 - t14
+        p0 = p0 * keep
+        p1 = p1 * keep
+        p2 = p2 * keep
+        p3 = p3 * keep
+        p4 = p4 * keep
+        p5 = p5 * keep
+        p6 = p6 * keep
+        p7 = p7 * keep
+        p8 = p8 * keep
+        p9 = p9 * keep
+        p10 = p10 * keep
+        p11 = p11 * keep
+        p12 = p12 * keep
+        p13 = p13 * keep
+        p14 = p14 * keep
+        p14 = p14 + alpha
+        # 7. modified conjunctive combination
+        o0 = w1 * (p0 + p2 + p5 + p8 + p11 + p14) + w3 * (p0 + p5 + p11) + w25 * (p0 + p2) + w31 * p0
+        o1 = w2 * (p1 + p2 + p6 + p8 + p12 + p14) + w3 * (p1 + p6 + p12) + w26 * (p1 + p2) + w31 * p1
+        o2 = w3 * (p2 + p8 + p14) + w31 * p2
+        o3 = w4 * (p3 + p7 + p8 + p13 + p14) + w28 * p3 + w31 * p3
+        o4 = w24 * (p4 + p5 + p6 + p7 + p8) + w25 * (p4 + p6 + p7) + w26 * (p4 + p5 + p7) + w28 * (p4 + p5 + p6) + w31 * p4
+        o5 = w25 * (p5 + p8) + w31 * p5
+        o6 = w26 * (p6 + p8) + w31 * p6
+        o7 = w28 * (p7 + p8) + w31 * p7
+        o8 = w31 * p8
+        o9 = w4 * (p0 + p1 + p2) + w24 * (p0 + p1 + p2 + p9) + w25 * p9 + w26 * p9 + w28 * (p0 + p1 + p2 + p9) + w31 * p9
+        o10 = w24 * (p10 + p11 + p12 + p13 + p14) + w25 * (p10 + p12 + p13) + w26 * (p10 + p11 + p13) + w28 * (p10 + p11 + p12) + w31 * p10
+        o11 = w25 * (p11 + p14) + w31 * p11
+        o12 = w26 * (p12 + p14) + w31 * p12
+        o13 = w28 * (p13 + p14) + w31 * p13
+        o14 = w1 * (p1 + p3 + p4 + p6 + p7 + p9 + p10 + p12 + p13) + w2 * (p0 + p3 + p4 + p5 + p7 + p9 + p10 + p11 + p13) + w3 * (p3 + p4 + p7 + p9 + p10 + p13) + w4 * (p4 + p5 + p6 + p9 + p10 + p11 + p12) + w24 * p3 + w25 * (p1 + p3) + w26 * (p0 + p3) + w31 * p14
+        m_out[1, at] = o0
+        m_out[2, at] = o1
+        m_out[3, at] = o2
+        m_out[4, at] = o3
+        m_out[8, at] = o4
+        m_out[9, at] = o5
+        m_out[10, at] = o6
+        m_out[12, at] = o7
+        m_out[15, at] = o8
+        m_out[16, at] = o9
+        m_out[24, at] = o10
+        m_out[25, at] = o11
+        m_out[26, at] = o12
+        m_out[28, at] = o13
+        m_out[31, at] = o14
+        # BetP: each set's share 1/|A| once, then the sum per class
+        q2 = o2 * r2
+        q5 = o5 * r2
+        q6 = o6 * r2
+        q7 = o7 * r2
+        q8 = o8 * r4
+        q10 = o10 * r2
+        q11 = o11 * r3
+        q12 = o12 * r3
+        q13 = o13 * r3
+        q14 = o14 * r5
+        betp[0, at] = o0 + q2 + q5 + q8 + q11 + q14
+        betp[1, at] = o1 + q2 + q6 + q8 + q12 + q14
+        betp[2, at] = o3 + q7 + q8 + q13 + q14
+        betp[3, at] = o4 + q5 + q6 + q7 + q8 + q10 + q11 + q12 + q13 + q14
+        betp[4, at] = o9 + q10 + q11 + q12 + q13 + q14
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def fused_update(m_prev, z_prev, sensor, gis, warp_on, geo, prm,
+                 m_out, z_out, betp, first, stop):  # pragma: no cover - compiled
+    w = sensor.shape[1]
+    rb = np.empty((ROW_PLANES, w), np.float32)
+    src = np.empty(w, np.int64)
+    for i in range(first, stop):
+        fused_row(i, m_prev, z_prev, sensor, gis, warp_on, geo, prm, m_out, z_out, betp, rb, src)

@@ -1,59 +1,61 @@
-"""Run-time tables and buffers for the fused update kernel in ``_fused.py``.
+"""Run-time parameters and state buffers for the generated update kernel in ``_fused.py``.
 
 Only 15 of the 32 subsets can ever carry mass in a filter state (the intersection
 closure of the sensor-and-map focal sets, their specialisations and {M});
-:mod:`dstenv.dst._codegen` derives them and writes the unrolled kernel.
+:mod:`dstenv.dst._codegen` derives them and writes the kernel.
+
+State layout the kernel expects: a grid of ``C`` channels is a ``(C, P) float32``
+array of flat planes, cell ``(i, j)`` at column ``i * W + j``, with
+``P >= H * W + W``. Columns ``H * W .. H * W + W - 1`` hold a vacuous cell
+(m(Omega) = 1, zeta = 0) that cells coming from outside the previous grid read, so
+the warp needs no special case.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from dstenv.dst._codegen import SM_CASES
-from dstenv.dst._fused import REACHABLE, fused_update
-from dstenv.dst.frame import FREE, NUM_SETS, OCCUPIED
-from dstenv.dst.inputs import map_masses, sensor_masses
+from dstenv.dst._fused import PRM, REACHABLE, fused_update
 from dstenv.dst.params import DSTParams
-from dstenv.dst.rules import dempster
 
-__all__ = ["REACHABLE", "sensor_map_weights", "padded_grid", "fused_update"]
-
-_MAX_FOCAL = max(len(cs) for _, _, cs in SM_CASES)
+__all__ = ["REACHABLE", "kernel_params", "plane_grid", "grid_view", "fused_update"]
 
 
-def sensor_map_weights(params: DSTParams) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """m_sm = dempster(sensor, map) for each of the 3 x 4 input cases, as kernel tables.
+def kernel_params(params: DSTParams) -> np.ndarray:
+    """The update's numbers as the kernel's ``(len(PRM),) float32`` vector (``_fused.PRM`` order).
 
-    Returns:
-        ``(wsm, sm_free, sm_occ)``: ``(12, K) float64`` masses of each case's focal
-        sets (in ``_fused.CASE_SETS`` order), and ``(12,) float64`` m_sm(F), m_sm(O).
-        Case index = 4 * sensor code + map code.
+    Complements (1 - alpha, 1 - c_s, 1 - c_m) are formed in float64 first, as
+    :func:`dstenv.dst.inputs.sensor_masses` does, so the kernel's input masses are
+    the reference's to the bit.
     """
-    n = len(SM_CASES)
-    sensor = np.array([[s for s, _, _ in SM_CASES]], dtype=np.uint8)
-    gis = np.array([[g for _, g, _ in SM_CASES]], dtype=np.uint8)
-    m = dempster(
-        sensor_masses(sensor, params.sensor_confidence), map_masses(gis, params.map_confidence)
-    ).astype(np.float64)[:, 0, :]  # (32, 12)
-    wsm = np.zeros((n, _MAX_FOCAL))
-    for idx, (s, g, sets) in enumerate(SM_CASES):
-        if idx != 4 * s + g:
-            raise AssertionError("SM_CASES must be ordered by 4 * sensor + map")
-        carried = set(np.flatnonzero(m[:, idx]).tolist())
-        if not carried <= set(sets):
-            raise AssertionError(f"case {idx} puts mass outside its generated focal sets")
-        wsm[idx, : len(sets)] = m[sets, idx]
-    free = [a for a in range(1, NUM_SETS) if a & ~FREE == 0]
-    occ = [a for a in range(1, NUM_SETS) if a & ~OCCUPIED == 0]
-    return wsm, m[free].sum(0), m[occ].sum(0)
+    values = {
+        "alpha": params.alpha,
+        "keep": 1.0 - params.alpha,
+        "dinc": params.delta_inc,
+        "ddec": params.delta_dec,
+        "g_occ": params.gamma_occupied,
+        "g_conf": params.gamma_conflict,
+        "cs": params.sensor_confidence,
+        "ncs": 1.0 - params.sensor_confidence,
+        "cm": params.map_confidence,
+        "ncm": 1.0 - params.map_confidence,
+    }
+    return np.array([values[name] for name in PRM], dtype=np.float32)
 
 
-def padded_grid(channels: int, shape: tuple[int, int]) -> np.ndarray:
-    """A zeroed ``(channels, H, W) float32`` view whose channel stride is not a power of two.
+def plane_grid(channels: int, shape: tuple[int, int]) -> np.ndarray:
+    """A zeroed ``(channels, P) float32`` plane array for an ``(H, W)`` grid (module docstring).
 
-    Channel planes of 2^k bytes map the same cell of every plane onto the same cache
-    set; 64 spare floats per plane avoid that aliasing in the per-cell kernel.
+    ``P`` is ``H * W + W`` rounded up to whole cache lines, plus one more line: with
+    power-of-two grids a plane of 2^k bytes would map the same cell of every plane
+    onto the same L1 set, and the loop reads and writes ~40 planes at once.
     """
     h, w = shape
-    base = np.zeros((channels, h * w + 64), np.float32)
-    return base[:, : h * w].reshape(channels, h, w)
+    p = -(-(h * w + w) // 16) * 16 + 16
+    return np.zeros((channels, p), np.float32)
+
+
+def grid_view(planes: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """The ``(C, H, W)`` view of a :func:`plane_grid` array (no copy, not C-contiguous)."""
+    h, w = shape
+    return planes[:, : h * w].reshape(planes.shape[0], h, w)

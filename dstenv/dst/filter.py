@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import os
+import threading
+
 import numpy as np
 
-from dstenv.dst._kernel import REACHABLE, fused_update, padded_grid, sensor_map_weights
+from dstenv.dst._kernel import REACHABLE, fused_update, grid_view, kernel_params, plane_grid
 from dstenv.dst.frame import NUM_CLASSES, NUM_SETS, OMEGA
 from dstenv.dst.params import DSTParams
 
@@ -14,15 +17,26 @@ __all__ = ["PerceptionGridFilter"]
 class PerceptionGridFilter:
     """Map-aided evidential grid over (navigable, non_navigable, building, static, moving).
 
-    Implements ``dst-spec.md`` steps 1-8 with a fused numba kernel that visits only the
-    15 subsets that can carry mass (:data:`dstenv.dst._kernel.REACHABLE`) and computes
-    BetP in the same pass; the result equals
-    :func:`dstenv.dst.reference.reference_update` to float32 rounding.
+    Implements ``dst-spec.md`` steps 1-8 with a generated numba kernel
+    (:mod:`dstenv.dst._codegen`) that visits only the 15 subsets that can carry mass
+    (:data:`dstenv.dst._kernel.REACHABLE`), runs vectorised across each grid row in
+    float32 and computes BetP in the same pass; the result equals
+    :func:`dstenv.dst.reference.reference_update` to float32 rounding (< 1e-6).
+
+    Fast path: ``update(..., copy=False)`` followed by :meth:`pignistic` (what
+    :mod:`dstenv.pipeline` does) touches only the 15 reachable planes; ``copy=True``
+    (the default) adds a copy of the whole ``(32, H, W)`` grid.
 
     Args:
         shape: ``(H, W)`` of the ego-centred grid (axes as in :mod:`dstenv.grid`).
         params: the update's numbers (default :meth:`DSTParams.default`).
         cell_size: cell edge [m], used to apply the ego motion.
+        threads: split each update into this many bands of rows, run in parallel
+            (default 1). Results are bit-identical for any value. Extra threads are
+            plain Python threads started per update (the kernel releases the GIL), so
+            nothing persists across ``fork``; they only pay on otherwise idle cores:
+            when the cores are busy a band that waits for a time slice stalls the
+            whole update.
 
     Attributes:
         masses: ``(32, H, W) float32`` current perception grid (read-only view).
@@ -35,21 +49,34 @@ class PerceptionGridFilter:
     """
 
     def __init__(
-        self, shape: tuple[int, int], params: DSTParams | None = None, cell_size: float = 0.33
+        self,
+        shape: tuple[int, int],
+        params: DSTParams | None = None,
+        cell_size: float = 0.33,
+        *,
+        threads: int = 1,
     ) -> None:
         h, w = (int(v) for v in shape)
         if h < 1 or w < 1:
             raise ValueError(f"grid shape must be positive, got {shape}")
         if not cell_size > 0:
             raise ValueError(f"cell_size must be > 0 m, got {cell_size}")
+        most = os.cpu_count() or 1
+        if not isinstance(threads, (int, np.integer)) or not 1 <= threads <= most:
+            raise ValueError(
+                f"threads must be an integer in 1..{most} (the CPU count), got {threads!r}"
+            )
         self.shape = (h, w)
         self.cell_size = float(cell_size)
+        self.threads = int(threads)
+        self._bands = np.linspace(0, h, min(self.threads, h) + 1).round().astype(int).tolist()
         self.params = params if params is not None else DSTParams.default()
-        self._wsm, self._sm_free, self._sm_occ = sensor_map_weights(self.params)
-        # Two buffers whose unreachable sets stay 0 forever; updates write the other one.
-        self._buf = [padded_grid(NUM_SETS, (h, w)) for _ in range(2)]
-        self._zbuf = [np.zeros((h, w), np.float32) for _ in range(2)]
-        self._betp = padded_grid(NUM_CLASSES, (h, w))
+        self._prm = kernel_params(self.params)
+        # Two state buffers (flat planes with a vacuous pad, see _kernel); updates write
+        # the other one, and the unreachable sets stay 0 forever.
+        self._buf = [plane_grid(NUM_SETS, (h, w)) for _ in range(2)]
+        self._zbuf = [plane_grid(1, (h, w))[0] for _ in range(2)]
+        self._betp = plane_grid(NUM_CLASSES, (h, w))
         self._cur = 0
         self.reset()
 
@@ -57,7 +84,7 @@ class PerceptionGridFilter:
         """Back to total ignorance: m(Omega) = 1 and zeta = 0 everywhere."""
         for buf, zbuf in zip(self._buf, self._zbuf):
             buf[REACHABLE] = 0.0
-            buf[OMEGA] = 1.0
+            buf[OMEGA] = 1.0  # the pad columns too: they stand for "outside the grid"
             zbuf[:] = 0.0
         self._betp[...] = 1.0 / NUM_CLASSES
         self._cur = 0
@@ -65,14 +92,14 @@ class PerceptionGridFilter:
     @property
     def masses(self) -> np.ndarray:
         """``(32, H, W) float32`` current grid, a read-only view valid until the next update."""
-        view = self._buf[self._cur].view()
+        view = grid_view(self._buf[self._cur], self.shape)
         view.flags.writeable = False
         return view
 
     @property
     def zeta(self) -> np.ndarray:
         """``(H, W) float32`` current accumulator (read-only view)."""
-        view = self._zbuf[self._cur].view()
+        view = grid_view(self._zbuf[self._cur][None], self.shape)[0]
         view.flags.writeable = False
         return view
 
@@ -106,27 +133,38 @@ class PerceptionGridFilter:
             if len(ego_motion) != 3:
                 raise ValueError(f"ego_motion must be (dx, dy, dyaw), got {ego_motion!r}")
             dx, dy, dyaw = (float(v) for v in ego_motion)
+            if not np.isfinite([dx, dy, dyaw]).all():
+                raise ValueError(f"ego_motion must be finite, got {ego_motion!r}")
         warp_on = (dx, dy, dyaw) != (0.0, 0.0, 0.0)
+        # cos/sin by numpy, as reference.source_cells, so both pick the same source cells
+        geo = np.array([np.cos(dyaw), np.sin(dyaw), dx, dy, self.cell_size])
         nxt = 1 - self._cur
-        p = self.params
-        fused_update(
-            self._buf[self._cur], self._zbuf[self._cur], sensor, gis,
-            dx, dy, dyaw, self.cell_size, warp_on,
-            p.alpha, p.delta_inc, p.delta_dec, p.gamma_occupied, p.gamma_conflict,
-            self._wsm, self._sm_free, self._sm_occ,
+        args = (
+            self._buf[self._cur], self._zbuf[self._cur], sensor, gis, warp_on, geo, self._prm,
             self._buf[nxt], self._zbuf[nxt], self._betp,
         )
+        # bands of rows: extra ones in threads, the first in this thread
+        workers = [
+            threading.Thread(target=fused_update, args=(*args, first, stop))
+            for first, stop in zip(self._bands[1:-1], self._bands[2:])
+        ]
+        for worker in workers:
+            worker.start()
+        fused_update(*args, self._bands[0], self._bands[1])
+        for worker in workers:
+            worker.join()
         self._cur = nxt
-        return np.ascontiguousarray(self._buf[nxt]) if copy else self.masses
+        return self.masses.copy() if copy else self.masses
 
     def pignistic(self, out: np.ndarray | None = None) -> np.ndarray:
         """BetP of the current grid: ``(5, H, W) float32`` over ``CLASSES``.
 
         Computed by the update itself, so this is a copy (into ``out`` if given).
         """
+        betp = grid_view(self._betp, self.shape)
         if out is None:
-            return np.ascontiguousarray(self._betp)
-        out[...] = self._betp
+            return betp.copy()
+        out[...] = betp
         return out
 
     def _codes(self, grid: np.ndarray, max_code: int, name: str) -> np.ndarray:

@@ -22,8 +22,17 @@ from dstenv.segment.registry import SEGMENTERS, create_segmenter, register_segme
 from dstenv.segment.segmenters import DSTSegmenter, Segmenter, TorchSegmenter
 
 __all__ = [
-    "SEGMENTERS", "create_segmenter", "register_segmenter",
-    "Segmenter", "DSTSegmenter", "TorchSegmenter",
-    "save_checkpoint", "load_checkpoint", "load_segmenter",
-    "ConfusionMeter", "confusion_matrix", "iou_per_class", "mean_iou",
+    "SEGMENTERS",
+    "create_segmenter",
+    "register_segmenter",
+    "Segmenter",
+    "DSTSegmenter",
+    "TorchSegmenter",
+    "save_checkpoint",
+    "load_checkpoint",
+    "load_segmenter",
+    "ConfusionMeter",
+    "confusion_matrix",
+    "iou_per_class",
+    "mean_iou",
 ]

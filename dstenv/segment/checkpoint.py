@@ -61,7 +61,9 @@ def load_checkpoint(path: str | Path) -> dict[str, Any]:
     if not isinstance(ckpt, dict) or ckpt.get("format") != FORMAT:
         raise ValueError(f"{path}: not a dstenv segmenter checkpoint")
     if ckpt.get("version") != _VERSION:
-        raise ValueError(f"{path}: checkpoint version {ckpt.get('version')} not supported (need {_VERSION})")
+        raise ValueError(
+            f"{path}: checkpoint version {ckpt.get('version')} not supported (need {_VERSION})"
+        )
     return ckpt
 
 
@@ -69,7 +71,9 @@ def load_segmenter(path: str | Path, device: str | torch.device = "cpu") -> Torc
     """Rebuild the network of a checkpoint and load its weights (eval mode)."""
     ckpt = load_checkpoint(path)
     spec = ckpt["spec"]
-    seg = TorchSegmenter(spec["model"], spec["model_kwargs"], spec["in_channels"], spec["num_classes"], device)
+    seg = TorchSegmenter(
+        spec["model"], spec["model_kwargs"], spec["in_channels"], spec["num_classes"], device
+    )
     seg.model.load_state_dict(ckpt["model"])
     seg.model.eval()
     return seg

@@ -26,8 +26,12 @@ def _train(args: argparse.Namespace) -> int:
     from dstenv.data import ShardDataset, StreamingDataset
     from dstenv.segment.train import train
 
-    cfg: dict[str, Any] = {"model": args.model, "model_kwargs": args.model_kwargs, "seed": args.seed,
-                           "device": args.device}
+    cfg: dict[str, Any] = {
+        "model": args.model,
+        "model_kwargs": args.model_kwargs,
+        "seed": args.seed,
+        "device": args.device,
+    }
     for key in ("epochs", "batch_size", "lr", "loss", "crop", "num_workers"):
         if getattr(args, key) is not None:
             cfg[key] = getattr(args, key)
@@ -35,7 +39,9 @@ def _train(args: argparse.Namespace) -> int:
         if not args.steps_per_epoch:
             raise CLIError("--stream needs --steps-per-epoch (a stream has no end)")
         if args.class_weights is None and cfg.get("loss", "wce+lovasz").startswith("wce"):
-            raise CLIError("--stream with a weighted loss needs --class-weights (or --loss lovasz/ce)")
+            raise CLIError(
+                "--stream with a weighted loss needs --class-weights (or --loss lovasz/ce)"
+            )
         train_ds = StreamingDataset(args.stream or None, seed=args.seed, split="train")
         val_ds = ShardDataset(args.data, split="val") if args.data else None
         cfg["max_batches"] = args.steps_per_epoch
@@ -50,10 +56,20 @@ def _train(args: argparse.Namespace) -> int:
     if args.class_weights is not None:
         cfg["class_weights"] = args.class_weights
     out = Path(args.out)
-    _, history = train(cfg, train_ds, val_ds, out, resume=not args.no_resume, progress=not args.quiet,
-                       log=(lambda m: None) if args.quiet else print)
+    _, history = train(
+        cfg,
+        train_ds,
+        val_ds,
+        out,
+        resume=not args.no_resume,
+        progress=not args.quiet,
+        log=(lambda m: None) if args.quiet else print,
+    )
     best = max((m for m in history["val_miou"] if m is not None), default=None)
-    print(f"checkpoints in {out} (last.pt, best.pt)" + (f"; best val mIoU {best:.3f}" if best is not None else ""))
+    print(
+        f"checkpoints in {out} (last.pt, best.pt)"
+        + (f"; best val mIoU {best:.3f}" if best is not None else "")
+    )
     return 0
 
 
@@ -68,14 +84,26 @@ def _benchmark(args: argparse.Namespace) -> int:
     for item in args.set or []:
         parts += ["--set", item]
     command = " ".join(shlex.quote(a) for a in parts)
-    results = run_benchmark(cfg, args.out, data_dir=args.data, progress=not args.quiet,
-                            log=(lambda m: None) if args.quiet else print, preset=args.preset, command=command)
+    results = run_benchmark(
+        cfg,
+        args.out,
+        data_dir=args.data,
+        progress=not args.quiet,
+        log=(lambda m: None) if args.quiet else print,
+        preset=args.preset,
+        command=command,
+    )
     out = Path(args.out)
     print((out / "results.md").read_text())
     print(f"wrote {out / 'results.json'}, {out / 'results.md'}, {out / 'figures'}/*.png")
     goal = results.get("goal")
-    return 0 if goal is None or not args.check_goal or (goal["margin_met"] and goal["moving_met"]
-                                                        and goal["static_met"]) else 1
+    return (
+        0
+        if goal is None
+        or not args.check_goal
+        or (goal["margin_met"] and goal["moving_met"] and goal["static_met"])
+        else 1
+    )
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -84,21 +112,41 @@ def register(sub: argparse._SubParsersAction) -> None:
     from dstenv.segment.losses import LOSSES
     from dstenv.segment.models import MODELS
 
-    p = sub.add_parser("train", help="train a segmentation network on shards or a stream",
-                       description="Train a segmenter (Adam, median-frequency weighted CE and/or "
-                                   "Lovasz-softmax). Checkpoints last.pt/best.pt are written "
-                                   "atomically after every epoch; rerun to resume.")
+    p = sub.add_parser(
+        "train",
+        help="train a segmentation network on shards or a stream",
+        description="Train a segmenter (Adam, median-frequency weighted CE and/or "
+        "Lovasz-softmax). Checkpoints last.pt/best.pt are written "
+        "atomically after every epoch; rerun to resume.",
+    )
     p.add_argument("--data", metavar="DIR", help="dataset directory from dstenv generate")
-    p.add_argument("--stream", metavar="SCENARIO", nargs="?", const="",
-                   help="train on frames simulated on the fly (no disk); optional scenario")
-    p.add_argument("--steps-per-epoch", type=int, default=0, help="batches per epoch when streaming")
+    p.add_argument(
+        "--stream",
+        metavar="SCENARIO",
+        nargs="?",
+        const="",
+        help="train on frames simulated on the fly (no disk); optional scenario",
+    )
+    p.add_argument(
+        "--steps-per-epoch", type=int, default=0, help="batches per epoch when streaming"
+    )
     p.add_argument("--out", required=True, metavar="DIR", help="checkpoint directory")
     p.add_argument("--model", default="unet-light", choices=sorted(MODELS))
-    p.add_argument("--model-kwargs", type=_json_arg, default={}, metavar="JSON",
-                   help='builder options, e.g. \'{"base": 16}\' or \'{"vgg16_weights": "vgg16.pth"}\'')
+    p.add_argument(
+        "--model-kwargs",
+        type=_json_arg,
+        default={},
+        metavar="JSON",
+        help='builder options, e.g. \'{"base": 16}\' or \'{"vgg16_weights": "vgg16.pth"}\'',
+    )
     p.add_argument("--loss", choices=LOSSES, default=None, help="default wce+lovasz")
-    p.add_argument("--class-weights", type=float, nargs=5, metavar="W",
-                   help="fixed class weights (default: median frequency of the training split)")
+    p.add_argument(
+        "--class-weights",
+        type=float,
+        nargs=5,
+        metavar="W",
+        help="fixed class weights (default: median frequency of the training split)",
+    )
     p.add_argument("--epochs", type=int)
     p.add_argument("--batch-size", type=int)
     p.add_argument("--lr", type=float, help="Adam learning rate (default 1e-3)")
@@ -110,16 +158,27 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=_train)
 
-    b = sub.add_parser("benchmark", help="compare DST and FCN-DST segmenters on held-out maps",
-                       description="Generate data, train the learned segmenters, tune DST, and score every "
-                                   "segmenter on a test split of unseen map seeds. Writes results.md, "
-                                   "results.json and figures/*.png into --out. Rerun to resume.")
-    b.add_argument("--preset", default="cpu", choices=sorted(PRESETS),
-                   help="cpu: <= 30 min on a 2-core CPU (default); gpu: the full benchmark; tiny: smoke test")
+    b = sub.add_parser(
+        "benchmark",
+        help="compare DST and FCN-DST segmenters on held-out maps",
+        description="Generate data, train the learned segmenters, tune DST, and score every "
+        "segmenter on a test split of unseen map seeds. Writes results.md, "
+        "results.json and figures/*.png into --out. Rerun to resume.",
+    )
+    b.add_argument(
+        "--preset",
+        default="cpu",
+        choices=sorted(PRESETS),
+        help="cpu: <= 30 min on a 2-core CPU (default); gpu: the full benchmark; tiny: smoke test",
+    )
     b.add_argument("--out", default="benchmark-out", metavar="DIR", help="output directory")
     b.add_argument("--data", metavar="DIR", help="use existing shards instead of generating")
-    b.add_argument("--set", action="append", metavar="KEY=VALUE",
-                   help="override a preset value, e.g. train.epochs=3 or data.frames=500 (repeatable)")
+    b.add_argument(
+        "--set",
+        action="append",
+        metavar="KEY=VALUE",
+        help="override a preset value, e.g. train.epochs=3 or data.frames=500 (repeatable)",
+    )
     b.add_argument("--check-goal", action="store_true", help="exit 1 if the README goal is not met")
     b.add_argument("--quiet", action="store_true")
     b.set_defaults(func=_benchmark)

@@ -38,7 +38,9 @@ def evaluate(
         A :class:`ConfusionMeter` holding the ``all`` and ``visible`` matrices.
     """
     meter = ConfusionMeter(num_classes)
-    for batch in tqdm(data, desc=desc or f"eval {segmenter.label}", disable=not progress, leave=False):
+    for batch in tqdm(
+        data, desc=desc or f"eval {segmenter.label}", disable=not progress, leave=False
+    ):
         pred = segmenter.predict(torch.as_tensor(batch["x"]))
         meter.update(pred, torch.as_tensor(batch["labels"]), torch.as_tensor(batch["visible"]))
     return meter

@@ -56,19 +56,24 @@ def confusion_matrix(
     p = torch.as_tensor(pred).reshape(-1).long()
     t = torch.as_tensor(target).reshape(-1).long()
     if p.shape != t.shape:
-        raise ValueError(f"pred and target differ in size: {tuple(pred.shape)} vs {tuple(target.shape)}")
+        raise ValueError(
+            f"pred and target differ in size: {tuple(pred.shape)} vs {tuple(target.shape)}"
+        )
     keep = t != ignore_index
     if mask is not None:
         m = torch.as_tensor(mask).reshape(-1)
         if m.shape != t.shape:
-            raise ValueError(f"mask size {tuple(mask.shape)} does not match target {tuple(target.shape)}")
+            raise ValueError(
+                f"mask size {tuple(mask.shape)} does not match target {tuple(target.shape)}"
+            )
         keep &= m.bool()
     p, t = p[keep], t[keep]
     for name, v in (("target", t), ("pred", p)):
         if v.numel() and (int(v.min()) < 0 or int(v.max()) >= num_classes):
+            bad = int(v.max()) if int(v.max()) >= num_classes else int(v.min())
             raise ValueError(
-                f"{name} holds class {int(v.max()) if int(v.max()) >= num_classes else int(v.min())} "
-                f"outside [0, {num_classes}) and not the ignore index {ignore_index}"
+                f"{name} holds class {bad} outside [0, {num_classes}) "
+                f"and not the ignore index {ignore_index}"
             )
     counts = torch.bincount(t * num_classes + p, minlength=num_classes * num_classes)
     return counts.reshape(num_classes, num_classes).cpu().numpy().astype(np.int64)
@@ -123,7 +128,9 @@ def summarize(cm: np.ndarray, class_names: tuple[str, ...] | list[str]) -> dict:
         "confusion": [[int]]}``; undefined values are ``None``.
     """
     if cm.shape != (len(class_names), len(class_names)):
-        raise ValueError(f"confusion matrix {cm.shape} does not match {len(class_names)} class names")
+        raise ValueError(
+            f"confusion matrix {cm.shape} does not match {len(class_names)} class names"
+        )
 
     def per_class(v: np.ndarray) -> dict[str, float | None]:
         return {n: (None if np.isnan(x) else float(x)) for n, x in zip(class_names, v)}
@@ -168,8 +175,13 @@ class ConfusionMeter:
         """Add a batch: ``pred``/``target`` ``(B, H, W)`` int, ``visible`` ``(B, H, W) bool``."""
         self.all += confusion_matrix(pred, target, self.num_classes, None, self.ignore_index)
         if visible is not None:
-            self.visible += confusion_matrix(pred, target, self.num_classes, visible, self.ignore_index)
+            self.visible += confusion_matrix(
+                pred, target, self.num_classes, visible, self.ignore_index
+            )
 
     def summary(self, class_names: tuple[str, ...] | list[str]) -> dict:
         """``{"all": summarize(all), "visible": summarize(visible)}``."""
-        return {"all": summarize(self.all, class_names), "visible": summarize(self.visible, class_names)}
+        return {
+            "all": summarize(self.all, class_names),
+            "visible": summarize(self.visible, class_names),
+        }

@@ -27,7 +27,13 @@ from typing import Any
 from dstenv.dst.params import DSTParams
 from dstenv.segment.segmenters import DSTSegmenter, Segmenter, TorchSegmenter
 
-__all__ = ["SegmenterEntry", "SEGMENTERS", "register_segmenter", "create_segmenter", "segmenter_kind"]
+__all__ = [
+    "SegmenterEntry",
+    "SEGMENTERS",
+    "register_segmenter",
+    "create_segmenter",
+    "segmenter_kind",
+]
 
 
 @dataclass(frozen=True)
@@ -53,7 +59,9 @@ def _make_dst_tuned(
         p = params if isinstance(params, DSTParams) else DSTParams.from_dict(params)
         return DSTSegmenter(p, "dst-tuned", "dst-tuned")
     if not episodes:
-        raise ValueError("dst-tuned needs training episodes to tune on (episodes=...) or fixed params=")
+        raise ValueError(
+            "dst-tuned needs training episodes to tune on (episodes=...) or fixed params="
+        )
     from dstenv.segment.tune import tune_dst_params
 
     best, trace = tune_dst_params(episodes, **search)
@@ -61,7 +69,9 @@ def _make_dst_tuned(
 
 
 def _learned(model_name: str) -> Callable[..., TorchSegmenter]:
-    def factory(in_channels: int = 10, num_classes: int = 5, device: str = "cpu", **model_kwargs: Any):
+    def factory(
+        in_channels: int = 10, num_classes: int = 5, device: str = "cpu", **model_kwargs: Any
+    ):
         return TorchSegmenter(model_name, model_kwargs, in_channels, num_classes, device)
 
     return factory
@@ -70,7 +80,9 @@ def _learned(model_name: str) -> Callable[..., TorchSegmenter]:
 #: name -> :class:`SegmenterEntry`
 SEGMENTERS: dict[str, SegmenterEntry] = {
     "dst": SegmenterEntry(_make_dst, "dst", "argmax of the pignistic probability (pure DST)"),
-    "dst-tuned": SegmenterEntry(_make_dst_tuned, "dst", "DST parameters tuned on the training split"),
+    "dst-tuned": SegmenterEntry(
+        _make_dst_tuned, "dst", "DST parameters tuned on the training split"
+    ),
     "unet-light": SegmenterEntry(_learned("unet-light"), "learned", "light U-Net, trains on a CPU"),
     "unet-temporal": SegmenterEntry(
         _learned("unet-temporal"), "learned", "U-Net with separate t / t-1 streams"
@@ -80,7 +92,11 @@ SEGMENTERS: dict[str, SegmenterEntry] = {
 
 
 def register_segmenter(
-    name: str, factory: Callable[..., Segmenter], kind: str, description: str = "", overwrite: bool = False
+    name: str,
+    factory: Callable[..., Segmenter],
+    kind: str,
+    description: str = "",
+    overwrite: bool = False,
 ) -> None:
     """Add a segmenter to :data:`SEGMENTERS`.
 

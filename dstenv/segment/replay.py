@@ -61,12 +61,18 @@ class Episode:
     def __post_init__(self) -> None:
         t = self.sensor.shape[0]
         if self.gis.shape != self.sensor.shape or self.poses.shape != (t, 3):
-            raise ValueError(f"episode {self.seed}: sensor {self.sensor.shape}, gis {self.gis.shape}, "
-                             f"poses {self.poses.shape} disagree")
-        if len(self.steps) and (np.any(np.diff(self.steps) <= 0) or self.steps[-1] >= t or self.steps[0] < 0):
+            raise ValueError(
+                f"episode {self.seed}: sensor {self.sensor.shape}, gis {self.gis.shape}, "
+                f"poses {self.poses.shape} disagree"
+            )
+        if len(self.steps) and (
+            np.any(np.diff(self.steps) <= 0) or self.steps[-1] >= t or self.steps[0] < 0
+        ):
             raise ValueError(f"episode {self.seed}: scored steps must increase within [0, {t})")
         if self.labels.shape[0] != len(self.steps) or self.visible.shape != self.labels.shape:
-            raise ValueError(f"episode {self.seed}: {len(self.steps)} steps but labels {self.labels.shape}")
+            raise ValueError(
+                f"episode {self.seed}: {len(self.steps)} steps but labels {self.labels.shape}"
+            )
 
 
 def filter_episode(episode: Episode, params: DSTParams) -> np.ndarray:
@@ -138,8 +144,13 @@ def record_episodes(
     return episodes
 
 
-def check_replay(episode: Episode, stored_x: np.ndarray, stored_labels: np.ndarray, params: DSTParams,
-                 atol: float = 1.0 / 255.0) -> None:
+def check_replay(
+    episode: Episode,
+    stored_x: np.ndarray,
+    stored_labels: np.ndarray,
+    params: DSTParams,
+    atol: float = 1.0 / 255.0,
+) -> None:
     """Raise if the replay does not reproduce the stored frames.
 
     Args:
@@ -153,9 +164,17 @@ def check_replay(episode: Episode, stored_x: np.ndarray, stored_labels: np.ndarr
         RuntimeError: naming the episode and the largest difference.
     """
     if not np.array_equal(episode.labels, np.asarray(stored_labels, dtype=episode.labels.dtype)):
-        raise RuntimeError(f"replay of episode seed {episode.seed} gives other labels than the shard: "
-                           "the pipeline is not reproducible with the stored config")
-    diff = float(np.abs(filter_episode(episode, params) - stored_x).max()) if len(episode.steps) else 0.0
+        raise RuntimeError(
+            f"replay of episode seed {episode.seed} gives other labels than the shard: "
+            "the pipeline is not reproducible with the stored config"
+        )
+    diff = (
+        float(np.abs(filter_episode(episode, params) - stored_x).max())
+        if len(episode.steps)
+        else 0.0
+    )
     if diff > atol:
-        raise RuntimeError(f"replay of episode seed {episode.seed} differs from the stored BetP by {diff:.4f} "
-                           f"(> {atol:.4f}) with the generation DST parameters")
+        raise RuntimeError(
+            f"replay of episode seed {episode.seed} differs from the stored BetP by {diff:.4f} "
+            f"(> {atol:.4f}) with the generation DST parameters"
+        )

@@ -17,11 +17,24 @@ import numpy as np
 from dstenv.dst.frame import CLASSES
 from dstenv.frame import IGNORE_INDEX
 
-__all__ = ["write_json", "markdown_table", "plot_confusions", "plot_curves", "plot_examples", "CLASS_COLORS"]
+__all__ = [
+    "write_json",
+    "markdown_table",
+    "plot_confusions",
+    "plot_curves",
+    "plot_examples",
+    "CLASS_COLORS",
+]
 
 #: RGB colour per class (navigable, non_navigable, building, static, moving), grey = ignore
 CLASS_COLORS = np.array(
-    [[0.85, 0.85, 0.85], [0.55, 0.75, 0.45], [0.35, 0.35, 0.55], [0.95, 0.65, 0.10], [0.85, 0.10, 0.10]]
+    [
+        [0.85, 0.85, 0.85],
+        [0.55, 0.75, 0.45],
+        [0.35, 0.35, 0.55],
+        [0.95, 0.65, 0.10],
+        [0.85, 0.10, 0.10],
+    ]
 )
 _IGNORE_COLOR = np.array([1.0, 1.0, 1.0])
 
@@ -52,40 +65,61 @@ def markdown_table(results: dict[str, Any]) -> str:
     data = results.get("data", {})
     if data:
         lines += [
-            f"Test split: {data.get('test_frames', '?')} frames from {data.get('test_episodes', '?')} held-out "
-            f"map seeds (never used in training); train {data.get('train_frames', '?')} frames, "
+            f"Test split: {data.get('test_frames', '?')} frames from "
+            f"{data.get('test_episodes', '?')} held-out map seeds (never used in training); "
+            f"train {data.get('train_frames', '?')} frames, "
             f"val {data.get('val_frames', '?')}; grid {data.get('grid_shape', '?')} cells of "
             f"{data.get('cell_size', '?')} m.",
             "",
         ]
     for scope, title in (("all", "all labelled cells"), ("visible", "visible cells only")):
-        lines += [f"## IoU over {title}", "", "| segmenter | " + " | ".join(CLASSES) + " | mIoU |",
-                  "|---|" + "---:|" * (len(CLASSES) + 1)]
-        for label, seg in results["segmenters"].items():
-            m = seg[scope]
-            lines.append(f"| {label} | " + " | ".join(_fmt(m["iou"][c]) for c in CLASSES)
-                         + f" | **{_fmt(m['miou'])}** |")
-        lines += ["", f"## Accuracy, precision, recall over {title} (precision/recall: class means)", "",
-                  "| segmenter | accuracy | precision | recall | "
-                  + " | ".join(f"P {c} | R {c}" for c in ("static", "moving")) + " |",
-                  "|---|---:|---:|---:|---:|---:|---:|---:|"]
+        lines += [
+            f"## IoU over {title}",
+            "",
+            "| segmenter | " + " | ".join(CLASSES) + " | mIoU |",
+            "|---|" + "---:|" * (len(CLASSES) + 1),
+        ]
         for label, seg in results["segmenters"].items():
             m = seg[scope]
             lines.append(
-                f"| {label} | {_fmt(m['accuracy'])} | {_fmt(m['mean_precision'])} | {_fmt(m['mean_recall'])} | "
-                + " | ".join(f"{_fmt(m['precision'][c])} | {_fmt(m['recall'][c])}" for c in ("static", "moving"))
+                f"| {label} | "
+                + " | ".join(_fmt(m["iou"][c]) for c in CLASSES)
+                + f" | **{_fmt(m['miou'])}** |"
+            )
+        lines += [
+            "",
+            f"## Accuracy, precision, recall over {title} (precision/recall: class means)",
+            "",
+            "| segmenter | accuracy | precision | recall | "
+            + " | ".join(f"P {c} | R {c}" for c in ("static", "moving"))
+            + " |",
+            "|---|---:|---:|---:|---:|---:|---:|---:|",
+        ]
+        for label, seg in results["segmenters"].items():
+            m = seg[scope]
+            lines.append(
+                f"| {label} | {_fmt(m['accuracy'])} | {_fmt(m['mean_precision'])} | "
+                f"{_fmt(m['mean_recall'])} | "
+                + " | ".join(
+                    f"{_fmt(m['precision'][c])} | {_fmt(m['recall'][c])}"
+                    for c in ("static", "moving")
+                )
                 + " |"
             )
         lines.append("")
     goal = results.get("goal")
     if goal:
-        lines += ["## Goal", "",
-                  f"Best learned: **{goal['best_learned']}** mIoU {_fmt(goal['best_learned_miou'])}; "
-                  f"best DST: **{goal['best_dst']}** mIoU {_fmt(goal['best_dst_miou'])}; "
-                  f"margin {_fmt(goal['margin'])} (goal >= 0.15: {'met' if goal['margin_met'] else 'NOT met'}); "
-                  f"moving IoU {_fmt(goal['moving_iou'])} (goal >= 0.6: {'met' if goal['moving_met'] else 'NOT met'}); "
-                  f"static IoU {_fmt(goal['static_iou'])} (goal >= 0.5: {'met' if goal['static_met'] else 'NOT met'}).",
-                  ""]
+        met = {k: "met" if goal[f"{k}_met"] else "NOT met" for k in ("margin", "moving", "static")}
+        lines += [
+            "## Goal",
+            "",
+            f"Best learned: **{goal['best_learned']}** mIoU {_fmt(goal['best_learned_miou'])}; "
+            f"best DST: **{goal['best_dst']}** mIoU {_fmt(goal['best_dst_miou'])}; "
+            f"margin {_fmt(goal['margin'])} (goal >= 0.15: {met['margin']}); "
+            f"moving IoU {_fmt(goal['moving_iou'])} (goal >= 0.6: {met['moving']}); "
+            f"static IoU {_fmt(goal['static_iou'])} (goal >= 0.5: {met['static']}).",
+            "",
+        ]
     if results.get("command"):
         lines += ["Reproduce with:", "", "```", results["command"], "```", ""]
     return "\n".join(lines)
@@ -123,8 +157,15 @@ def plot_confusions(results: dict[str, Any], path: str | Path, scope: str = "all
         ax.imshow(norm, vmin=0, vmax=1, cmap="Blues")
         for i in range(len(CLASSES)):
             for j in range(len(CLASSES)):
-                ax.text(j, i, f"{norm[i, j]:.2f}", ha="center", va="center", fontsize=7,
-                        color="white" if norm[i, j] > 0.6 else "black")
+                ax.text(
+                    j,
+                    i,
+                    f"{norm[i, j]:.2f}",
+                    ha="center",
+                    va="center",
+                    fontsize=7,
+                    color="white" if norm[i, j] > 0.6 else "black",
+                )
         ax.set_xticks(range(len(CLASSES)), short, rotation=45, fontsize=7)
         ax.set_yticks(range(len(CLASSES)), short, fontsize=7)
         ax.set_title(f"{label}\nmIoU {_fmt(seg[scope]['miou'])}", fontsize=8)
@@ -141,9 +182,20 @@ def plot_curves(histories: dict[str, dict[str, list]], path: str | Path) -> Path
     for name, h in histories.items():
         ax1.plot(h["epoch"], h["train_loss"], "-o", ms=3, label=f"{name} train")
         if any(v is not None for v in h["val_loss"]):
-            ax1.plot(h["epoch"], [np.nan if v is None else v for v in h["val_loss"]], "--o", ms=3,
-                     label=f"{name} val")
-            ax2.plot(h["epoch"], [np.nan if v is None else v for v in h["val_miou"]], "-o", ms=3, label=name)
+            ax1.plot(
+                h["epoch"],
+                [np.nan if v is None else v for v in h["val_loss"]],
+                "--o",
+                ms=3,
+                label=f"{name} val",
+            )
+            ax2.plot(
+                h["epoch"],
+                [np.nan if v is None else v for v in h["val_miou"]],
+                "-o",
+                ms=3,
+                label=name,
+            )
     ax1.set_xlabel("epoch")
     ax1.set_ylabel("loss")
     ax1.legend(fontsize=7)
@@ -174,7 +226,9 @@ def plot_examples(examples: list[dict[str, Any]], path: str | Path) -> Path:
         raise ValueError("no examples to plot")
     names = list(examples[0]["predictions"])
     ncol = 2 + len(names)
-    fig, axes = plt.subplots(len(examples), ncol, figsize=(2.3 * ncol, 2.4 * len(examples)), squeeze=False)
+    fig, axes = plt.subplots(
+        len(examples), ncol, figsize=(2.3 * ncol, 2.4 * len(examples)), squeeze=False
+    )
     for row, ex in zip(axes, examples):
         row[0].imshow(ex["betp_moving"], vmin=0, vmax=1, cmap="magma")
         row[0].set_title(f"DST BetP(moving)\n{ex['title']}", fontsize=7)

@@ -53,7 +53,13 @@ class DSTSegmenter(Segmenter):
         info: extra JSON-compatible facts for the report (e.g. the tuning trace).
     """
 
-    def __init__(self, params: DSTParams, name: str = "dst", label: str | None = None, info: dict | None = None):
+    def __init__(
+        self,
+        params: DSTParams,
+        name: str = "dst",
+        label: str | None = None,
+        info: dict | None = None,
+    ):
         self.params = params
         self.name = name
         self.label = label or name
@@ -92,12 +98,16 @@ class TorchSegmenter(Segmenter):
         self.in_channels = in_channels
         self.num_classes = num_classes
         self.device = torch.device(device)
-        self.model: SegmentationModel = build_model(model_name, in_channels, num_classes, **self.model_kwargs)
+        self.model: SegmentationModel = build_model(
+            model_name, in_channels, num_classes, **self.model_kwargs
+        )
         self.model.to(self.device)
 
     def predict(self, x: torch.Tensor) -> torch.Tensor:
         if x.dim() != 4 or x.shape[1] != self.in_channels:
-            raise ValueError(f"{self.name} needs (B, {self.in_channels}, H, W) input, got {tuple(x.shape)}")
+            raise ValueError(
+                f"{self.name} needs (B, {self.in_channels}, H, W) input, got {tuple(x.shape)}"
+            )
         return self.model.predict(x.to(self.device)).cpu()
 
     def spec(self) -> dict[str, Any]:

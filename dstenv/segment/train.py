@@ -38,6 +38,7 @@ def default_train_config() -> dict[str, Any]:
         "model_kwargs": {},  # builder options, e.g. {"base": 16}
         "loss": "wce+lovasz",  # one of dstenv.segment.losses.LOSSES
         "class_weights": None,  # list of 5 floats; None: median frequency of the training data
+        "weight_power": 1.0,  # median-frequency weights ** this (1: paper eq. 2; 0: unweighted)
         "epochs": 10,
         "batch_size": 8,
         "lr": 1e-3,  # Adam learning rate (betas 0.9/0.999, eps 1e-8 as in the paper)
@@ -61,33 +62,46 @@ def resolve_device(name: str) -> torch.device:
 
 def _check(cfg: dict[str, Any]) -> None:
     if cfg["model"] not in MODELS:
-        raise ConfigError(f"train.model: unknown model {cfg['model']!r}; choose from {', '.join(MODELS)}")
+        raise ConfigError(
+            f"train.model: unknown model {cfg['model']!r}; choose from {', '.join(MODELS)}"
+        )
     if cfg["loss"] not in LOSSES:
-        raise ConfigError(f"train.loss: unknown loss {cfg['loss']!r}; choose from {', '.join(LOSSES)}")
+        raise ConfigError(
+            f"train.loss: unknown loss {cfg['loss']!r}; choose from {', '.join(LOSSES)}"
+        )
     for key in ("epochs", "batch_size"):
         if cfg[key] < 1:
             raise ConfigError(f"train.{key}: must be >= 1, got {cfg[key]}")
-    if cfg["crop"] < 0 or cfg["max_batches"] < 0 or cfg["lr"] <= 0:
-        raise ConfigError("train.crop/max_batches must be >= 0 and train.lr > 0")
+    if cfg["crop"] < 0 or cfg["max_batches"] < 0 or cfg["lr"] <= 0 or cfg["weight_power"] < 0:
+        raise ConfigError("train.crop, max_batches and weight_power must be >= 0 and train.lr > 0")
 
 
-def _class_weights(cfg: dict[str, Any], data: Any, log: Callable[[str], None]) -> list[float] | None:
+def _class_weights(
+    cfg: dict[str, Any], data: Any, log: Callable[[str], None]
+) -> list[float] | None:
     if not cfg["loss"].startswith("wce"):
         return None
     if cfg["class_weights"] is not None:
         if len(cfg["class_weights"]) != len(CLASSES):
-            raise ConfigError(f"train.class_weights: need {len(CLASSES)} values, got {len(cfg['class_weights'])}")
+            raise ConfigError(
+                f"train.class_weights: need {len(CLASSES)} values, got {len(cfg['class_weights'])}"
+            )
         return [float(w) for w in cfg["class_weights"]]
     if isinstance(data, torch.utils.data.IterableDataset):
         raise ConfigError("train.class_weights must be given for a streaming dataset")
     loader = torch.utils.data.DataLoader(data, batch_size=16, num_workers=cfg["num_workers"])
     counts, present = class_statistics((b["labels"] for b in loader), len(CLASSES))
-    weights = median_frequency_weights(counts, present)
-    log("class weights (median frequency): " + ", ".join(f"{n} {w:.3g}" for n, w in zip(CLASSES, weights)))
+    weights = median_frequency_weights(counts, present) ** float(cfg["weight_power"])
+    log(
+        f"class weights (median frequency ^ {cfg['weight_power']:g}): "
+        + ", ".join(f"{n} {w:.3g}" for n, w in zip(CLASSES, weights))
+    )
     return [float(w) for w in weights]
 
 
-def _crop(batch: dict[str, torch.Tensor], size: int, gen: torch.Generator) -> dict[str, torch.Tensor]:
+def _crop(
+    batch: dict[str, torch.Tensor], size: int, gen: torch.Generator
+) -> dict[str, torch.Tensor]:
     h, w = batch["labels"].shape[-2:]
     if size <= 0 or (size >= h and size >= w):
         return batch
@@ -140,8 +154,10 @@ def train(
         saved.pop("class_weights", None)
         if saved != mine:
             diff = sorted(k for k in mine if saved.get(k) != mine[k])
-            raise ConfigError(f"{last}: checkpoint was trained with other settings ({', '.join(diff)}); "
-                              "use another output directory or --no-resume")
+            raise ConfigError(
+                f"{last}: checkpoint was trained with other settings ({', '.join(diff)}); "
+                "use another output directory or --no-resume"
+            )
         cfg["class_weights"] = ckpt["config"]["class_weights"]
     else:
         cfg["class_weights"] = _class_weights(cfg, train_data, log)
@@ -149,11 +165,24 @@ def train(
     torch.manual_seed(cfg["seed"])
     seg = TorchSegmenter(cfg["model"], cfg["model_kwargs"], in_channels, len(CLASSES), device)
     model = seg.model
-    weights = None if cfg["class_weights"] is None else np.asarray(cfg["class_weights"], dtype=np.float32)
+    weights = (
+        None if cfg["class_weights"] is None else np.asarray(cfg["class_weights"], dtype=np.float32)
+    )
     loss_fn = build_loss(cfg["loss"], weights).to(device)
-    opt = torch.optim.Adam(model.parameters(), lr=cfg["lr"], betas=(0.9, 0.999), eps=1e-8,
-                           weight_decay=cfg["weight_decay"])
-    history: dict[str, list] = {"epoch": [], "train_loss": [], "val_loss": [], "val_miou": [], "val_iou": []}
+    opt = torch.optim.Adam(
+        model.parameters(),
+        lr=cfg["lr"],
+        betas=(0.9, 0.999),
+        eps=1e-8,
+        weight_decay=cfg["weight_decay"],
+    )
+    history: dict[str, list] = {
+        "epoch": [],
+        "train_loss": [],
+        "val_loss": [],
+        "val_miou": [],
+        "val_iou": [],
+    }
     start = 0
     if ckpt is not None:
         model.load_state_dict(ckpt["model"])
@@ -169,16 +198,25 @@ def train(
         if hasattr(train_data, "set_epoch"):  # streaming: a new episode stream per epoch
             train_data.set_epoch(epoch)
         loader = torch.utils.data.DataLoader(
-            train_data, batch_size=cfg["batch_size"], shuffle=not streaming, generator=gen,
-            num_workers=cfg["num_workers"], drop_last=False,
+            train_data,
+            batch_size=cfg["batch_size"],
+            shuffle=not streaming,
+            generator=gen,
+            num_workers=cfg["num_workers"],
+            drop_last=False,
         )
         n_batches = len(loader) if not streaming else cfg["max_batches"]
         if cfg["max_batches"]:
             n_batches = min(n_batches, cfg["max_batches"])
         model.train()
         total, count = 0.0, 0
-        bar = tqdm(loader, total=n_batches, desc=f"epoch {epoch + 1}/{cfg['epochs']}", disable=not progress,
-                   leave=False)
+        bar = tqdm(
+            loader,
+            total=n_batches,
+            desc=f"epoch {epoch + 1}/{cfg['epochs']}",
+            disable=not progress,
+            leave=False,
+        )
         for b, batch in enumerate(bar):
             if b >= n_batches:
                 break
@@ -199,12 +237,24 @@ def train(
         history["val_loss"].append(val_loss)
         history["val_miou"].append(val_miou)
         history["val_iou"].append(val_iou)
-        log(f"epoch {epoch + 1}: train loss {total / max(count, 1):.4f}"
-            + (f", val loss {val_loss:.4f}, val mIoU {val_miou:.3f}" if val_miou is not None else ""))
+        log(
+            f"epoch {epoch + 1}: train loss {total / max(count, 1):.4f}"
+            + (
+                f", val loss {val_loss:.4f}, val mIoU {val_miou:.3f}"
+                if val_miou is not None
+                else ""
+            )
+        )
         if out is not None:
-            payload = {"spec": seg.spec(), "model": model.state_dict(), "optimizer": opt.state_dict(),
-                       "epoch": epoch, "rng": {"torch": torch.get_rng_state()}, "config": cfg,
-                       "history": history}
+            payload = {
+                "spec": seg.spec(),
+                "model": model.state_dict(),
+                "optimizer": opt.state_dict(),
+                "epoch": epoch,
+                "rng": {"torch": torch.get_rng_state()},
+                "config": cfg,
+                "history": history,
+            }
             save_checkpoint(last, payload)
             score = val_miou if val_miou is not None else -(total / max(count, 1))
             if score > best:
@@ -215,13 +265,17 @@ def train(
 
 
 @torch.no_grad()
-def _validate(model, loss_fn, val_data, cfg, device) -> tuple[float | None, float | None, list | None]:
+def _validate(
+    model, loss_fn, val_data, cfg, device
+) -> tuple[float | None, float | None, list | None]:
     if val_data is None:
         return None, None, None
     model.eval()
     meter = ConfusionMeter(len(CLASSES))
     total, count = 0.0, 0
-    loader = torch.utils.data.DataLoader(val_data, batch_size=cfg["batch_size"], num_workers=cfg["num_workers"])
+    loader = torch.utils.data.DataLoader(
+        val_data, batch_size=cfg["batch_size"], num_workers=cfg["num_workers"]
+    )
     for batch in loader:
         x = batch["x"].to(device).float()
         y = batch["labels"].to(device).long()

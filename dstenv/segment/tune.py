@@ -123,8 +123,14 @@ def tune_dst_params(
         if not improved:
             frac /= 2
     bar.close()
-    trace = {"budget": budget, "seed": seed, "start_miou": _num(start_score), "best_miou": _num(best_score),
-             "best_params": best.to_dict(), "evaluations": evaluations}
+    trace = {
+        "budget": budget,
+        "seed": seed,
+        "start_miou": _num(start_score),
+        "best_miou": _num(best_score),
+        "best_params": best.to_dict(),
+        "evaluations": evaluations,
+    }
     return best, trace
 
 

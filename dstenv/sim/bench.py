@@ -24,7 +24,7 @@ __all__ = ["run", "BENCH_CONFIG"]
 #: a 3 x 3 block city with about 40 agents (moving, parked, pedestrians)
 BENCH_CONFIG = {
     "map": {"blocks_x": 3, "blocks_y": 3},
-    "traffic": {"cars": 14, "cyclists": 2, "pedestrians": 12, "parked_density": 0.15},
+    "traffic": {"cars": 14, "cyclists": 2, "pedestrians": 12, "parked_density": 0.08},
 }
 
 

@@ -95,6 +95,7 @@ def generate_city(cfg: dict[str, Any], traffic: dict[str, Any],
 
     # crosswalks: both sides of every street leaving a junction, between the blocks it separates
     inset = curb + sw / 2
+    walk_off = min(LANE_OFFSET, sw / 4)  # walking lines stay well inside narrow sidewalks
     crossings, zebras = [], []
     for i in range(nx):
         for j in range(ny):
@@ -113,14 +114,14 @@ def generate_city(cfg: dict[str, Any], traffic: dict[str, Any],
                     continue
                 d = np.array(d, float)
                 p = np.array([-d[1], d[0]])  # left of the arm's direction
-                lat = hw + inset - LANE_OFFSET
+                lat = hw + inset - walk_off
                 for along, a, b in ((1.9, left_cell, right_cell), (3.1, right_cell, left_cell)):
                     base = node_xy[n] + d * (reach[n] + along)
                     sgn = 1.0 if a == left_cell else -1.0
                     crossings.append((face_of[a], face_of[b], base + sgn * p * lat,
                                       base - sgn * p * lat))
                 zebras.append((node_xy[n] + d * (reach[n] + 2.5), d, hw))
-    add_block_rings(builder, faces, inset, crossings)
+    add_block_rings(builder, faces, inset, crossings, walk_off)
     network = builder.build(node_xy, control, phase, lw)
 
     # rasters
@@ -253,7 +254,7 @@ def _parking(surface, face, cfg, rng, res, avoid: np.ndarray,
 def _buildings(face, cfg, rng, side: int | None = None) -> list[np.ndarray]:
     """Rows of buildings along the four sides of a block (or only along ``side`` of a
     one-sided frontage strip), without overlaps."""
-    front = cfg["curb_strip_width"] + cfg["sidewalk_width"]
+    front = cfg["curb_strip_width"] + cfg["sidewalk_width"] + 0.3  # clear of the walkers
     x0, x1, y0, y1 = face
     inner = (x0 + front, x1 - front, y0 + front, y1 - front)
     if side is not None:  # only the street side has a sidewalk

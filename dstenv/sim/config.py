@@ -21,8 +21,10 @@ def default_config() -> dict[str, Any]:
         "dt": 0.1,  # [s] simulation step (the Velodyne's 10 Hz)
         "map": {
             "kind": "procedural",  # "procedural" city generator | "osm" file
-            "osm_file": "",  # path of a .osm / .osm.bz2 file (kind = "osm"); relative
-            #                  paths are resolved against the scenario file's directory
+            "osm_file": "",  # path of a .osm / .osm.bz2 file (kind = "osm"); a relative
+            #                  path is looked up in World(base_dir=...) (the scenario
+            #                  file's folder for `dstenv render`), the current folder,
+            #                  then the shipped scenarios
             "resolution": 0.2,  # [m] map raster cell size
             "margin": 35.0,  # [m] frontage beyond the outer streets / space around an OSM map
             "blocks_x": 5,  # number of blocks along x (procedural)
@@ -58,7 +60,7 @@ def default_config() -> dict[str, Any]:
             "pedestrian_speed": 1.3,  # [m/s]
             "stop_sign_prob": 0.35,  # [-] share of junctions that are all-way stops
             "signal_prob": 0.35,  # [-] share of junctions with traffic lights (rest: yield)
-            "signal_green": 12.0,  # [s] green time per phase (plus 3 s all-red)
+            "signal_green": 12.0,  # [s] green per phase (none enter its last 3 s; 3 s all-red)
             "stop_duration": 1.5,  # [s] standstill required at a stop sign
             "halt_rate": 0.01,  # [1/s] chance per second that a car halts in its lane
             "halt_duration": 6.0,  # [s] mean duration of such a halt (exponential, at most 4x)

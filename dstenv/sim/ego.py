@@ -4,12 +4,16 @@ from __future__ import annotations
 
 import math
 
+import numba as nb
 import numpy as np
 
 from dstenv.sim.raster import lookup
-from dstenv.sim.types import Agents, MapClass, WorldMap
+from dstenv.sim.types import MapClass, WorldMap
 
-__all__ = ["bicycle_step", "pure_pursuit", "box_corners", "boxes_overlap", "footprint_classes"]
+BUILDING, ROAD = int(MapClass.BUILDING), int(MapClass.ROAD)
+
+__all__ = ["bicycle_step", "pure_pursuit", "box_corners", "boxes_overlap", "box_overlap",
+           "footprint_classes", "hits"]
 
 
 def bicycle_step(x: float, y: float, yaw: float, v: float, accel: float, steer: float,
@@ -107,15 +111,59 @@ def footprint_classes(world_map: WorldMap, corners: np.ndarray, n_edge: int = 3)
     return lookup(world_map, pts)
 
 
-def hits(world_map: WorldMap, agents: Agents, corners: np.ndarray) -> tuple[bool, bool]:
-    """``(collision, off_road)`` of a footprint: overlap with an agent or a building,
-    or any part of it off the road."""
-    cls = footprint_classes(world_map, corners)
-    centre = corners.mean(0)
-    near = np.flatnonzero(np.hypot(*(agents.xy - centre).T) < 8.0) if len(agents) else []
-    collide = bool((cls == MapClass.BUILDING).any())
-    if len(near):
-        sub = Agents(agents.xy[near], agents.yaw[near], agents.speed[near], agents.length[near],
-                     agents.width[near], agents.kind[near], agents.parked[near])
-        collide = collide or bool(boxes_overlap(corners, sub.corners()).any())
-    return collide, bool((cls != MapClass.ROAD).any())
+@nb.njit(cache=True)
+def box_overlap(x1, y1, h1, l1, w1, x2, y2, h2, l2, w2):
+    """Separating-axis test of two oriented boxes (centre, yaw, half length, half width)."""
+    dx, dy = x2 - x1, y2 - y1
+    if dx * dx + dy * dy > (l1 + w1 + l2 + w2) ** 2:
+        return False
+    c1, s1, c2, s2 = np.cos(h1), np.sin(h1), np.cos(h2), np.sin(h2)
+    for ax, ay in ((c1, s1), (-s1, c1), (c2, s2), (-s2, c2)):
+        r1 = l1 * abs(c1 * ax + s1 * ay) + w1 * abs(-s1 * ax + c1 * ay)
+        r2 = l2 * abs(c2 * ax + s2 * ay) + w2 * abs(-s2 * ax + c2 * ay)
+        if abs(dx * ax + dy * ay) >= r1 + r2 - 1e-9:
+            return False
+    return True
+
+
+def hits(world_map: WorldMap, xy: np.ndarray, yaw: np.ndarray, half_len: np.ndarray,
+         half_wid: np.ndarray, box: tuple[float, float, float, float, float]) -> tuple[bool, bool]:
+    """``(collision, off_road)`` of a footprint.
+
+    Args:
+        world_map: the map (its raster decides building / road).
+        xy, yaw, half_len, half_wid: the other bodies, ``(N, 2)`` / ``(N,)`` float64.
+        box: ``(x, y, yaw, length, width)`` of the footprint.
+
+    Returns:
+        collision: it overlaps a body or a building cell; off_road: some part of it
+        (corners, edge midpoints, centre) is not on a road cell.
+    """
+    x0, y0 = world_map.origin
+    return _hits(world_map.raster, float(x0), float(y0), float(world_map.resolution),
+                 float(box[0]), float(box[1]), float(box[2]), box[3] / 2, box[4] / 2,
+                 xy, yaw, half_len, half_wid)
+
+
+@nb.njit(cache=True)
+def _hits(raster, x0, y0, res, x, y, yaw, hl, hw, axy, ayaw, ahl, ahw):
+    c, s = np.cos(yaw), np.sin(yaw)
+    h, w = raster.shape
+    collide, off = False, False
+    for a in (-1.0, -0.5, 0.0, 0.5, 1.0):
+        for b in (-1.0, 0.0, 1.0):
+            px = x + c * a * hl - s * b * hw
+            py = y + s * a * hl + c * b * hw
+            col = int(np.floor((px - x0) / res))
+            row = int(np.floor((py - y0) / res))
+            if row < 0 or row >= h or col < 0 or col >= w:
+                off = True
+                continue
+            code = raster[row, col]
+            collide = collide or code == BUILDING
+            off = off or code != ROAD
+    for j in range(axy.shape[0]):
+        if box_overlap(x, y, yaw, hl, hw, axy[j, 0], axy[j, 1], ayaw[j], ahl[j], ahw[j]):
+            collide = True
+            break
+    return collide, off

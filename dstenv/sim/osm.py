@@ -28,7 +28,7 @@ from shapely.geometry import LineString, Polygon
 
 from dstenv.sim.lanes import Control, LaneKind, NetworkBuilder, cut_polyline, offset_polyline
 from dstenv.sim.raster import Surface, fill_polygon
-from dstenv.sim.roads import RoadEdge, add_road_lanes
+from dstenv.sim.roads import RoadEdge, add_road_lanes, turning_circle
 from dstenv.sim.types import MapClass, WorldMap
 
 __all__ = ["load_osm", "latlon_to_mercator", "EARTH_RADIUS"]
@@ -41,6 +41,7 @@ ROAD_LANES = {"motorway": 4, "trunk": 4, "primary": 2, "secondary": 2, "tertiary
 FOOT_TYPES = {"footway", "path", "pedestrian", "steps", "cycleway", "bridleway", "corridor"}
 FOOT_WIDTH = 2.0  # [m]
 WALK_OFFSET = 0.6  # [m] half distance between the two walking lines of a footway
+KERB_RADIUS = 4.0  # [m] rounding of the kerb at junctions
 
 
 def latlon_to_mercator(lat, lon, scale: float) -> tuple[np.ndarray, np.ndarray]:
@@ -223,7 +224,8 @@ def load_osm(path: str | Path, *, resolution: float = 0.2, lane_width: float = 3
         node_xy[n] = pos[ref]
     trims = np.array([half.get(n, 3.0) + 1.5 for n in range(len(gid))])
     builder = NetworkBuilder()
-    degree = add_road_lanes(builder, len(gid), edges, trims, lane_width)
+    degree = add_road_lanes(builder, len(gid), edges, trims, lane_width,
+                            right_radius=KERB_RADIUS + lane_width / 2)
     rng = np.random.default_rng(0)  # fixed: the same file gives the same junction rules
     tr = traffic or {"stop_sign_prob": 0.0, "signal_prob": 0.0, "signal_green": 12.0}
     u = rng.random(len(gid))
@@ -245,7 +247,15 @@ def load_osm(path: str | Path, *, resolution: float = 0.2, lane_width: float = 3
     for line in foot:
         _paint(surface, LineString(line).buffer(FOOT_WIDTH / 2), origin, resolution,
                Surface.SIDEWALK)
+    for e in edges:  # paved turning circles where streets end
+        for n, seg in ((e.u, e.poly[[1, 0]]), (e.v, e.poly[[-2, -1]])):
+            if degree[n] == 1:
+                d = seg[1] - seg[0]
+                centre, radius = turning_circle(node_xy[n], float(np.arctan2(d[1], d[0])), 3.0)
+                road_polys.append(shapely.Point(centre).buffer(radius))
     road_union = shapely.union_all(road_polys) if road_polys else Polygon()
+    # rounded kerbs at junctions (a morphological closing), so turning cars stay on road
+    road_union = road_union.buffer(KERB_RADIUS).buffer(-KERB_RADIUS)
     polys = []
     for b in buildings:
         if b.intersects(road_union):
@@ -255,9 +265,8 @@ def load_osm(path: str | Path, *, resolution: float = 0.2, lane_width: float = 3
                 polys.append(np.asarray(part.exterior.coords)[:-1])
                 _paint(raster, part, origin, resolution, MapClass.BUILDING)
                 _paint(surface, part, origin, resolution, Surface.BUILDING)
-    for rp in road_polys:
-        _paint(raster, rp, origin, resolution, MapClass.ROAD)
-        _paint(surface, rp, origin, resolution, Surface.ROAD)
+    _paint(raster, road_union, origin, resolution, MapClass.ROAD)
+    _paint(surface, road_union, origin, resolution, Surface.ROAD)
     wm = WorldMap(raster=raster, origin=origin, resolution=resolution, buildings=polys)
     _add_walks(builder, wm, edges, edge_half, trims, foot)
     wm.lanes = builder.build(node_xy, control, phase, lane_width)

@@ -9,9 +9,11 @@ import numpy as np
 from dstenv.sim.lanes import (LaneKind, NetworkBuilder, Turn, bezier, cut_polyline, fillet_curve,
                               offset_polyline)
 
-__all__ = ["RoadEdge", "add_road_lanes", "signal_group"]
+__all__ = ["RoadEdge", "add_road_lanes", "signal_group", "balloon", "turning_circle"]
 
 STRAIGHT_ANGLE = np.deg2rad(35.0)  # [rad] heading change below which a manoeuvre is straight
+UTURN_RADIUS = 4.5  # [m] loop radius of a U-turn at a dead end (a car can follow it)
+UTURN_AHEAD = 4.0  # [m] from the lane ends to the near edge of the U-turn loop (smooth legs)
 
 
 @dataclass
@@ -37,6 +39,27 @@ class RoadEdge:
 def signal_group(heading: float) -> int:
     """Traffic-light phase (0 or 1) of an approach: axis of its heading."""
     return int(((heading % np.pi) + np.pi / 4) // (np.pi / 2)) % 2
+
+
+def balloon(p0: np.ndarray, h0: float, p1: np.ndarray, radius: float = UTURN_RADIUS) -> np.ndarray:
+    """U-turn at a dead end: a counter-clockwise loop of ``radius`` [m] around a point
+    ahead of the lane ends (a turning circle), from ``p0`` (heading ``h0``) to ``p1``."""
+    d = np.array([np.cos(h0), np.sin(h0)])
+    left = np.array([-d[1], d[0]])
+    mid = (np.asarray(p0) + np.asarray(p1)) / 2
+    centre = mid + d * (UTURN_AHEAD + 0.5 * radius)
+    ang = np.deg2rad(np.linspace(-110.0, 110.0, 23))
+    ring = centre + radius * (np.cos(ang)[:, None] * d + np.sin(ang)[:, None] * left)
+    return np.vstack([p0, ring, p1])
+
+
+def turning_circle(node_xy: np.ndarray, h_in: float, uturn_trim: float,
+                   radius: float = UTURN_RADIUS) -> tuple[np.ndarray, float]:
+    """Centre and radius [m] of the paved disc a :func:`balloon` U-turn needs at a dead
+    end reached at heading ``h_in`` (a car's half width and a margin included)."""
+    d = np.array([np.cos(h_in), np.sin(h_in)])
+    centre = np.asarray(node_xy) + d * (UTURN_AHEAD - uturn_trim + 0.5 * radius)
+    return centre, radius + 2.4
 
 
 def _wrap(a: float) -> float:
@@ -137,8 +160,10 @@ def _connect(builder: NetworkBuilder, node: int, deg: int, by_edge: dict, a: int
         poly = None
         if turn == Turn.RIGHT and ka == na - 1:
             poly = fillet_curve(pa, ha, pb, hb, right_radius)
+        if turn == Turn.UTURN:
+            poly = balloon(pa, ha, pb)
         if poly is None:
-            poly = bezier(pa, ha, pb, hb, n=24, k=0.67 if turn == Turn.UTURN else 0.42)
+            poly = bezier(pa, ha, pb, hb, n=24, k=0.42)
         c = builder.add(poly, LaneKind.CONNECTOR, node=node, turn=turn, group=signal_group(ha))
         builder.link(a, c)
         builder.link(c, b)

@@ -59,7 +59,8 @@ def _split(ring: np.ndarray, cuts: list[float]) -> list[np.ndarray]:
 
 
 def add_block_rings(builder: NetworkBuilder, faces: list[tuple[float, float, float, float]],
-                    inset: float, crossings: list[tuple[int, int, np.ndarray, np.ndarray]]) -> int:
+                    inset: float, crossings: list[tuple[int, int, np.ndarray, np.ndarray]],
+                    offset: float = LANE_OFFSET) -> int:
     """Add sidewalk rings of all blocks and the crosswalks between them.
 
     Args:
@@ -72,8 +73,8 @@ def add_block_rings(builder: NetworkBuilder, faces: list[tuple[float, float, flo
     Returns:
         Number of crosswalk lanes added (crossings whose ends miss a ring are dropped).
     """
-    outer = [rounded_rect(x0 + inset - LANE_OFFSET, x1 - inset + LANE_OFFSET,
-                          y0 + inset - LANE_OFFSET, y1 - inset + LANE_OFFSET)
+    outer = [rounded_rect(x0 + inset - offset, x1 - inset + offset,
+                          y0 + inset - offset, y1 - inset + offset)
              for x0, x1, y0, y1 in faces]
     cuts: list[list[tuple[float, int, str]]] = [[] for _ in faces]
     kept = []
@@ -88,8 +89,8 @@ def add_block_rings(builder: NetworkBuilder, faces: list[tuple[float, float, flo
     cross_lane = {ci: builder.add(np.stack([crossings[ci][2], crossings[ci][3]]), LaneKind.CROSSING)
                   for ci in kept}
     for f, (x0, x1, y0, y1) in enumerate(faces):
-        inner = rounded_rect(x0 + inset + LANE_OFFSET, x1 - inset - LANE_OFFSET,
-                             y0 + inset + LANE_OFFSET, y1 - inset - LANE_OFFSET)[::-1]
+        inner = rounded_rect(x0 + inset + offset, x1 - inset - offset,
+                             y0 + inset + offset, y1 - inset - offset)[::-1]
         lid = builder.add(inner, LaneKind.SIDEWALK)
         builder.link(lid, lid)
         marks = sorted(c for c in cuts[f] if c[1] in cross_lane)

@@ -4,8 +4,9 @@ The world state is a dict of structure-of-arrays over B rows, the ego last:
 ``xy (B,2)``, ``yaw``, ``v``, ``hl``/``hw`` (half length / width), ``akind``
 (:class:`AgentKind`), ``mobile``, ``parked``, ``route (B,K)`` lanes ahead,
 ``s`` arc length on ``route[:,0]``, ``lat`` lateral offset (left +), junction
-``grant``, request time ``req_t``, ``stop_clock``, ``halt`` timer, ``stuck`` and
-``idm (B,5)`` (desired speed, accel, comfortable decel, headway, jam gap).
+``grant`` (reserved connector), request time ``req_t``, ``stop_clock``, ``halt``
+timer, ``stuck``, ``still`` (standstill time) and ``idm (B,5)`` (desired speed,
+accel, comfortable decel, headway, jam gap).
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ BODY = {
     AgentKind.PEDESTRIAN: ((0.45, 0.55), (0.45, 0.55), 0.8, 1.5, 0.6, 0.4),
 }
 _FIELDS = ("xy", "yaw", "v", "hl", "hw", "akind", "mobile", "parked", "route", "s", "lat",
-           "grant", "req_t", "stop_clock", "halt", "stuck", "idm")
+           "grant", "req_t", "stop_clock", "halt", "stuck", "still", "idm")
 
 
 def net_tuple(net: LaneNetwork) -> tuple:
@@ -89,7 +90,7 @@ def _empty(k: int) -> dict[str, np.ndarray]:
             "parked": np.zeros(0, bool), "route": np.zeros((0, k), np.int64), "s": np.zeros(0),
             "lat": np.zeros(0), "grant": np.zeros(0, np.int64), "req_t": np.zeros(0),
             "stop_clock": np.zeros(0), "halt": np.zeros(0), "stuck": np.zeros(0, bool),
-            "idm": np.zeros((0, 5))}
+            "still": np.zeros(0), "idm": np.zeros((0, 5))}
 
 
 def add_row(st: dict[str, np.ndarray], kind: AgentKind, xy, yaw: float, length: float,
@@ -102,11 +103,28 @@ def add_row(st: dict[str, np.ndarray], kind: AgentKind, xy, yaw: float, length: 
            "mobile": [route is not None and not parked], "parked": [parked],
            "route": (np.full((1, k), -1) if route is None else np.asarray(route).reshape(1, k)),
            "s": [s], "lat": [lat], "grant": [-1], "req_t": [np.inf], "stop_clock": [0.0],
-           "halt": [0.0], "stuck": [False], "idm": np.asarray(idm, float).reshape(1, 5)}
+           "halt": [0.0], "stuck": [False], "still": [0.0],
+           "idm": np.asarray(idm, float).reshape(1, 5)}
     at = len(st["v"]) if at is None else at
     for f in _FIELDS:
         st[f] = np.insert(st[f], at, np.asarray(row[f], dtype=st[f].dtype), axis=0)
     return at
+
+
+def _add_parked(st: dict[str, np.ndarray], slots: np.ndarray, rng: np.random.Generator) -> None:
+    """Append parked cars at ``slots`` ``(S, 3)`` (x, y, yaw) in one go."""
+    n, k = len(slots), st["route"].shape[1]
+    (l_lo, l_hi), (w_lo, w_hi) = BODY[AgentKind.CAR][:2]
+    sizes = np.stack([rng.uniform(l_lo, l_hi, n), rng.uniform(w_lo, w_hi, n)], -1) / 2
+    rows = {"xy": slots[:, :2], "yaw": slots[:, 2], "v": np.zeros(n), "hl": sizes[:, 0],
+            "hw": sizes[:, 1], "akind": np.full(n, AgentKind.CAR, np.uint8),
+            "mobile": np.zeros(n, bool), "parked": np.ones(n, bool),
+            "route": np.full((n, k), -1, np.int64), "s": np.zeros(n), "lat": np.zeros(n),
+            "grant": np.full(n, -1, np.int64), "req_t": np.full(n, np.inf),
+            "stop_clock": np.zeros(n), "halt": np.zeros(n), "stuck": np.zeros(n, bool),
+            "still": np.zeros(n), "idm": np.zeros((n, 5))}
+    for f in _FIELDS:
+        st[f] = np.concatenate([st[f], rows[f].astype(st[f].dtype)])
 
 
 def _free(st, xy, yaw, length, width, gap) -> bool:
@@ -159,10 +177,7 @@ def populate(world_map: WorldMap, cfg: dict[str, Any], rng: np.random.Generator,
     st = _empty(k)
     slots = world_map.meta.get("parking_slots", np.zeros((0, 3)))
     taken = rng.random(len(slots)) < tr["parked_density"]
-    for x, y, yaw in slots[taken]:
-        (l_lo, l_hi), (w_lo, w_hi) = BODY[AgentKind.CAR][:2]
-        add_row(st, AgentKind.CAR, (x, y), yaw, rng.uniform(l_lo, l_hi), rng.uniform(w_lo, w_hi),
-                parked=True)
+    _add_parked(st, slots[taken], rng)
     road = np.flatnonzero((net.kind == LaneKind.ROAD) & (net.length > 12.0))
     if len(road) == 0:
         road = np.flatnonzero(net.kind == LaneKind.ROAD)
@@ -236,9 +251,14 @@ def _task(world_map, st, rng, cfg, k, slots, taken) -> None:
 
 def respawn(world_map: WorldMap, st: dict[str, np.ndarray], i: int, rng: np.random.Generator,
             min_ego_dist: float = 60.0) -> None:
-    """Move agent ``i`` (stuck at a dead end) to a free road lane far from the ego."""
+    """Move agent ``i`` (stuck at a dead end or in a gridlock) to a free lane of its
+    kind far from the ego."""
     net = world_map.lanes
-    lanes = np.flatnonzero((net.kind == LaneKind.ROAD) & (net.length > 8.0))
+    walker = st["akind"][i] == AgentKind.PEDESTRIAN
+    lanes = np.flatnonzero((net.kind == (LaneKind.SIDEWALK if walker else LaneKind.ROAD))
+                           & (net.length > 8.0))
+    if st["akind"][i] == AgentKind.CYCLIST and net.rightmost[lanes].any():
+        lanes = lanes[net.rightmost[lanes]]
     k = st["route"].shape[1]
     keep = {f: st[f][i].copy() for f in ("hl", "hw", "akind", "idm", "lat")}
     tmp = {f: np.delete(st[f], i, axis=0) for f in _FIELDS}
@@ -254,6 +274,6 @@ def respawn(world_map: WorldMap, st: dict[str, np.ndarray], i: int, rng: np.rand
             break
     st["route"][i] = plan_route(net, ln, rng, k)
     st["s"][i], st["v"][i], st["grant"][i], st["stuck"][i] = pos, 0.0, -1, False
-    st["req_t"][i], st["stop_clock"][i], st["halt"][i] = np.inf, 0.0, 0.0
+    st["req_t"][i], st["stop_clock"][i], st["halt"][i], st["still"][i] = np.inf, 0.0, 0.0, 0.0
     st["xy"][i] = x - keep["lat"] * np.sin(h), y + keep["lat"] * np.cos(h)
     st["yaw"][i] = h

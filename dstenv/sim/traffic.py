@@ -3,16 +3,20 @@
 Every mobile agent sits at arc length ``s`` on ``route[i, 0]`` and has its next
 lanes planned in ``route[i, 1:]``. One step:
 
-1. releases junction grants of agents that left the junction;
-2. the front agent of each approach lane requests its connector; requests are
+1. notes which connectors are held (occupied, or reserved by a grant);
+2. the front agent of each lane requests the next controlled connector; requests are
    granted oldest first if the junction's rule allows (green light / full stop at
    a stop sign), no granted or older waiting connector conflicts and the exit lane
    has room (vehicles from one lane may follow each other through);
 3. each agent looks along its route for the nearest body (agent or ego) inside
    its corridor, an ungranted stop line or a blocked crosswalk, and takes the
-   IDM acceleration towards it;
+   IDM acceleration towards it (of two standing agents that block each other,
+   the lower row heeds only its next obstacle);
 4. agents move along their lanes; the travel is also clamped to the gap, so no
-   agent ever drives into a body ahead of it.
+   agent ever drives into a body ahead of it;
+5. a move that would still make two footprints overlap is undone. An agent
+   standing for a minute (a gridlock from odd OSM junctions) out of the ego's
+   sight is flagged ``stuck`` and replaced by the world.
 
 The ego is the last row of the state arrays: it is an obstacle for everyone and,
 under autopilot, it gets an acceleration from the same rules (its motion is
@@ -24,6 +28,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from dstenv.sim.ego import box_overlap
 from dstenv.sim.lanes import lane_pose
 
 __all__ = ["traffic_step", "choose_successor", "route_point", "CAR", "CYCLIST", "PEDESTRIAN"]
@@ -34,6 +39,8 @@ C_NONE, C_YIELD, C_STOP, C_SIGNAL = 0, 1, 2, 3  # Control codes
 ALL_RED = 3.0  # [s] clearance time between signal phases
 AMBER = 3.0  # [s] end of a green phase in which no new vehicle is let in
 PATH_MAX = 200  # points in an agent's look-ahead path
+GRIDLOCK_TIME = 60.0  # [s] standstill (not a planned halt) after which an agent is ...
+REPLACE_DIST = 90.0  # [m] ... replaced, if it is at least this far from the ego (unseen)
 
 
 @nb.njit(cache=True)
@@ -95,57 +102,65 @@ def _seg_dist(px, py, ax, ay, bx, by):
 
 @nb.njit(cache=True)
 def traffic_step(net, st, idm, rules, t, dt, u, ego_auto):
-    """Advance all mobile agents by ``dt``; returns the ego's autopilot acceleration.
+    """Advance all mobile agents by ``dt`` (state arrays are updated in place).
 
     Args:
         net: lane-network arrays ``(pts, hdg, start, npts, ds, length, kind, node,
             turn, group, vmax, succ_ptr, succ, conf_ptr, conf, node_control, node_phase)``.
         st: state arrays over B rows (ego last) ``(xy, yaw, v, hl, hw, akind, mobile,
-            parked, route, s, lat, grant, req_t, stop_clock, halt, stuck)``.
+            parked, route, s, lat, grant, req_t, stop_clock, halt, stuck, still)``.
         idm: ``(B, 5)`` desired speed, max accel, comfortable decel, headway, jam gap.
         rules: ``(signal_green, stop_duration, halt_rate, halt_mean, pause_rate,
             pause_mean, crossing_prob)``.
         t: time [s]; dt: step [s]; u: ``(B, 3)`` uniform randoms; ego_auto: plan the ego.
+
+    Returns:
+        ``(accel, gap)`` of the ego under autopilot: IDM acceleration [m/s^2] and the
+        free distance ahead of it [m] (1e9 when nothing is in the way).
     """
     (pts, hdg, start, npts, ds, length, lkind, node, turn, group, vmax, succ_ptr, succ,
      conf_ptr, conf, node_control, node_phase) = net
     (xy, yaw, v, hl, hw, akind, mobile, parked, route, s, lat, grant, req_t, stop_clock,
-     halt, stuck) = st
+     halt, stuck, still) = st
     green, stop_dur, halt_rate, halt_mean, pause_rate, pause_mean, cross_prob = rules
     nb_rows = xy.shape[0]
     ego = nb_rows - 1
     n_route = route.shape[1]
     planner = mobile.copy()
     planner[ego] = ego_auto and route[ego, 0] >= 0
-    # 1. release grants once the rear has left the junction
+    # 1. junctions are held by the agents on their connectors (occupancy, rows 0..B-1)
+    # and by granted reservations of the next connector (rows B..2B-1); a reservation
+    # turns into occupancy when the agent enters the connector
+    held = np.full(2 * nb_rows, -1)
     for i in range(nb_rows):
-        g = grant[i]
-        if g < 0:
-            continue
-        ahead = False
-        for k in range(n_route):
-            ahead = ahead or route[i, k] == g
-        if not ahead:
-            ex = succ[succ_ptr[g]]
-            if route[i, 0] != ex or s[i] > 2.0 * hl[i] + 1.0:
-                grant[i] = -1
-    held = grant.copy()
-    if not ego_auto and route[ego, 0] >= 0 and lkind[route[ego, 0]] == K_CONN:
-        held[ego] = route[ego, 0]  # a driven ego inside a junction blocks conflicting moves
-    # 2. requests by the front agent of each approach lane
+        if grant[i] >= 0 and route[i, 0] == grant[i]:
+            grant[i] = -1
+        if route[i, 0] >= 0 and lkind[route[i, 0]] == K_CONN:
+            held[i] = route[i, 0]
+        held[nb_rows + i] = grant[i]
+    # 2. requests by the front agent of each lane for the next controlled connector
     n_lanes = start.shape[0]
     front = np.full(n_lanes, -1)
     for i in range(nb_rows):
         if planner[i] and (front[route[i, 0]] < 0 or s[i] > s[front[route[i, 0]]]):
             front[route[i, 0]] = i
+    req_c = np.full(nb_rows, -1)
     for i in range(nb_rows):
-        l0, c = route[i, 0], route[i, 1]
         asking = False
-        if planner[i] and akind[i] != PEDESTRIAN and c >= 0 and lkind[c] == K_CONN \
-                and lkind[l0] != K_CONN and node_control[node[c]] != C_NONE and grant[i] != c \
-                and front[l0] == i:
-            d = length[l0] - s[i] - hl[i]
-            if d < max(6.0, v[i] * v[i] / 6.0 + 3.0):  # comfortable braking distance + 3 m
+        if planner[i] and akind[i] != PEDESTRIAN and grant[i] < 0 and front[route[i, 0]] == i:
+            d = length[route[i, 0]] - s[i] - hl[i]
+            for k in range(1, n_route):
+                ln = route[i, k]
+                if ln < 0 or d > 60.0:
+                    break
+                if lkind[ln] == K_CONN:
+                    if node_control[node[ln]] != C_NONE:
+                        req_c[i] = ln
+                    break
+                if front[ln] >= 0:  # someone is ahead on the way: it asks first
+                    break
+                d += length[ln]
+            if req_c[i] >= 0 and d < max(6.0, v[i] * v[i] / 6.0 + 3.0):  # braking dist + 3 m
                 asking = True
                 if v[i] < 0.1 and d < 3.0:
                     stop_clock[i] += dt
@@ -161,7 +176,7 @@ def traffic_step(net, st, idm, rules, t, dt, u, ego_auto):
         i = order[oi]
         if req_t[i] == np.inf:
             break
-        c = route[i, 1]
+        c = req_c[i]
         n = node[c]
         ok = True
         if node_control[n] == C_SIGNAL:
@@ -171,8 +186,8 @@ def traffic_step(net, st, idm, rules, t, dt, u, ego_auto):
         if not ok:
             continue
         # no overtaking: a request never jumps an older conflicting one that waits
-        for k in range(nb_rows + n_wait):
-            g = held[k] if k < nb_rows else waiting[k - nb_rows]
+        for k in range(2 * nb_rows + n_wait):
+            g = held[k] if k < 2 * nb_rows else waiting[k - 2 * nb_rows]
             if g < 0:
                 continue
             for q in range(conf_ptr[c], conf_ptr[c + 1]):
@@ -180,26 +195,31 @@ def traffic_step(net, st, idm, rules, t, dt, u, ego_auto):
                     ok = False
             if not ok:
                 break
-        if ok:  # the exit lane must have room (never block the box)
-            ex = succ[succ_ptr[c]]
-            room = length[ex]
-            for k in range(nb_rows):
-                if route[k, 0] == ex:
-                    room = min(room, s[k] - hl[k])
-                elif held[k] >= 0 and succ[succ_ptr[held[k]]] == ex:
-                    room -= 2.0 * hl[k] + 3.0
-            ok = room >= 2.0 * hl[i] + 3.0
-        if ok:
-            grant[i] = c
-            held[i] = c
-            req_t[i] = np.inf
-            stop_clock[i] = 0.0
-        else:
+        if not ok:  # conflicting traffic has the junction: later conflicting ones wait too
             waiting[n_wait] = c
             n_wait += 1
+            continue
+        # the exit lane must have room (never block the box); a lane shorter than a
+        # car only needs to be empty
+        ex = succ[succ_ptr[c]]
+        room = length[ex]
+        for k in range(nb_rows):
+            if route[k, 0] == ex:
+                room = min(room, s[k] - hl[k])
+            for g in (held[k], held[nb_rows + k]):
+                if g >= 0 and succ[succ_ptr[g]] == ex:
+                    room -= 2.0 * hl[k] + 3.0
+        if room >= min(2.0 * hl[i] + 3.0, length[ex] - 0.01):
+            grant[i] = c
+            held[nb_rows + i] = c
+            req_t[i] = np.inf
+            stop_clock[i] = 0.0
     # 3. car following along the route
     acc = np.zeros(nb_rows)
-    gaps = np.full(nb_rows, 1e9)
+    gaps, leads, gaps2, leads2 = np.full(nb_rows, 1e9), np.zeros(nb_rows), \
+        np.full(nb_rows, 1e9), np.zeros(nb_rows)
+    blocker = np.full(nb_rows, -1)
+    vlims = np.zeros(nb_rows)
     path = np.empty((PATH_MAX, 4))  # x, y, heading, distance ahead of the centre
     for i in range(nb_rows):
         if not planner[i]:
@@ -212,7 +232,7 @@ def traffic_step(net, st, idm, rules, t, dt, u, ego_auto):
         npath = 0
         base = -s[i]
         vlim = min(v0, vmax[route[i, 0]])
-        gap, vlead = 1e9, 0.0
+        gap, vlead, blk, gap2, vlead2 = 1e9, 0.0, -1, 1e9, 0.0
         for k in range(n_route):
             ln = route[i, k]
             if ln < 0 or base > look:
@@ -231,9 +251,7 @@ def traffic_step(net, st, idm, rules, t, dt, u, ego_auto):
                                               pts[a1, 0], pts[a1, 1]) < hl[q] + 2.0 + 2.5 * v[q]):
                             stop_here = True
                 if stop_here:
-                    g = base - hl[i] - 0.3
-                    if g < gap:
-                        gap, vlead = g, 0.0
+                    gap, vlead, blk = base - hl[i] - 0.3, 0.0, -2
                     break
             i0 = 0 if k > 0 else int(np.floor(s[i] / ds[ln])) + 1
             for p in range(start[ln] + i0, start[ln] + npts[ln]):
@@ -269,22 +287,36 @@ def traffic_step(net, st, idm, rules, t, dt, u, ego_auto):
                 side = margin if path[p, 3] >= hl[i] and v[j] > 0.1 else 0.0
                 if abs(-ex * sh + ey * ch) < hw[i] + hl[j] * sa + hw[j] * ca + side:
                     g = path[p, 3] + lon - hl[i] - (hl[j] * ca + hw[j] * sa)
-                    if g < gap:
-                        gap, vlead = g, max(v[j] * np.cos(yaw[j] - h), 0.0)
+                    vl = max(v[j] * np.cos(yaw[j] - h), 0.0)
+                    if g < gap:  # the old nearest (maybe a stop line) becomes second
+                        gap2, vlead2 = gap, vlead
+                        gap, vlead, blk = g, vl, j
+                    elif g < gap2:
+                        gap2, vlead2 = g, vl
                     break
-        if halt[i] > 0.0:
-            vlim = 0.0
-        if vlim < 0.05:
+        gaps[i], leads[i], blocker[i], gaps2[i], leads2[i] = gap, vlead, blk, gap2, vlead2
+        vlims[i] = 0.0 if halt[i] > 0.0 else vlim
+    # two standing agents waiting for each other (odd junction geometry): the lower
+    # row goes first, heeding only its next obstacle (the safety net still applies)
+    for i in range(nb_rows):
+        j = blocker[i]
+        if planner[i] and j > i and planner[j] and blocker[j] == i and v[i] < 0.1 \
+                and v[j] < 0.1:
+            gaps[i], leads[i] = gaps2[i], leads2[i]
+    for i in range(nb_rows):
+        if not planner[i]:
+            continue
+        v0, amax, bcomf, headway, jam = idm[i, 0], idm[i, 1], idm[i, 2], idm[i, 3], idm[i, 4]
+        if vlims[i] < 0.05:
             a = -min(bcomf, v[i] / dt)
         else:
-            a = amax * (1.0 - (v[i] / vlim) ** 4)
-        if gap < 1e8:
-            dyn = v[i] * headway + v[i] * (v[i] - vlead) / (2 * np.sqrt(amax * bcomf))
-            sstar = jam + max(0.0, dyn)
-            a -= amax * (sstar / max(gap, 0.01)) ** 2
-        acc[i] = min(max(a, -3.0 if ped else -9.0), amax)
-        gaps[i] = gap
+            a = amax * (1.0 - (v[i] / vlims[i]) ** 4)
+        if gaps[i] < 1e8:
+            dyn = v[i] * headway + v[i] * (v[i] - leads[i]) / (2 * np.sqrt(amax * bcomf))
+            a -= amax * ((jam + max(0.0, dyn)) / max(gaps[i], 0.01)) ** 2
+        acc[i] = min(max(a, -3.0 if akind[i] == PEDESTRIAN else -9.0), amax)
     # 4. motion of the non-ego agents
+    old_xy, old_yaw, old_s, old_route = xy.copy(), yaw.copy(), s.copy(), route.copy()
     for i in range(nb_rows - 1):
         if not mobile[i]:
             continue
@@ -312,6 +344,11 @@ def traffic_step(net, st, idm, rules, t, dt, u, ego_auto):
                 last, u[i, 0], succ_ptr, succ, lkind, turn, cross_prob)
         x, y, h = lane_pose(pts, hdg, start, npts, ds, route[i, 0], s[i])
         xy[i, 0], xy[i, 1], yaw[i] = x - lat[i] * np.sin(h), y + lat[i] * np.cos(h), h
+        # a gridlock (rare, from odd junction geometry) is cleared out of the ego's sight
+        still[i] = still[i] + dt if (v[i] < 0.1 and halt[i] <= 0.0) else 0.0
+        if still[i] > GRIDLOCK_TIME:
+            dx, dy = xy[i, 0] - xy[ego, 0], xy[i, 1] - xy[ego, 1]
+            stuck[i] = dx * dx + dy * dy > REPLACE_DIST ** 2
         # halts of cars mid-block and pauses of pedestrians
         if halt[i] > 0.0:
             halt[i] -= dt
@@ -321,4 +358,19 @@ def traffic_step(net, st, idm, rules, t, dt, u, ego_auto):
         elif akind[i] == CAR and lkind[route[i, 0]] == K_ROAD and \
                 length[route[i, 0]] - s[i] > 25.0 and u[i, 1] < halt_rate * dt:
             halt[i] = min(-halt_mean * np.log(max(u[i, 2], 1e-9)), 4.0 * halt_mean)
-    return acc[ego]
+    # 5. safety net: a move that would make two footprints overlap is undone (the agent
+    # stands still for this step); earlier rows are final, later rows still old
+    for i in range(nb_rows - 1):
+        if not mobile[i] or (old_s[i] == s[i] and old_route[i, 0] == route[i, 0]):
+            continue
+        for j in range(nb_rows):
+            if j == i:
+                continue
+            jx, jy, jh = (xy[j, 0], xy[j, 1], yaw[j]) if j < i else \
+                (old_xy[j, 0], old_xy[j, 1], old_yaw[j])
+            if box_overlap(xy[i, 0], xy[i, 1], yaw[i], hl[i], hw[i], jx, jy, jh, hl[j], hw[j]):
+                xy[i, 0], xy[i, 1], yaw[i], s[i], v[i] = \
+                    old_xy[i, 0], old_xy[i, 1], old_yaw[i], old_s[i], 0.0
+                route[i, :] = old_route[i, :]
+                break
+    return acc[ego], gaps[ego]

@@ -13,7 +13,7 @@ from dstenv.config import ConfigError, merge_config
 from dstenv.sim import spawn
 from dstenv.sim.citygen import generate_city
 from dstenv.sim.config import MAP_KINDS, default_config
-from dstenv.sim.ego import bicycle_step, box_corners, hits, pure_pursuit
+from dstenv.sim.ego import bicycle_step, hits, pure_pursuit
 from dstenv.sim.lanes import LaneKind, LaneNetwork, lane_pose, project_on_lane
 from dstenv.sim.traffic import choose_successor, route_point, traffic_step
 from dstenv.sim.types import AgentKind, Agents, WorldMap
@@ -36,6 +36,19 @@ class World:
 
     All randomness comes from one ``np.random.Generator`` seeded by :meth:`reset`:
     the same seed gives bit-identical maps, agents and trajectories.
+
+    Attributes:
+        map: the episode's :class:`WorldMap` (a new city per reset for ``procedural``).
+        agents: :class:`Agents` other than the ego (copies).
+        agent_lanes: ``(N,) int64`` current lane of each agent (-1 parked).
+        ego_pose: ``(3,)`` ``(x, y, yaw)``; ego_speed [m/s]; ego_steer [rad];
+            ego_size ``(length, width)`` [m].
+        time: [s] since reset; steps: steps since reset; seed: the episode seed.
+        collision: the ego overlaps an agent or a building; off_road: part of the
+            ego is off the road raster.
+        route: ``(8,)`` lanes the ego follows (current first); route_progress: [m]
+            driven along it since reset; lane_offset: [m] from its centre-line
+            (left +); route_polyline(ahead, spacing): points ahead on the route.
     """
 
     def __init__(self, config: Mapping[str, Any] | None = None, seed: int | None = 0, *,
@@ -80,12 +93,18 @@ class World:
         net = self._map.lanes
         auto = ego_action is None
         u = self.rng.random((len(st["v"]), 3))
-        acc = traffic_step(spawn.net_tuple(net), spawn.state_tuple(st), st["idm"],
-                           spawn.rules_tuple(cfg["traffic"]), self.time, dt, u, auto)
+        acc, gap = traffic_step(spawn.net_tuple(net), spawn.state_tuple(st), st["idm"],
+                                spawn.rules_tuple(cfg["traffic"]), self.time, dt, u, auto)
         e = len(st["v"]) - 1
         x, y, yaw, v = st["xy"][e, 0], st["xy"][e, 1], st["yaw"][e], st["v"][e]
         if auto:
-            accel = float(acc)
+            # IDM, and never further than the free gap ahead (like the traffic agents)
+            room = max(gap - 0.05, 0.0)
+            if room >= v * dt / 2:  # reaches ``room`` at the end of the step at the latest
+                limit = 2.0 * (room - v * dt) / dt ** 2
+            else:  # has to stop within the step
+                limit = -v * v / (2.0 * room) if room > 0 else -1e9
+            accel = float(min(acc, limit))
             # pure pursuit of the rear axle, which then stays on the lane in turns
             look = float(np.clip(2.5 + 0.4 * v, 3.5, 12.0))
             half_wb = ego_cfg["wheelbase"] / 2
@@ -229,21 +248,22 @@ class World:
                     route[-2], u, net.succ_ptr, net.succ, net.kind, net.turn, 0.0)
         _, _, lane_yaw = lane_pose(net.pts, net.hdg, net.start, net.npts, net.ds, route[0], s)
         heading_err = abs((yaw - lane_yaw + np.pi) % (2 * np.pi) - np.pi)
-        if dist > 4.0 or heading_err > np.pi / 2:
+        if dist > 4.0 or heading_err > np.pi / 2:  # left the route: re-plan from here
+            gain = 0.0
             found = spawn.nearest_lane(net, x, y, yaw)
             if found is not None:
                 lane, s = found
                 route[:] = spawn.plan_route(net, lane, self.rng, len(route))
                 _, lat, _ = project_on_lane(*geo, lane, x, y, s, 1.0)
-                gain = 0.0
         st["s"][-1] = s
         self._lane_offset = float(lat)
         self.route_progress += float(gain)
 
     def _update_flags(self) -> None:
-        x, y, yaw = self.ego_pose
-        corners = box_corners(x, y, yaw, *self.ego_size)
-        self.collision, self.off_road = hits(self._map, self.agents, corners)
+        st = self._state
+        box = (*self.ego_pose, *self.ego_size)
+        self.collision, self.off_road = hits(self._map, st["xy"][:-1], st["yaw"][:-1],
+                                             st["hl"][:-1], st["hw"][:-1], box)
 
     def _load_osm(self) -> WorldMap:
         from dstenv.sim.osm import load_osm

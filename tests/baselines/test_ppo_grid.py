@@ -89,3 +89,12 @@ def test_same_seed_same_actions_and_weights(trained: dict) -> None:
     pa = PPO.load(out_a / "model.zip").policy.state_dict()
     pb = PPO.load(out_b / "model.zip").policy.state_dict()
     assert all(torch.equal(pa[k], pb[k]) for k in pa)
+
+
+@pytest.mark.slow
+def test_subprocess_envs_train(tmp_path, env_flags: list[str]) -> None:
+    """The default vector env (subprocesses) pickles the env factory and trains."""
+    meta = ppo_grid.main([*env_flags, "--n-envs", "2", "--vec-env", "subproc", "--n-steps",
+                          "32", "--batch-size", "32", "--n-epochs", "1", "--total-timesteps",
+                          "64", "--verbose", "0", "--out", str(tmp_path)])
+    assert meta["timesteps"] == 64 and (tmp_path / "model.zip").is_file()

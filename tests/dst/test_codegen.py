@@ -1,7 +1,12 @@
-"""The committed unrolled kernel is exactly what the generator writes."""
+"""The committed kernel is what the generator writes, and LLVM vectorises it."""
 
-from dstenv.dst import _codegen
-from dstenv.dst._kernel import REACHABLE
+import re
+
+import numba
+import numpy as np
+
+from dstenv.dst import DSTParams, _codegen, _fused
+from dstenv.dst._kernel import REACHABLE, kernel_params, plane_grid
 
 
 def test_generated_kernel_is_up_to_date():
@@ -12,3 +17,24 @@ def test_generated_kernel_is_up_to_date():
 
 def test_reachable_sets():
     assert list(REACHABLE) == [1, 2, 3, 4, 8, 9, 10, 12, 15, 16, 24, 25, 26, 28, 31]
+    # N, W, F, I, {S,M}, {N,S,M}, {W,S,M}, O, Omega: sensor focal x map focal, non-empty
+    assert _codegen.SM_SETS == [1, 2, 3, 4, 24, 25, 26, 28, 31]
+
+
+def test_row_kernel_is_vectorised():
+    """The per-cell arithmetic compiles to vector instructions (on numba 0.68 it does
+    not without the noalias pipeline, and the update then runs ~2.5x slower)."""
+    h, w = 3, 40
+    masses = plane_grid(32, (h, w))
+    masses[31] = 1.0
+    args = (
+        1, masses, plane_grid(1, (h, w))[0],
+        np.ones((h, w), np.uint8), np.full((h, w), 2, np.uint8),
+        True, np.array([1.0, 0.0, 0.33, 0.0, 0.33]), kernel_params(DSTParams()),
+        plane_grid(32, (h, w)), plane_grid(1, (h, w))[0], plane_grid(5, (h, w)),
+        np.empty((_fused.ROW_PLANES, w), np.float32), np.empty(w, np.int64),
+    )
+    kernel = _fused.fused_row  # compiled afresh (inspection needs it), with the same options
+    fresh = numba.jit(pipeline_class=_fused.NoAliasCompiler, **kernel.targetoptions)(kernel.py_func)
+    fresh(*args)
+    assert re.search(r"fadd[^\n]*<\d+ x float>", next(iter(fresh.inspect_llvm().values())))

@@ -1,5 +1,7 @@
 """PerceptionGridFilter: the temporal rule, ego motion, agreement with the reference."""
 
+import os
+
 import numpy as np
 import pytest
 
@@ -97,7 +99,10 @@ def test_rotation_by_quarter_turn():
 def test_matches_reference_over_random_sequence():
     rng = np.random.default_rng(7)
     shape = (24, 20)
-    for params in (DSTParams.default(), DSTParams.paper(), DSTParams(0.7, 0.9, 0.3, 0.5, 0.2, 0.4, 0.3)):
+    # the last preset makes free-on-building a total conflict (K = 1: vacuous m_sm)
+    presets = (DSTParams.default(), DSTParams.paper(), DSTParams(0.7, 0.9, 0.3, 0.5, 0.2, 0.4, 0.3),
+               DSTParams(sensor_confidence=1.0, map_confidence=1.0))
+    for params in presets:
         f = PerceptionGridFilter(shape, params, cell_size=0.4)
         m_ref, z_ref = vacuous(shape), np.zeros(shape, np.float32)
         for _ in range(12):
@@ -129,6 +134,42 @@ def test_reset_and_determinism():
         assert np.array_equal(a, b)
 
 
+def test_large_rotation_and_leaving_the_grid():
+    # runs of consecutive source cells are short under a large turn, and a long jump
+    # makes every cell come from outside (the vacuous pad); both must match the reference
+    rng = np.random.default_rng(11)
+    shape, params = (40, 37), DSTParams.default()
+    f = PerceptionGridFilter(shape, params, cell_size=0.5)
+    m_ref, z_ref = vacuous(shape), np.zeros(shape, np.float32)
+    for motion in [(0.3, -0.2, 1.1), (0.0, 0.0, -2.5), (100.0, 0.0, 0.0), None, (1.0, 2.0, 0.0)]:
+        sensor = rng.integers(0, 3, shape).astype(np.uint8)
+        gis = rng.integers(0, 4, shape).astype(np.uint8)
+        m = f.update(sensor, gis, motion)
+        m_ref, z_ref = reference_update(m_ref, z_ref, sensor, gis, params, 0.5, motion)
+        np.testing.assert_allclose(m, m_ref, atol=2e-6)
+        np.testing.assert_array_equal(f.zeta, z_ref)
+
+
+@pytest.mark.skipif((os.cpu_count() or 1) < 2, reason="a single CPU")
+def test_threads_give_identical_results():
+    rng = np.random.default_rng(5)
+    shape = (33, 48)
+    one, two = PerceptionGridFilter(shape), PerceptionGridFilter(shape, threads=2)
+    for _ in range(4):
+        sensor = rng.integers(0, 3, shape).astype(np.uint8)
+        gis = rng.integers(0, 4, shape).astype(np.uint8)
+        motion = (rng.normal(0, 0.6), rng.normal(0, 0.6), rng.normal(0, 0.2))
+        assert np.array_equal(one.update(sensor, gis, motion), two.update(sensor, gis, motion))
+        assert np.array_equal(one.zeta, two.zeta)
+        assert np.array_equal(one.pignistic(), two.pignistic())
+
+
+@pytest.mark.parametrize("threads", [0, 10_000, 1.5])
+def test_bad_thread_count(threads):
+    with pytest.raises(ValueError, match="threads must be an integer"):
+        PerceptionGridFilter((4, 4), threads=threads)
+
+
 def test_copy_semantics():
     f = PerceptionGridFilter((4, 4))
     a = f.update(full((4, 4), FREE_CODE), full((4, 4), ROAD))
@@ -136,6 +177,11 @@ def test_copy_semantics():
     assert a.flags.writeable and a.flags.c_contiguous
     assert not view.flags.writeable
     assert not np.shares_memory(a, view)
+    assert view.shape == (NUM_SETS, 4, 4) and f.zeta.shape == (4, 4)
+    betp = f.pignistic()
+    assert betp.flags.c_contiguous and betp.flags.writeable and betp.shape == (5, 4, 4)
+    out = np.zeros_like(betp)
+    assert f.pignistic(out) is out and np.array_equal(out, betp)
 
 
 def test_relative_pose_roundtrip():
@@ -158,6 +204,11 @@ def test_relative_pose_roundtrip():
 def test_bad_inputs(sensor, gis, match):
     with pytest.raises(ValueError, match=match):
         PerceptionGridFilter((4, 4)).update(sensor, gis)
+
+
+def test_non_finite_ego_motion_is_rejected():
+    with pytest.raises(ValueError, match="ego_motion must be finite"):
+        PerceptionGridFilter((4, 4)).update(full((4, 4), 0), full((4, 4), 0), (0.1, np.nan, 0.0))
 
 
 def test_params_validation_and_presets():

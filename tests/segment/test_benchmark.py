@@ -12,7 +12,9 @@ from dstenv.segment.checkpoint import load_checkpoint
 @pytest.fixture(scope="module")
 def tiny(tmp_path_factory):
     out = tmp_path_factory.mktemp("bench")
-    results = run_benchmark(preset_config("tiny"), out, progress=False, log=lambda m: None, preset="tiny")
+    results = run_benchmark(
+        preset_config("tiny"), out, progress=False, log=lambda m: None, preset="tiny"
+    )
     return out, results
 
 
@@ -25,11 +27,19 @@ def test_tiny_benchmark_scores_every_segmenter_on_the_same_cells(tiny):
     assert res["data"]["test_frames"] > 0 and res["data"]["grid_shape"] == [32, 32]
     tuning = res["segmenters"]["dst-tuned"]["describe"]["tuning"]
     assert tuning["best_miou"] >= tuning["start_miou"]
-    for name in ("results.json", "results.md", "figures/confusion_all.png", "figures/confusion_visible.png",
-                 "figures/training_curves.png", "figures/examples.png"):
+    for name in (
+        "results.json",
+        "results.md",
+        "figures/confusion_all.png",
+        "figures/confusion_visible.png",
+        "figures/training_curves.png",
+        "figures/examples.png",
+    ):
         assert (out / name).stat().st_size > 0, name
     assert json.loads((out / "results.json").read_text())["goal"]["best_dst"] in res["segmenters"]
-    assert load_checkpoint(out / "models" / "unet-light" / "best.pt")["spec"]["model"] == "unet-light"
+    assert (
+        load_checkpoint(out / "models" / "unet-light" / "best.pt")["spec"]["model"] == "unet-light"
+    )
 
 
 def test_test_maps_never_in_training(tiny):
@@ -37,22 +47,39 @@ def test_test_maps_never_in_training(tiny):
     from dstenv.segment.benchmark import split_index
 
     out, _ = tiny
-    seeds = {s: {f["seed"] for f in split_index(ShardDataset(out / "data", split=s).files)[0]}
-             for s in ("train", "test")}
+    seeds = {
+        s: {f["seed"] for f in split_index(ShardDataset(out / "data", split=s).files)[0]}
+        for s in ("train", "test")
+    }
     assert seeds["test"] and not seeds["test"] & seeds["train"]
 
 
 def test_cli_benchmark_on_existing_data_and_errors(tiny, tmp_path, capsys):
     out, res = tiny
-    rc = main(["benchmark", "--preset", "tiny", "--out", str(tmp_path), "--data", str(out / "data"),
-               "--set", "tune.enabled=false", "--quiet"])
+    rc = main(
+        [
+            "benchmark",
+            "--preset",
+            "tiny",
+            "--out",
+            str(tmp_path),
+            "--data",
+            str(out / "data"),
+            "--set",
+            "tune.enabled=false",
+            "--quiet",
+        ]
+    )
     assert rc == 0
     again = json.loads((tmp_path / "results.json").read_text())
     assert "dst-tuned" not in again["segmenters"]
     # same data, same seed: the same numbers as the first run
     assert again["segmenters"]["unet-light"]["all"] == res["segmenters"]["unet-light"]["all"]
     assert again["segmenters"]["dst (paper)"]["all"] == res["segmenters"]["dst (paper)"]["all"]
-    assert main(["benchmark", "--preset", "tiny", "--out", str(tmp_path), "--set", "data.frame=3"]) == 2
+    assert (
+        main(["benchmark", "--preset", "tiny", "--out", str(tmp_path), "--set", "data.frame=3"])
+        == 2
+    )
     assert "unknown key 'frame'" in capsys.readouterr().err
     assert main(["train", "--out", str(tmp_path / "m")]) == 2
     assert "--data" in capsys.readouterr().err
@@ -60,8 +87,20 @@ def test_cli_benchmark_on_existing_data_and_errors(tiny, tmp_path, capsys):
 
 def test_cli_train_resumes(tiny, tmp_path, capsys):
     out, _ = tiny
-    args = ["train", "--data", str(out / "data"), "--out", str(tmp_path), "--model-kwargs",
-            '{"base": 4, "depth": 2}', "--batch-size", "8", "--device", "cpu", "--quiet"]
+    args = [
+        "train",
+        "--data",
+        str(out / "data"),
+        "--out",
+        str(tmp_path),
+        "--model-kwargs",
+        '{"base": 4, "depth": 2}',
+        "--batch-size",
+        "8",
+        "--device",
+        "cpu",
+        "--quiet",
+    ]
     assert main([*args, "--epochs", "1"]) == 0
     assert main([*args, "--epochs", "2"]) == 0
     assert load_checkpoint(tmp_path / "last.pt")["history"]["epoch"] == [1, 2]

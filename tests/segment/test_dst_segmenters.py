@@ -4,7 +4,7 @@ import torch
 
 from dstenv.dst import CLASSES, DSTParams, PerceptionGridFilter
 from dstenv.grid import relative_pose
-from dstenv.segment.registry import create_segmenter, register_segmenter, SEGMENTERS
+from dstenv.segment.registry import SEGMENTERS, create_segmenter, register_segmenter
 from dstenv.segment.replay import Episode, check_replay, filter_episode
 from dstenv.segment.tune import score_params, tune_dst_params
 
@@ -19,8 +19,16 @@ def parked_car_episode(steps=(0, 1, 2), T=3, seed=0):
     gis = np.full((T, h, w), 2, np.uint8)
     labels = np.full((len(steps), h, w), NAV, np.uint8)
     labels[:, 2, 2] = STATIC
-    return Episode(seed, sensor, gis, np.zeros((T, 3)), np.array(steps), labels,
-                   np.ones((len(steps), h, w), bool), 0.33)
+    return Episode(
+        seed,
+        sensor,
+        gis,
+        np.zeros((T, 3)),
+        np.array(steps),
+        labels,
+        np.ones((len(steps), h, w), bool),
+        0.33,
+    )
 
 
 def test_dst_argmax_on_spec_reference_case():
@@ -38,8 +46,16 @@ def test_filter_episode_matches_a_plain_filter_loop():
     rng = np.random.default_rng(0)
     T, h, w = 6, 12, 10
     poses = np.cumsum(rng.normal(0, 0.3, (T, 3)), axis=0)
-    ep = Episode(1, rng.integers(0, 3, (T, h, w), dtype=np.uint8), rng.integers(0, 4, (T, h, w), dtype=np.uint8),
-                 poses, np.array([2, 5]), np.zeros((2, h, w), np.uint8), np.ones((2, h, w), bool), 0.5)
+    ep = Episode(
+        1,
+        rng.integers(0, 3, (T, h, w), dtype=np.uint8),
+        rng.integers(0, 4, (T, h, w), dtype=np.uint8),
+        poses,
+        np.array([2, 5]),
+        np.zeros((2, h, w), np.uint8),
+        np.ones((2, h, w), bool),
+        0.5,
+    )
     params = DSTParams.paper()
     f = PerceptionGridFilter((h, w), params, 0.5)
     betps = []
@@ -59,7 +75,9 @@ def test_filter_episode_matches_a_plain_filter_loop():
 def test_episode_validation():
     ep = parked_car_episode()
     with pytest.raises(ValueError, match="increase"):
-        Episode(0, ep.sensor, ep.gis, ep.poses, np.array([2, 1]), ep.labels[:2], ep.visible[:2], 0.33)
+        Episode(
+            0, ep.sensor, ep.gis, ep.poses, np.array([2, 1]), ep.labels[:2], ep.visible[:2], 0.33
+        )
 
 
 def test_presets_and_custom_params():
@@ -76,7 +94,9 @@ def test_presets_and_custom_params():
 
 
 def test_registry_is_extensible():
-    register_segmenter("dst-half", lambda: create_segmenter("dst", params={"alpha": 0.5}), "dst", "test")
+    register_segmenter(
+        "dst-half", lambda: create_segmenter("dst", params={"alpha": 0.5}), "dst", "test"
+    )
     try:
         assert create_segmenter("dst-half").params.alpha == 0.5
         with pytest.raises(ValueError, match="already registered"):

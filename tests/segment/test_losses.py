@@ -27,7 +27,9 @@ def test_median_frequency_weights_by_hand():
     w = median_frequency_weights(np.array([3, 1, 3]), np.array([7, 3, 4]))
     np.testing.assert_allclose(w, [1.0, 9 / 7, 4 / 7], rtol=1e-6)
     # plain frequencies: counts [80, 15, 5] -> freq .8 .15 .05, median .15
-    np.testing.assert_allclose(median_frequency_weights(np.array([80, 15, 5])), [0.1875, 1.0, 3.0], rtol=1e-6)
+    np.testing.assert_allclose(
+        median_frequency_weights(np.array([80, 15, 5])), [0.1875, 1.0, 3.0], rtol=1e-6
+    )
 
 
 def test_absent_class_gets_zero_weight():
@@ -84,5 +86,7 @@ def test_build_loss():
     loss = build_loss("wce+lovasz", np.ones(3, dtype=np.float32))
     logits = torch.randn(1, 3, 4, 4)
     target = torch.randint(0, 3, (1, 4, 4))
-    expected = WeightedCrossEntropyLoss(np.ones(3))(logits, target) + LovaszSoftmaxLoss()(logits, target)
+    expected = WeightedCrossEntropyLoss(np.ones(3))(logits, target) + LovaszSoftmaxLoss()(
+        logits, target
+    )
     assert float(loss(logits, target)) == pytest.approx(float(expected))

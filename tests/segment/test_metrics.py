@@ -27,7 +27,9 @@ def test_confusion_matrix_by_hand():
 
 def test_confusion_matrix_mask_and_torch():
     mask = np.array([[True, True, False, False], [True, True, False, True]])
-    cm = confusion_matrix(torch.as_tensor(PRED), torch.as_tensor(TRUE), 3, mask=torch.as_tensor(mask))
+    cm = confusion_matrix(
+        torch.as_tensor(PRED), torch.as_tensor(TRUE), 3, mask=torch.as_tensor(mask)
+    )
     np.testing.assert_array_equal(cm, [[1, 1, 0], [0, 0, 0], [1, 0, 1]])
 
 
@@ -61,7 +63,9 @@ def test_meter_accumulates_all_and_visible():
     meter = ConfusionMeter(3)
     vis = np.array([[True, True, False, False], [True, True, False, True]])
     for _ in range(2):
-        meter.update(torch.as_tensor(PRED)[None], torch.as_tensor(TRUE)[None], torch.as_tensor(vis)[None])
+        meter.update(
+            torch.as_tensor(PRED)[None], torch.as_tensor(TRUE)[None], torch.as_tensor(vis)[None]
+        )
     np.testing.assert_array_equal(meter.all, 2 * np.array([[1, 1, 0], [0, 2, 0], [1, 1, 1]]))
     np.testing.assert_array_equal(meter.visible, 2 * np.array([[1, 1, 0], [0, 0, 0], [1, 0, 1]]))
     out = meter.summary(("a", "b", "c"))

@@ -42,7 +42,9 @@ class TestModel:
     def test_save_load_round_trip(self, name, tmp_path):
         seg = create_segmenter(name, **FAST_KWARGS.get(name, {}))
         seg.model.eval()
-        path = save_checkpoint(tmp_path / "m.pt", {"spec": seg.spec(), "model": seg.model.state_dict()})
+        path = save_checkpoint(
+            tmp_path / "m.pt", {"spec": seg.spec(), "model": seg.model.state_dict()}
+        )
         again = load_segmenter(path)
         x = torch.rand(2, 10, 32, 32)
         with torch.no_grad():
@@ -86,14 +88,21 @@ def test_vgg16_weights_from_local_file(tmp_path):
     model = build_model("fcn8s-vgg16", fc_channels=16)
     enc = model.encoder
     sd = {f"features.{k}": torch.full_like(v, 0.5) for k, v in enc.features.state_dict().items()}
-    sd["classifier.0.weight"] = torch.arange(16 * 512 * 49, dtype=torch.float32).reshape(16, 512 * 49)
+    sd["classifier.0.weight"] = torch.arange(16 * 512 * 49, dtype=torch.float32).reshape(
+        16, 512 * 49
+    )
     sd["classifier.0.bias"] = torch.zeros(16)
     sd["classifier.3.weight"] = torch.ones(16, 16)
     sd["classifier.3.bias"] = torch.zeros(16)
     torch.save(sd, tmp_path / "vgg16.pth")
     load_vgg16_weights(enc, tmp_path / "vgg16.pth")
     assert float(enc.features[0].weight.detach().mean()) == 0.5
-    assert float(enc.fc6.weight.detach()[0, 0, 0, 1]) == 1.0 and enc.fc6.weight.shape == (16, 512, 7, 7)
+    assert float(enc.fc6.weight.detach()[0, 0, 0, 1]) == 1.0 and enc.fc6.weight.shape == (
+        16,
+        512,
+        7,
+        7,
+    )
     del sd["classifier.3.bias"]
     torch.save(sd, tmp_path / "bad.pth")
     with pytest.raises(ValueError, match="missing key"):

@@ -3,11 +3,11 @@ import json
 import numpy as np
 import pytest
 
-from dstenv.dst import CLASSES
-from dstenv.segment.benchmark import _goal, preset_config
 from dstenv.config import ConfigError
-from dstenv.segment.metrics import summarize
+from dstenv.dst import CLASSES
 from dstenv.segment import report
+from dstenv.segment.benchmark import _goal, preset_config
+from dstenv.segment.metrics import summarize
 
 
 def _results():
@@ -18,11 +18,28 @@ def _results():
     for label, cm, kind in (("dst (default)", noisy, "dst"), ("unet-light", eye, "learned")):
         s = summarize(cm, CLASSES)
         segs[label] = {"all": s, "visible": s, "kind": kind}
-    res = {"preset": "tiny", "command": "dstenv benchmark --preset tiny", "segmenters": segs,
-           "histories": {"unet-light": {"epoch": [1, 2], "train_loss": [1.0, 0.5], "val_loss": [1.1, 0.7],
-                                        "val_miou": [0.3, 0.6], "val_iou": [None, None]}},
-           "data": {"test_frames": 4, "test_episodes": 2, "train_frames": 10, "val_frames": 2,
-                    "grid_shape": [8, 8], "cell_size": 0.33}}
+    res = {
+        "preset": "tiny",
+        "command": "dstenv benchmark --preset tiny",
+        "segmenters": segs,
+        "histories": {
+            "unet-light": {
+                "epoch": [1, 2],
+                "train_loss": [1.0, 0.5],
+                "val_loss": [1.1, 0.7],
+                "val_miou": [0.3, 0.6],
+                "val_iou": [None, None],
+            }
+        },
+        "data": {
+            "test_frames": 4,
+            "test_episodes": 2,
+            "train_frames": 10,
+            "val_frames": 2,
+            "grid_shape": [8, 8],
+            "cell_size": 0.33,
+        },
+    }
     res["goal"] = _goal(segs, {k: v["kind"] for k, v in segs.items()})
     return res
 
@@ -51,8 +68,12 @@ def test_figures_are_written(tmp_path):
     assert report.plot_curves(res["histories"], tmp_path / "curves.png").stat().st_size > 1000
     lab = np.zeros((8, 8), np.int64)
     lab[0] = 255
-    ex = {"title": "x", "betp_moving": np.random.default_rng(0).random((8, 8)),
-          "predictions": {"dst": lab.clip(0, 4), "unet": lab.clip(0, 4)}, "labels": lab}
+    ex = {
+        "title": "x",
+        "betp_moving": np.random.default_rng(0).random((8, 8)),
+        "predictions": {"dst": lab.clip(0, 4), "unet": lab.clip(0, 4)},
+        "labels": lab,
+    }
     assert report.plot_examples([ex, ex], tmp_path / "ex.png").stat().st_size > 1000
 
 

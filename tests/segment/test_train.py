@@ -7,17 +7,20 @@ from dstenv.segment.evaluate import batches, evaluate
 from dstenv.segment.registry import create_segmenter
 from dstenv.segment.train import train
 
-from tests.segment.synthetic import SyntheticFrames
-
-SMALL = {"model": "unet-light", "model_kwargs": {"base": 4, "depth": 2}, "batch_size": 4, "lr": 5e-3}
+SMALL = {
+    "model": "unet-light",
+    "model_kwargs": {"base": 4, "depth": 2},
+    "batch_size": 4,
+    "lr": 5e-3,
+}
 
 
 def _weights(seg):
     return {k: v.clone() for k, v in seg.model.state_dict().items()}
 
 
-def test_same_seed_same_weights_and_resume_matches(tmp_path):
-    data, val = SyntheticFrames(8, seed=1), SyntheticFrames(4, seed=2)
+def test_same_seed_same_weights_and_resume_matches(tmp_path, make_frames):
+    data, val = make_frames(8, seed=1), make_frames(4, seed=2)
     quiet = {"progress": False, "log": lambda m: None}
     a, ha = train({**SMALL, "epochs": 2}, data, val, tmp_path / "a", **quiet)
     b, _ = train({**SMALL, "epochs": 2}, data, val, tmp_path / "b", **quiet)
@@ -37,25 +40,38 @@ def test_same_seed_same_weights_and_resume_matches(tmp_path):
     assert not all(torch.equal(wa[k], _weights(d)[k]) for k in wa)
 
 
-def test_resume_with_other_settings_is_refused(tmp_path):
-    data = SyntheticFrames(4, seed=1)
+def test_resume_with_other_settings_is_refused(tmp_path, make_frames):
+    data = make_frames(4, seed=1)
     train({**SMALL, "epochs": 1}, data, None, tmp_path, progress=False, log=lambda m: None)
     with pytest.raises(ConfigError, match="lr"):
-        train({**SMALL, "epochs": 2, "lr": 1e-2}, data, None, tmp_path, progress=False, log=lambda m: None)
+        train(
+            {**SMALL, "epochs": 2, "lr": 1e-2},
+            data,
+            None,
+            tmp_path,
+            progress=False,
+            log=lambda m: None,
+        )
 
 
-def test_bad_config_names_the_key():
+def test_bad_config_names_the_key(make_frames):
     with pytest.raises(ConfigError, match="unknown key 'epoch'"):
-        train({"epoch": 3}, SyntheticFrames(2), progress=False)
+        train({"epoch": 3}, make_frames(2), progress=False)
     with pytest.raises(ConfigError, match="unknown model"):
-        train({"model": "resnet"}, SyntheticFrames(2), progress=False)
+        train({"model": "resnet"}, make_frames(2), progress=False)
 
 
-def test_training_beats_noisy_argmax(tmp_path):
+def test_training_beats_noisy_argmax(tmp_path, make_frames):
     # the synthetic input is a noisy softmax of the labels: a trained net denoises it
-    data, test = SyntheticFrames(24, seed=3), SyntheticFrames(6, seed=4)
-    seg, hist = train({**SMALL, "model_kwargs": {"base": 8, "depth": 2}, "epochs": 6, "loss": "wce+lovasz"},
-                      data, test, tmp_path, progress=False, log=lambda m: None)
+    data, test = make_frames(24, seed=3), make_frames(6, seed=4)
+    seg, hist = train(
+        {**SMALL, "model_kwargs": {"base": 8, "depth": 2}, "epochs": 6, "loss": "wce+lovasz"},
+        data,
+        test,
+        tmp_path,
+        progress=False,
+        log=lambda m: None,
+    )
     assert hist["train_loss"][-1] < hist["train_loss"][0]
     best = load_segmenter(tmp_path / "best.pt")
     learned = evaluate(best, batches(test, 6))
@@ -63,3 +79,31 @@ def test_training_beats_noisy_argmax(tmp_path):
     from dstenv.segment.metrics import mean_iou
 
     assert mean_iou(learned.all) > mean_iou(dst.all) + 0.05
+
+
+def test_weight_power_softens_median_frequency_weights(tmp_path, make_frames):
+    data = make_frames(4, seed=1)
+    quiet = {"progress": False, "log": lambda m: None}
+    train({**SMALL, "epochs": 1}, data, None, tmp_path / "a", **quiet)
+    train({**SMALL, "epochs": 1, "weight_power": 0.5}, data, None, tmp_path / "b", **quiet)
+    wa = load_checkpoint(tmp_path / "a" / "last.pt")["config"]["class_weights"]
+    wb = load_checkpoint(tmp_path / "b" / "last.pt")["config"]["class_weights"]
+    assert wb == pytest.approx([w**0.5 for w in wa], rel=1e-6)
+    assert max(wa) > 1.5  # the rare synthetic classes are up-weighted
+
+
+def test_streaming_training_without_disk():
+    from dstenv.data import StreamingDataset
+
+    stream = StreamingDataset(
+        {"grid": {"height": 32, "width": 32}}, seed=0, episode_length=12, stride=4, warmup=4
+    )
+    quiet = {"progress": False, "log": lambda m: None}
+    with pytest.raises(ConfigError, match="max_batches"):
+        train({**SMALL, "epochs": 1}, stream, **quiet)
+    with pytest.raises(ConfigError, match="class_weights"):
+        train({**SMALL, "epochs": 1, "max_batches": 2}, stream, **quiet)
+    seg, hist = train(
+        {**SMALL, "epochs": 2, "max_batches": 2, "class_weights": [1.0] * 5}, stream, **quiet
+    )
+    assert hist["epoch"] == [1, 2] and all(v > 0 for v in hist["train_loss"])

@@ -177,3 +177,20 @@ def test_default_config_sections():
     assert set(cfg) == {"dt", "map", "traffic", "ego", "task"}
     assert cfg["dt"] == 0.1
     assert default_config() is not cfg  # a fresh dict each call
+
+
+def test_a_stuck_agent_is_replaced_out_of_sight():
+    w = World(SMALL, seed=6)
+    st = w._state
+    kinds = w.agents.kind
+    car = int(np.flatnonzero(st["mobile"][:-1] & (kinds == AgentKind.CAR))[0])
+    walker = int(np.flatnonzero(kinds == AgentKind.PEDESTRIAN)[0])
+    before = w.agents.xy.copy()
+    st["stuck"][[car, walker]] = True  # as the traffic step flags gridlocked agents
+    w.step()
+    a = w.agents
+    for i, lane_kind in ((car, LaneKind.ROAD), (walker, LaneKind.SIDEWALK)):
+        assert not w._state["stuck"][i]
+        assert np.hypot(*(a.xy[i] - before[i])) > 1.0
+        assert np.hypot(*(a.xy[i] - w.ego_pose[:2])) >= 60.0
+        assert w.map.lanes.kind[w.agent_lanes[i]] == lane_kind

@@ -40,7 +40,9 @@ class CombinedLoss(nn.Module):
         return sum(loss(logits, target) for loss in self.losses)
 
 
-def build_loss(name: str, weights: np.ndarray | None = None, ignore_index: int = IGNORE_INDEX) -> nn.Module:
+def build_loss(
+    name: str, weights: np.ndarray | None = None, ignore_index: int = IGNORE_INDEX
+) -> nn.Module:
     """Create a loss by name.
 
     Args:
@@ -52,7 +54,9 @@ def build_loss(name: str, weights: np.ndarray | None = None, ignore_index: int =
     if name not in LOSSES:
         raise ValueError(f"unknown loss {name!r}; choose from {', '.join(LOSSES)}")
     if name.startswith("wce") and weights is None:
-        raise ValueError(f"loss {name!r} needs class weights (median frequency of the training split)")
+        raise ValueError(
+            f"loss {name!r} needs class weights (median frequency of the training split)"
+        )
     if name == "ce":
         return WeightedCrossEntropyLoss(None, ignore_index)
     if name == "lovasz":

@@ -37,7 +37,10 @@ def lovasz_grad(gt_sorted: torch.Tensor) -> torch.Tensor:
 
 
 def lovasz_softmax(
-    probs: torch.Tensor, target: torch.Tensor, classes: str = "present", ignore_index: int = IGNORE_INDEX
+    probs: torch.Tensor,
+    target: torch.Tensor,
+    classes: str = "present",
+    ignore_index: int = IGNORE_INDEX,
 ) -> torch.Tensor:
     """Lovasz-softmax loss.
 

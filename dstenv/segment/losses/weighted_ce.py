@@ -56,7 +56,9 @@ def class_statistics(
     return counts, present
 
 
-def median_frequency_weights(counts: np.ndarray, present_cells: np.ndarray | None = None) -> np.ndarray:
+def median_frequency_weights(
+    counts: np.ndarray, present_cells: np.ndarray | None = None
+) -> np.ndarray:
     """Class weights ``w_c = median(freq) / freq(c)`` (paper eq. 2).
 
     Args:
@@ -77,7 +79,9 @@ def median_frequency_weights(counts: np.ndarray, present_cells: np.ndarray | Non
         present_cells = np.full_like(counts, counts.sum())
     present_cells = np.asarray(present_cells, dtype=np.float64)
     if counts.shape != present_cells.shape or counts.ndim != 1:
-        raise ValueError(f"counts {counts.shape} and present_cells {present_cells.shape} must be equal (C,)")
+        raise ValueError(
+            f"counts {counts.shape} and present_cells {present_cells.shape} must be equal (C,)"
+        )
     seen = counts > 0
     if not seen.any():
         raise ValueError("no labelled cell in the training data: cannot compute class weights")
@@ -99,13 +103,17 @@ class WeightedCrossEntropyLoss(nn.Module):
     Shapes: ``logits (B, C, H, W) float``, ``target (B, H, W) int64`` -> scalar.
     """
 
-    def __init__(self, weights: np.ndarray | torch.Tensor | None = None, ignore_index: int = IGNORE_INDEX):
+    def __init__(
+        self, weights: np.ndarray | torch.Tensor | None = None, ignore_index: int = IGNORE_INDEX
+    ):
         super().__init__()
         w = None if weights is None else torch.as_tensor(np.asarray(weights), dtype=torch.float32)
         self.register_buffer("weights", w)
         self.ignore_index = ignore_index
 
     def forward(self, logits: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
-        nll = F.cross_entropy(logits, target, weight=self.weights, ignore_index=self.ignore_index, reduction="sum")
+        nll = F.cross_entropy(
+            logits, target, weight=self.weights, ignore_index=self.ignore_index, reduction="sum"
+        )
         n = (target != self.ignore_index).sum().clamp(min=1)
         return nll / n

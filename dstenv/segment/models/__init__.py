@@ -23,7 +23,9 @@ MODELS: dict[str, Callable[..., SegmentationModel]] = {
 }
 
 
-def build_model(name: str, in_channels: int = 10, num_classes: int = 5, **kwargs: Any) -> SegmentationModel:
+def build_model(
+    name: str, in_channels: int = 10, num_classes: int = 5, **kwargs: Any
+) -> SegmentationModel:
     """Create a network by name (see :data:`MODELS`); ``kwargs`` go to its builder."""
     if name not in MODELS:
         raise ValueError(f"unknown model {name!r}; choose from {', '.join(MODELS)}")

@@ -40,7 +40,9 @@ def bilinear_kernel(channels: int, size: int) -> torch.Tensor:
 
 
 def _upsampler(channels: int, factor: int) -> nn.ConvTranspose2d:
-    up = nn.ConvTranspose2d(channels, channels, 2 * factor, stride=factor, padding=factor // 2, bias=False)
+    up = nn.ConvTranspose2d(
+        channels, channels, 2 * factor, stride=factor, padding=factor // 2, bias=False
+    )
     with torch.no_grad():
         up.weight.copy_(bilinear_kernel(channels, 2 * factor))
     return up
@@ -52,7 +54,9 @@ class VGG16Encoder(nn.Module):
     Returns ``[pool3 (B,256,H/8,W/8), pool4 (B,512,H/16,W/16), fc7 (B,fc,H/32,W/32)]``.
     """
 
-    def __init__(self, in_channels: int = 10, fc_channels: int = 4096, dropout: float = 0.5) -> None:
+    def __init__(
+        self, in_channels: int = 10, fc_channels: int = 4096, dropout: float = 0.5
+    ) -> None:
         super().__init__()
         self.input_conv = nn.Conv2d(in_channels, 3, 1)
         layers: list[nn.Module] = []
@@ -122,9 +126,13 @@ def load_vgg16_weights(encoder: VGG16Encoder, path: str | Path) -> None:
         else:
             continue
         if src is None:
-            raise ValueError(f"{path}: missing key for {key!r} (expected a torchvision vgg16 state dict)")
+            raise ValueError(
+                f"{path}: missing key for {key!r} (expected a torchvision vgg16 state dict)"
+            )
         if src.numel() != own[key].numel():
-            raise ValueError(f"{path}: {key!r} has {tuple(src.shape)}, the model needs {tuple(own[key].shape)}")
+            raise ValueError(
+                f"{path}: {key!r} has {tuple(src.shape)}, the model needs {tuple(own[key].shape)}"
+            )
         new[key] = src.reshape(own[key].shape)
     encoder.load_state_dict(new, strict=False)
 
@@ -140,4 +148,6 @@ def fcn8s_vgg16(
     enc = VGG16Encoder(in_channels, fc_channels, dropout)
     if vgg16_weights:
         load_vgg16_weights(enc, vgg16_weights)
-    return SegmentationModel(enc, FCN8sDecoder(enc.channels, num_classes), _upsampler(num_classes, 8))
+    return SegmentationModel(
+        enc, FCN8sDecoder(enc.channels, num_classes), _upsampler(num_classes, 8)
+    )

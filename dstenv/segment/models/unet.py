@@ -57,7 +57,9 @@ class TwoStreamEncoder(nn.Module):
     def __init__(self, in_channels: int, stream: int = 12, base: int = 16, depth: int = 3) -> None:
         super().__init__()
         if in_channels % 2:
-            raise ValueError(f"the temporal model needs an even channel count (t, t-1), got {in_channels}")
+            raise ValueError(
+                f"the temporal model needs an even channel count (t, t-1), got {in_channels}"
+            )
         self.half = in_channels // 2
         self.stream_t = conv_block(self.half, stream)
         self.stream_prev = conv_block(self.half, stream)
@@ -66,7 +68,9 @@ class TwoStreamEncoder(nn.Module):
         self.stride = self.body.stride
 
     def forward(self, x: torch.Tensor) -> list[torch.Tensor]:
-        merged = torch.cat([self.stream_t(x[:, : self.half]), self.stream_prev(x[:, self.half :])], 1)
+        merged = torch.cat(
+            [self.stream_t(x[:, : self.half]), self.stream_prev(x[:, self.half :])], 1
+        )
         return self.body(merged)
 
 
@@ -82,7 +86,9 @@ class UNetDecoder(nn.Module):
     def __init__(self, channels: list[int]) -> None:
         super().__init__()
         rev = channels[::-1]
-        self.ups = nn.ModuleList(nn.ConvTranspose2d(a, b, 2, stride=2) for a, b in zip(rev, rev[1:]))
+        self.ups = nn.ModuleList(
+            nn.ConvTranspose2d(a, b, 2, stride=2) for a, b in zip(rev, rev[1:])
+        )
         self.blocks = nn.ModuleList(conv_block(2 * b, b) for b in rev[1:])
 
     def forward(self, feats: list[torch.Tensor]) -> torch.Tensor:
@@ -93,11 +99,17 @@ class UNetDecoder(nn.Module):
 
 
 def unet_light(
-    in_channels: int = 10, num_classes: int = 5, base: int = 16, depth: int = 3, dropout: float = 0.1
+    in_channels: int = 10,
+    num_classes: int = 5,
+    base: int = 16,
+    depth: int = 3,
+    dropout: float = 0.1,
 ) -> SegmentationModel:
     """The light U-Net (``unet-light``)."""
     enc = UNetEncoder(in_channels, base, depth)
-    return SegmentationModel(enc, UNetDecoder(enc.channels), SegmentationHead(base, num_classes, dropout))
+    return SegmentationModel(
+        enc, UNetDecoder(enc.channels), SegmentationHead(base, num_classes, dropout)
+    )
 
 
 def unet_temporal(
@@ -110,4 +122,6 @@ def unet_temporal(
 ) -> SegmentationModel:
     """The two-stream temporal U-Net (``unet-temporal``)."""
     enc = TwoStreamEncoder(in_channels, stream, base, depth)
-    return SegmentationModel(enc, UNetDecoder(enc.channels), SegmentationHead(base, num_classes, dropout))
+    return SegmentationModel(
+        enc, UNetDecoder(enc.channels), SegmentationHead(base, num_classes, dropout)
+    )

@@ -1,8 +1,9 @@
-"""Synthetic frames with the dataset dict layout, for tests that need no simulator."""
+"""Shared fixtures of the segment tests: synthetic frames in the dataset dict layout."""
 
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import torch
 
 from dstenv.frame import IGNORE_INDEX
@@ -16,7 +17,9 @@ class SyntheticFrames(torch.utils.data.Dataset):
     ignore labels and a random visible mask exercise the masks.
     """
 
-    def __init__(self, n: int = 8, shape: tuple[int, int] = (32, 32), seed: int = 0, noise: float = 1.2):
+    def __init__(
+        self, n: int = 8, shape: tuple[int, int] = (32, 32), seed: int = 0, noise: float = 1.2
+    ):
         rng = np.random.default_rng(seed)
         h, w = shape
         self.items = []
@@ -33,11 +36,22 @@ class SyntheticFrames(torch.utils.data.Dataset):
             x = np.concatenate([p, np.roll(p, 1, axis=2)]).astype(np.float32)
             lab[0, :] = IGNORE_INDEX
             vis = rng.random((h, w)) < 0.7
-            self.items.append({"x": torch.from_numpy(x), "labels": torch.from_numpy(lab),
-                               "visible": torch.from_numpy(vis)})
+            self.items.append(
+                {
+                    "x": torch.from_numpy(x),
+                    "labels": torch.from_numpy(lab),
+                    "visible": torch.from_numpy(vis),
+                }
+            )
 
     def __len__(self) -> int:
         return len(self.items)
 
     def __getitem__(self, i: int) -> dict[str, torch.Tensor]:
         return self.items[i]
+
+
+@pytest.fixture
+def make_frames():
+    """Factory fixture: ``make_frames(n, shape=(32, 32), seed=0)`` -> :class:`SyntheticFrames`."""
+    return SyntheticFrames

@@ -107,7 +107,8 @@ def _pct(x: float) -> str:
 def _budget(meta: dict[str, Any] | None) -> str:
     if meta is None:
         return "-"
-    return f"{meta['timesteps']:,} steps, {meta['wall_time_s'] / 60:.0f} min"
+    minutes = meta["wall_time_s"] / 60
+    return f"{meta['timesteps']:,} steps, {minutes:.{1 if minutes < 10 else 0}f} min"
 
 
 def results_markdown(rows: list[tuple[str, dict[str, float], dict[str, Any] | None]],

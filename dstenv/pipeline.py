@@ -192,16 +192,38 @@ class Pipeline:
         self.step_index += 1
         return self._observe()
 
-    def _observe(self) -> Frame:
-        w, cfg, spec = self.world, self.config, self.spec
+    def _advance(self, action: Any = None) -> None:
+        """:meth:`step` without building a :class:`Frame` (no labels, no masses copy).
+
+        The world, LIDAR randomness and filter advance exactly as in :meth:`step`, so
+        the frames of later steps are identical; data generation calls this for the
+        steps between kept frames.
+        """
+        if self._prev_pose is None:
+            raise RuntimeError("Pipeline.step: call reset(seed) first")
+        self.world.step(action)
+        self.step_index += 1
+        pose, _, _, _, _ = self._sense(False)
+        self._prev_pose = pose
+        self._prev_betp = self.filter.pignistic()
+
+    def _sense(self, want_masses: bool) -> tuple[np.ndarray, Agents, np.ndarray, np.ndarray,
+                                                 np.ndarray]:
+        """Sweep, grids and filter update: ``(pose, agents, sensor, gis, masses)``."""
+        w, spec = self.world, self.spec
         pose = np.array(w.ego_pose, dtype=np.float64)
         agents = w.agents
         self.sweep = self.lidar.sweep(w.map, agents, pose, self._rng)
         sensor = self.sweep.sensor_grid(spec)
         gis = gis_grid(w.map, pose, spec, self._map_error)
         motion = None if self._prev_pose is None else relative_pose(self._prev_pose, pose)
-        want_masses = cfg["frame"]["masses"]
         masses = self.filter.update(sensor, gis, motion, copy=want_masses)
+        return pose, agents, sensor, gis, masses
+
+    def _observe(self) -> Frame:
+        w, cfg, spec = self.world, self.config, self.spec
+        want_masses = cfg["frame"]["masses"]
+        pose, agents, sensor, gis, masses = self._sense(want_masses)
         betp = self.filter.pignistic()
         labels = label_grid(w.map, agents, pose, spec, cfg["labels"]["moving_threshold"])
         extras: dict[str, np.ndarray] = {}

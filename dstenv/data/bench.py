@@ -4,21 +4,28 @@ Measured in one process against references taken in the same run, so the ratios
 hold on any machine:
 
 * **pipeline step alone** (world + LIDAR + grids + DST + labels, no storage): the
-  ceiling of single-process generation at stride 1;
+  ceiling of single-process generation at stride 1; and the step without a
+  :class:`~dstenv.frame.Frame` (``Pipeline._advance``) that generation uses between
+  kept frames;
 * **generate**: ``dstenv generate`` end to end (simulation, quantisation,
-  compression, checksums, atomic shard files, manifest) at stride 1 and at the
-  default stride 10 (one frame per simulated second), with 1 and 2 worker processes
-  (figures include Pipeline construction, episode resets with map generation, and
-  for the pool, process start-up: a full run of 190 frames per worker at stride 1 is
-  one episode each);
+  compression, checksums, atomic shard files, manifest) with every step kept
+  (stride 1) and at the default stride 10 (one frame per simulated second), with 1
+  and 2 worker processes, with a new city per episode and with 4 episodes per city
+  (``--episodes-per-map 4``); figures include Pipeline construction, city
+  generation, and for the pool process start-up (~1-2 s);
+* the previous default (gzip level 6) at stride 1, 1 worker, as the in-process
+  reference of the storage path;
 * **bytes per frame**: real frames (stride 10) stored with each encoding, against
   the uncompressed float32 reference (10 probability channels as float32 plus the
   uint8 grids).
+
+Each generate figure is the median of ``--repeats`` runs (default 3; 1 with ``--quick``).
 """
 
 from __future__ import annotations
 
 import argparse
+import statistics
 import tempfile
 import time
 from itertools import islice
@@ -33,9 +40,9 @@ __all__ = ["run"]
 
 #: name -> ShardWriter keyword arguments
 ENCODINGS: dict[str, dict[str, Any]] = {
-    "uint8+gzip6 (default)": {"quantize": True, "compression": "gzip", "compression_opts": 6},
+    "uint8+gzip3 (default)": {"quantize": True, "compression": "gzip", "compression_opts": 3},
     "uint8+gzip1": {"quantize": True, "compression": "gzip", "compression_opts": 1},
-    "uint8+gzip4": {"quantize": True, "compression": "gzip", "compression_opts": 4},
+    "uint8+gzip6": {"quantize": True, "compression": "gzip", "compression_opts": 6},
     "uint8+gzip9": {"quantize": True, "compression": "gzip", "compression_opts": 9},
     "uint8+lzf": {"quantize": True, "compression": "lzf", "compression_opts": None},
     "float32+gzip6": {"quantize": False, "compression": "gzip", "compression_opts": 6},
@@ -43,15 +50,16 @@ ENCODINGS: dict[str, dict[str, Any]] = {
 }
 
 
-def _pipeline_rate(config: dict[str, Any], steps: int) -> float:
+def _pipeline_rate(config: dict[str, Any], steps: int, frame: bool = True) -> float:
     from dstenv.pipeline import Pipeline
 
     p = Pipeline(config)
     p.reset(12345)
     p.step()  # numba compilation and caches out of the timing
+    step = p.step if frame else p._advance
     t0 = time.perf_counter()
     for _ in range(steps):
-        p.step()
+        step()
     return steps / (time.perf_counter() - t0)
 
 
@@ -78,37 +86,57 @@ def _encodings(config: dict[str, Any], n: int, tmp: Path) -> dict[str, Any]:
 
 
 def _generate_rate(config: dict[str, Any], frames: int, workers: int, stride: int,
-                   tmp: Path) -> dict[str, float]:
+                   tmp: Path, repeat: int, **spec_kw: Any) -> dict[str, float]:
     spec = GenerateSpec(config=config, frames=frames, seed=1, split="train",
                         frames_per_shard=max(1, frames // (2 * workers)), episode_length=200,
-                        stride=stride, warmup=stride)
-    out = tmp / f"gen-w{workers}-s{stride}"
-    t0 = time.perf_counter()
-    generate(spec, out, workers=workers, progress=False)
-    rate = frames / (time.perf_counter() - t0)
-    size = sum(p.stat().st_size for p in out.rglob("*.h5"))
-    return {"frames_per_s": rate, "frames_per_hour": 3600 * rate, "bytes_per_frame": size / frames}
+                        stride=stride, warmup=stride, **spec_kw)
+    rates = []
+    for r in range(repeat):
+        out = tmp / f"gen-w{workers}-s{stride}-{len(list(tmp.iterdir()))}"
+        t0 = time.perf_counter()
+        generate(spec, out, workers=workers, progress=False)
+        rates.append(frames / (time.perf_counter() - t0))
+        size = sum(p.stat().st_size for p in out.rglob("*.h5"))
+    rate = statistics.median(rates)
+    return {"frames_per_s": rate, "frames_per_hour": 3600 * rate, "bytes_per_frame": size / frames,
+            "frames": frames, "runs_frames_per_s": rates}
+
+
+#: generate variants: label -> (workers, stride, episodes per map, gzip level)
+VARIANTS: dict[str, tuple[int, int, int, int]] = {
+    "w1 stride1 gzip6 (previous)": (1, 1, 1, 6),
+    "w1 stride1": (1, 1, 1, 3),
+    "w2 stride1": (2, 1, 1, 3),
+    "w1 stride10": (1, 10, 1, 3),
+    "w2 stride10": (2, 10, 1, 3),
+    "w1 stride10 4ep/map": (1, 10, 4, 3),
+    "w2 stride10 4ep/map": (2, 10, 4, 3),
+}
 
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
     """Run the benchmark at 256 x 256 and print a table; returns the figures."""
     quick = bool(getattr(args, "quick", False))
     size = int(getattr(args, "grid", 0) or 256)
+    repeat = 1 if quick else int(getattr(args, "repeats", 0) or 3)
     config = scenario_config(None, {"grid": {"height": size, "width": size}})
-    # frames per measurement: stride 1 (per worker), stride 10, stored for the encodings
-    n1, n10, n_store = (20, 4, 6) if quick else (190, 38, 30)
-    result: dict[str, Any] = {"grid": [size, size]}
+    # frames per worker: stride 1 (4 episodes of 190 kept steps), stride 10 (8 episodes),
+    # and frames stored for the encodings
+    n1, n10, n_store = (20, 4, 6) if quick else (760, 152, 30)
+    result: dict[str, Any] = {"grid": [size, size], "repeat": repeat}
     with tempfile.TemporaryDirectory(prefix="dstenv-bench-") as tmp_name:
         tmp = Path(tmp_name)
-        step_rate = _pipeline_rate(config, n1)
+        step_rate = _pipeline_rate(config, n1 if quick else 200)
         result["pipeline_steps_per_s"] = step_rate
+        result["pipeline_advance_per_s"] = _pipeline_rate(config, n1 if quick else 200, False)
         result["store"] = _encodings(config, n_store, tmp)
         gen: dict[str, Any] = {}
-        for workers, stride in ((1, 1), (2, 1), (1, 10)):
-            frames = n1 if stride == 1 else n10
-            r = _generate_rate(config, frames * workers, workers, stride, tmp)
+        for name, (workers, stride, eps, level) in VARIANTS.items():
+            frames = (n1 if stride == 1 else n10) * workers
+            r = _generate_rate(config, frames, workers, stride, tmp, repeat,
+                               episodes_per_map=eps, compression_level=level)
             r["ratio_to_pipeline_step"] = r["frames_per_s"] / step_rate
-            gen[f"workers={workers} stride={stride}"] = r
+            gen[name] = r
         result["generate"] = gen
     _print(result)
     return result
@@ -117,10 +145,12 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
 def _print(r: dict[str, Any]) -> None:
     h, w = r["grid"]
     print(f"grid {h}x{w}; pipeline step alone: {r['pipeline_steps_per_s']:.1f} steps/s "
-          f"({3600 * r['pipeline_steps_per_s']:,.0f} per hour)")
-    print(f"{'generate':<24}{'frames/s':>10}{'frames/hour':>14}{'vs step':>9}{'B/frame':>10}")
+          f"({3600 * r['pipeline_steps_per_s']:,.0f} per hour); without a Frame: "
+          f"{r['pipeline_advance_per_s']:.1f} steps/s")
+    print(f"generate (median of {r['repeat']})"
+          f"{'frames/s':>12}{'frames/hour':>14}{'vs step':>9}{'B/frame':>10}")
     for name, g in r["generate"].items():
-        print(f"{name:<24}{g['frames_per_s']:>10.1f}{g['frames_per_hour']:>14,.0f}"
+        print(f"{name:<30}{g['frames_per_s']:>10.1f}{g['frames_per_hour']:>14,.0f}"
               f"{g['ratio_to_pipeline_step']:>9.2f}{g['bytes_per_frame']:>10,.0f}")
     store = r["store"]
     print(f"storage of {store['frames']} frames (stride 10); uncompressed float32 reference: "

@@ -76,6 +76,7 @@ def _generate(args: argparse.Namespace) -> int:
             split=args.split, frames_per_shard=args.frames_per_shard,
             episode_length=args.episode_length, stride=args.stride,
             warmup=args.stride if args.warmup is None else args.warmup, masses=args.masses,
+            episodes_per_map=args.episodes_per_map,
             quantize=not args.float32,
             compression=None if args.compression == "none" else args.compression,
             compression_level=args.gzip_level,
@@ -184,6 +185,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="keep one frame every STRIDE steps (default 10 = 1 s)")
     p.add_argument("--warmup", type=int, default=None,
                    help="first kept step of an episode (default: STRIDE)")
+    p.add_argument("--episodes-per-map", type=int, default=1, metavar="E",
+                   help="episodes (new traffic and route) on each procedural city before "
+                        "building the next; a city costs ~100 steps (default 1)")
     p.add_argument("--grid", type=_grid, metavar="N|HxW", help="grid size in cells")
     p.add_argument("--cell-size", type=float, help="cell size [m]")
     p.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE",
@@ -193,8 +197,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="store probabilities as float32 (default uint8, error <= 1/510)")
     p.add_argument("--compression", default="gzip", choices=["gzip", "lzf", "none"],
                    help="shard compression (default gzip)")
-    p.add_argument("--gzip-level", type=int, default=6, choices=range(10), metavar="0-9",
-                   help="gzip level (default 6: ~24 KB per 256x256 frame)")
+    p.add_argument("--gzip-level", type=int, default=3, choices=range(10), metavar="0-9",
+                   help="gzip level (default 3: ~30-40 KB per 256x256 frame; 6: ~25-30 KB "
+                        "at twice the write time)")
     p.add_argument("--frames-per-shard", type=int, default=256)
     p.add_argument("--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
                    help="run shards as Ray tasks; no ADDRESS starts a local Ray")

@@ -16,6 +16,7 @@ import concurrent.futures as cf
 import dataclasses
 import json
 import multiprocessing
+import os
 import queue as queue_mod
 import sys
 from collections.abc import Callable, Mapping
@@ -51,9 +52,12 @@ class GenerateSpec:
         episode_length: steps per episode (one step = one LIDAR period, 0.1 s).
         stride: keep one frame every ``stride`` steps (10 = 1 s).
         warmup: first kept step of an episode.
+        episodes_per_map: episodes driven on each procedural map with new traffic
+            (:mod:`dstenv.data.sampling`); 1 builds a new city for every episode.
         masses: also store the raw ``(32, H, W)`` masses.
         quantize: probabilities as uint8 (error <= 1/510) instead of float32.
-        compression: ``"gzip"``, ``"lzf"`` or ``None``; ``compression_level`` for gzip.
+        compression: ``"gzip"``, ``"lzf"`` or ``None``; ``compression_level`` for gzip
+            (3: the fastest level that keeps a 256x256 frame far below 64 KB).
     """
 
     config: Mapping[str, Any]
@@ -65,10 +69,11 @@ class GenerateSpec:
     episode_length: int = 200
     stride: int = 10
     warmup: int = 10
+    episodes_per_map: int = 1
     masses: bool = False
     quantize: bool = True
     compression: str | None = "gzip"
-    compression_level: int = 6
+    compression_level: int = 3
 
     def __post_init__(self) -> None:
         if self.frames < 1:
@@ -78,6 +83,8 @@ class GenerateSpec:
         if self.split != "auto" and self.split not in SPLITS:
             raise ValueError(f"unknown split {self.split!r}; choose auto, {', '.join(SPLITS)}")
         frame_steps(self.episode_length, self.stride, self.warmup)  # validates
+        if self.episodes_per_map < 1:
+            raise ValueError(f"episodes per map must be >= 1, got {self.episodes_per_map}")
 
     def meta(self) -> dict[str, Any]:
         """The settings as plain JSON data (without the config)."""
@@ -147,7 +154,8 @@ def write_shard(task: ShardTask, out: str | Path,
     attrs = {"config": config, "seed": spec.seed, "split": task.split, "shard_index": task.index,
              "scenario": spec.scenario, "task": task.describe()}
     frames = iter_frames(lambda: Pipeline(config), episode_seeds(spec.seed, task.split,
-                         (task.index,)), spec.episode_length, spec.stride, spec.warmup)
+                         (task.index,)), spec.episode_length, spec.stride, spec.warmup,
+                         spec.episodes_per_map)
     with ShardWriter(out / task.file, attrs, quantize=spec.quantize, masses=spec.masses,
                      compression=spec.compression,
                      compression_opts=spec.compression_level) as writer:
@@ -282,8 +290,26 @@ def _run_serial(todo: list[ShardTask], out: Path, update: Callable[[int], None]
     return {t.file: write_shard(t, out, update) for t in todo}
 
 
+#: thread pools of numerical libraries, one thread per worker process: K workers on K
+#: cores must not each start K threads (unless the user set these variables)
+_ONE_THREAD = ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS",
+               "MKL_NUM_THREADS")
+
+
 def _run_pool(todo: list[ShardTask], out: Path, workers: int, update: Callable[[int], None]
               ) -> dict[str, dict[str, Any]]:
+    saved = {k: os.environ.get(k) for k in _ONE_THREAD}
+    os.environ.update({k: "1" for k, v in saved.items() if v is None})
+    try:  # spawned workers inherit the environment when they start
+        return _run_pool_env(todo, out, workers, update)
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+
+
+def _run_pool_env(todo: list[ShardTask], out: Path, workers: int,
+                  update: Callable[[int], None]) -> dict[str, dict[str, Any]]:
     ctx = multiprocessing.get_context("spawn")
     q = ctx.Queue()
     results: dict[str, dict[str, Any]] = {}

@@ -14,6 +14,16 @@ run: a test map never appears in any training set, whatever ``--seed``, ``--fram
 or worker count produced them (also across separate runs and the streaming dataset).
 Scenarios with a fixed map (an OSM file) have one map only; their splits differ in
 traffic and ego route, not in map.
+
+Several episodes per map
+------------------------
+Building a procedural city costs about as much as 100 simulation steps. With
+``episodes_per_map = E > 1`` each map seed serves ``E`` episodes: the first one is
+exactly ``Pipeline.reset(seed)``; episode ``k >= 1`` drives the same map with
+new traffic, ego route, LIDAR noise and map error drawn from
+:func:`traffic_seed` ``(seed, k)``. Frames keep the map seed in ``frame.seed`` (the
+split stays a property of the map); ``frame.step`` restarts at each episode, so
+``k`` is the number of step restarts since the seed changed.
 """
 
 from __future__ import annotations
@@ -35,6 +45,7 @@ __all__ = [
     "episode_seeds",
     "frame_steps",
     "iter_frames",
+    "traffic_seed",
     "scenario_config",
 ]
 
@@ -98,12 +109,19 @@ def frame_steps(episode_length: int, stride: int, warmup: int) -> list[int]:
     return steps
 
 
+def traffic_seed(map_seed: int, episode: int) -> int:
+    """Seed of episode ``episode >= 1`` on the map of ``map_seed`` (module docstring)."""
+    ss = np.random.SeedSequence([int(map_seed), int(episode), 0x7AFF1C])
+    return int(ss.generate_state(1, np.uint64)[0] % SEED_LIMIT)
+
+
 def iter_frames(
     make_pipeline: Callable[[], Any],
     seeds: Iterator[int],
     episode_length: int,
     stride: int,
     warmup: int,
+    episodes_per_map: int = 1,
 ) -> Iterator[Frame]:
     """Frames of consecutive autopilot episodes, one every ``stride`` steps.
 
@@ -113,22 +131,60 @@ def iter_frames(
         episode_length: steps per episode (including the reset frame, step 0).
         stride: keep one frame every ``stride`` steps.
         warmup: first kept step (lets the DST grid accumulate evidence).
+        episodes_per_map: episodes driven on each map (module docstring); above 1
+            the pipeline must be a procedural ``"city"`` one.
 
     Yields:
-        :class:`Frame` objects; ``frame.seed`` is the episode seed and ``frame.step``
-        the step index (set here if the pipeline leaves them at their defaults).
+        :class:`Frame` objects; ``frame.seed`` is the episode's map seed and
+        ``frame.step`` the step index (set here if the pipeline leaves them at their
+        defaults).
     """
+    if episodes_per_map < 1:
+        raise ValueError(f"episodes per map must be >= 1, got {episodes_per_map}")
     keep = set(frame_steps(episode_length, stride, warmup))
     last = max(keep)
     pipeline = make_pipeline()
+    if episodes_per_map > 1:
+        _check_map_reuse(pipeline.config)
     for seed in seeds:
         frame = pipeline.reset(seed)
-        for step in range(last + 1):
-            if step > 0:
+        yield from _episode(pipeline, frame, seed, keep, last)
+        if episodes_per_map > 1:
+            reuse = _same_map_pipeline(pipeline, traffic_seed(seed, 1))
+            for k in range(1, episodes_per_map):
+                frame = reuse.reset(traffic_seed(seed, k))
+                yield from _episode(reuse, frame, seed, keep, last)
+
+
+def _episode(pipeline: Any, frame: Frame, seed: int, keep: set[int], last: int
+             ) -> Iterator[Frame]:
+    # steps between kept frames need no Frame (labels...): Pipeline._advance skips it
+    advance = getattr(pipeline, "_advance", None)
+    for step in range(last + 1):
+        if step > 0:
+            if step in keep or advance is None:
                 frame = pipeline.step(None)
-            if step in keep:
-                frame.seed, frame.step = int(seed), step
-                yield frame
+            else:
+                advance(None)
+        if step in keep:
+            frame.seed, frame.step = int(seed), step
+            yield frame
+
+
+def _check_map_reuse(config: Mapping[str, Any]) -> None:
+    if config.get("source") != "city" or config["world"]["map"]["kind"] != "procedural":
+        raise ValueError("episodes per map > 1 needs source 'city' with a procedural map "
+                         f"(got source {config.get('source')!r}, map kind "
+                         f"{config['world']['map']['kind']!r})")
+
+
+def _same_map_pipeline(pipeline: Any, seed: int) -> Any:
+    """A pipeline of the same configuration driving ``pipeline``'s current map."""
+    from dstenv.pipeline import Pipeline
+    from dstenv.sim.world import World
+
+    world = World(pipeline.config["world"], seed, world_map=pipeline.world.map)
+    return Pipeline(pipeline.config, world=world)
 
 
 def scenario_config(scenario: str | Path | Mapping[str, Any] | None = None,

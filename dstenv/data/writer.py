@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import concurrent.futures as cf
 import json
 import os
 import re
@@ -14,6 +15,7 @@ import h5py
 import numpy as np
 
 from dstenv import __version__
+from dstenv.data.codec import DIRECT_COMPRESSIONS, encode_chunk
 from dstenv.data.format import (
     BUFFER_BYTES, BUFFER_FRAMES, FORMAT, FORMAT_VERSION, GRID_FIELDS, N_CLASSES, N_MASSES,
     PROB_FIELDS, QUANT_SCALE, SCALAR_FIELDS, class_names, encode_attr, partial_path, short_error,
@@ -35,6 +37,15 @@ class ShardWriter:
             have them).
         compression: ``"gzip"``, ``"lzf"`` or ``None``.
         compression_opts: gzip level (0-9).
+        threads: background threads that compress the grids while the caller
+            produces the next frames (0: compress in :meth:`add`). Only gzip and
+            uncompressed shards are encoded here (:mod:`dstenv.data.codec`); lzf
+            goes through h5py. The bytes written do not depend on it.
+
+    With gzip or no compression every grid chunk is encoded once by
+    :func:`dstenv.data.codec.encode_chunk` and written with ``write_direct_chunk``;
+    a ``pignistic_prev`` equal (after quantisation) to the previous frame's
+    ``pignistic``, as in every episode kept at stride 1, reuses that chunk's bytes.
 
     Raises:
         ValueError: on missing attributes or a frame of the wrong shape or dtype.
@@ -57,6 +68,7 @@ class ShardWriter:
         masses: bool = False,
         compression: str | None = "gzip",
         compression_opts: int | None = 6,
+        threads: int = 1,
     ) -> None:
         self.path = Path(path)
         self.tmp_path = partial_path(self.path)
@@ -78,6 +90,12 @@ class ShardWriter:
         self._filters: dict[str, Any] = {"compression": compression, "fletcher32": True}
         if compression == "gzip":
             self._filters["compression_opts"] = compression_opts
+        self._direct = compression in DIRECT_COMPRESSIONS
+        self._codec = (compression, compression_opts)
+        self._threads = max(int(threads), 0) if self._direct else 0
+        self._pool: cf.ThreadPoolExecutor | None = None
+        self._last_prob: np.ndarray | None = None  # quantised pignistic of the last frame
+        self._last_chunk: Any = None  # its encoded chunk (bytes or Future)
         self._file: h5py.File | None = None
         self._shape: tuple[int, int] | None = None
         self._pending: list[dict[str, Any]] = []
@@ -87,6 +105,8 @@ class ShardWriter:
     def __enter__(self) -> ShardWriter:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._file = h5py.File(self.tmp_path, "w", track_order=False)
+        if self._threads:
+            self._pool = cf.ThreadPoolExecutor(self._threads, thread_name_prefix="shard-codec")
         return self
 
     def _create(self, h: int, w: int) -> None:
@@ -120,14 +140,31 @@ class ShardWriter:
         if self._shape is None:
             self._create(h, w)
         values = self._check(frame)
-        self._pending.append(values)
         self._pending_bytes += sum(np.asarray(v).nbytes for v in values.values())
+        if self._direct:
+            self._encode(values)
+        self._pending.append(values)
         self.n_frames += 1
         if len(self._pending) >= BUFFER_FRAMES or self._pending_bytes >= BUFFER_BYTES:
             try:
                 self._flush(self._file)
             except (OSError, RuntimeError) as exc:
                 raise self._write_error(exc) from None
+
+    def _encode(self, values: dict[str, Any]) -> None:
+        """Replace the per-frame grids in ``values`` by their encoded chunks (or futures)."""
+        prob = values["pignistic"]
+        for name, value in values.items():
+            if np.ndim(value) < 2:
+                continue
+            if (name == "pignistic_prev" and self._last_prob is not None
+                    and np.array_equal(value, self._last_prob)):
+                values[name] = self._last_chunk  # stride 1: same bytes as the last chunk
+            elif self._pool is not None:
+                values[name] = self._pool.submit(encode_chunk, value, *self._codec)
+            else:
+                values[name] = encode_chunk(value, *self._codec)
+        self._last_prob, self._last_chunk = prob, values["pignistic"]
 
     def _write_error(self, exc: BaseException) -> OSError:
         """A one-line OSError for an HDF5 write failure (HDF5 reports errno in its text)."""
@@ -146,7 +183,15 @@ class ShardWriter:
         for name in self._pending[0]:
             ds = f[name]
             ds.resize(start + k, axis=0)
-            ds[start:start + k] = np.stack([np.asarray(v[name]) for v in self._pending])
+            first = self._pending[0][name]
+            if isinstance(first, (bytes, cf.Future)):
+                tail = (0,) * (ds.ndim - 1)
+                for i, v in enumerate(self._pending):
+                    chunk = v[name]
+                    ds.id.write_direct_chunk((start + i, *tail),
+                                             chunk if isinstance(chunk, bytes) else chunk.result())
+            else:
+                ds[start:start + k] = np.stack([np.asarray(v[name]) for v in self._pending])
         self._pending, self._pending_bytes = [], 0
 
     def _check(self, frame: Frame) -> dict[str, Any]:
@@ -212,6 +257,15 @@ class ShardWriter:
         f, self._file = self._file, None
         if f is None:
             return
+        try:
+            self._close(f, exc_type)
+        finally:
+            if self._pool is not None:
+                self._pool.shutdown(wait=True, cancel_futures=True)
+                self._pool = None
+            self._last_prob = self._last_chunk = None
+
+    def _close(self, f: h5py.File, exc_type: type[BaseException] | None) -> None:
         if exc_type is not None:
             self._discard(f)
             return

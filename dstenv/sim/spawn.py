@@ -215,11 +215,15 @@ def _task(world_map, st, rng, cfg, k, slots, taken) -> None:
     route_lanes = [int(l) for l in ego_route if l >= 0]
     nodes = [int(net.node[l]) for l in route_lanes if net.kind[l] == LaneKind.CONNECTOR]
     placed = 0
+    # lane owning each successor entry (CSR rows of succ_ptr), for vectorised look-ups
+    owner = np.repeat(np.arange(len(net)), np.diff(net.succ_ptr))
+    road_off_route = net.kind == LaneKind.ROAD
+    road_off_route[route_lanes] = False
     for n in nodes:  # cars waiting to enter the ego's next junctions from side streets
-        conn = np.flatnonzero(net.node == n)
-        approach = [a for a in range(len(net)) if net.kind[a] == LaneKind.ROAD
-                    and a not in route_lanes and np.isin(net.successors(a), conn).any()]
-        for a in rng.permutation(approach) if approach else []:
+        into = np.zeros(len(net), bool)
+        into[owner[net.node[net.succ] == n]] = True  # a successor belongs to junction n
+        approach = np.flatnonzero(into & road_off_route)
+        for a in rng.permutation(approach) if len(approach) else []:
             if placed >= task["cross_traffic"]:
                 break
             s = net.length[a] - rng.uniform(6.0, 30.0)
@@ -241,11 +245,11 @@ def _task(world_map, st, rng, cfg, k, slots, taken) -> None:
     for c in rng.permutation(crossings) if crossings else []:
         if placed >= task["crossing_pedestrians"]:
             break
-        pred = [p for p in range(len(net)) if c in net.successors(p)]
-        if pred:
+        pred = owner[net.succ == c]  # ascending lane ids, like a scan over all lanes
+        if len(pred):
             s = net.length[pred[0]] - rng.uniform(0.5, 4.0)
             if _mobile(world_map, st, rng, cfg, AgentKind.PEDESTRIAN, None, None, k,
-                       lane=pred[0], s=s, fixed=(int(c),), at=len(st["v"]) - 1) is not None:
+                       lane=int(pred[0]), s=s, fixed=(int(c),), at=len(st["v"]) - 1) is not None:
                 placed += 1
 
 

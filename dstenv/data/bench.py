@@ -90,16 +90,31 @@ def _generate_rate(config: dict[str, Any], frames: int, workers: int, stride: in
     spec = GenerateSpec(config=config, frames=frames, seed=1, split="train",
                         frames_per_shard=max(1, frames // (2 * workers)), episode_length=200,
                         stride=stride, warmup=stride, **spec_kw)
-    rates = []
+    rates, cpu_rates = [], []
     for r in range(repeat):
         out = tmp / f"gen-w{workers}-s{stride}-{len(list(tmp.iterdir()))}"
-        t0 = time.perf_counter()
+        c0, t0 = _cpu_seconds(), time.perf_counter()
         generate(spec, out, workers=workers, progress=False)
         rates.append(frames / (time.perf_counter() - t0))
+        cpu_rates.append(frames / max(_cpu_seconds() - c0, 1e-9))
         size = sum(p.stat().st_size for p in out.rglob("*.h5"))
     rate = statistics.median(rates)
     return {"frames_per_s": rate, "frames_per_hour": 3600 * rate, "bytes_per_frame": size / frames,
-            "frames": frames, "runs_frames_per_s": rates}
+            "frames": frames, "runs_frames_per_s": rates,
+            "frames_per_cpu_hour": 3600 * statistics.median(cpu_rates)}
+
+
+def _cpu_seconds() -> float:
+    """CPU time of this process and its finished children (the pool's workers) [s].
+
+    On a shared machine the wall-clock rate of K workers depends on what else runs;
+    frames per CPU-second times the free cores is the rate of an idle machine.
+    """
+    import resource
+
+    own = resource.getrusage(resource.RUSAGE_SELF)
+    kids = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
 
 
 #: generate variants: label -> (workers, stride, episodes per map, gzip level)
@@ -148,10 +163,14 @@ def _print(r: dict[str, Any]) -> None:
           f"({3600 * r['pipeline_steps_per_s']:,.0f} per hour); without a Frame: "
           f"{r['pipeline_advance_per_s']:.1f} steps/s")
     print(f"generate (median of {r['repeat']})"
-          f"{'frames/s':>12}{'frames/hour':>14}{'vs step':>9}{'B/frame':>10}")
+          f"{'frames/s':>12}{'frames/hour':>14}{'vs step':>9}{'B/frame':>10}"
+          f"{'frames/CPU-hour':>17}")
     for name, g in r["generate"].items():
         print(f"{name:<30}{g['frames_per_s']:>10.1f}{g['frames_per_hour']:>14,.0f}"
-              f"{g['ratio_to_pipeline_step']:>9.2f}{g['bytes_per_frame']:>10,.0f}")
+              f"{g['ratio_to_pipeline_step']:>9.2f}{g['bytes_per_frame']:>10,.0f}"
+              f"{g['frames_per_cpu_hour']:>17,.0f}")
+    print("frames/CPU-hour x free cores = frames/hour of an idle machine (wall-clock rates "
+          "here share the cores with whatever else runs)")
     store = r["store"]
     print(f"storage of {store['frames']} frames (stride 10); uncompressed float32 reference: "
           f"{store['reference_float32_bytes_per_frame']:,} B/frame")

@@ -190,6 +190,8 @@ class StreamingDataset(IterableDataset):
             test maps stay unseen); ``None`` for any.
         inputs: ``"fcn10"``, ``"pignistic"`` or ``"masses"``.
         episode_length, stride, warmup: as in ``dstenv generate`` (steps of 0.1 s).
+        episodes_per_map: episodes on each procedural city before the next one
+            (:mod:`dstenv.data.sampling`; 1: a new city per episode).
         max_frames: stop each worker after this many frames (``None``: forever).
         rank: process rank for distributed training.
     """
@@ -197,7 +199,7 @@ class StreamingDataset(IterableDataset):
     def __init__(self, scenario: str | Path | Mapping[str, Any] | None = None, seed: int = 0, *,
                  split: str | None = "train", inputs: str = "fcn10", episode_length: int = 200,
                  stride: int = 10, warmup: int | None = None, max_frames: int | None = None,
-                 rank: int = 0) -> None:
+                 rank: int = 0, episodes_per_map: int = 1) -> None:
         super().__init__()
         self.config = scenario_config(scenario)
         self.names = _check_inputs(inputs)
@@ -207,6 +209,9 @@ class StreamingDataset(IterableDataset):
         self.episode_length, self.stride = episode_length, stride
         self.warmup = stride if warmup is None else warmup
         self.max_frames = max_frames
+        if episodes_per_map < 1:
+            raise ValueError(f"episodes per map must be >= 1, got {episodes_per_map}")
+        self.episodes_per_map = int(episodes_per_map)
         self.epoch = 0
         episode_seeds(self.seed, split, ())  # validates the split name early
 
@@ -221,7 +226,7 @@ class StreamingDataset(IterableDataset):
         worker = 0 if info is None else info.id
         seeds = episode_seeds(self.seed, self.split, (self.rank, worker, self.epoch))
         frames = iter_frames(lambda: Pipeline(self.config), seeds, self.episode_length,
-                             self.stride, self.warmup)
+                             self.stride, self.warmup, self.episodes_per_map)
         for n, frame in enumerate(frames):
             if self.max_frames is not None and n >= self.max_frames:
                 return

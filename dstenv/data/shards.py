@@ -7,8 +7,11 @@ One shard holds ``N`` :class:`dstenv.frame.Frame` records of one grid shape
 one frame per chunk (random access reads exactly one chunk per array; the small
 records ``ego_pose``, ``time``, ``seed``, ``step``, ``class_counts`` 64 frames per
 chunk), compressed
-(``gzip`` level 6 by default, or ``lzf``) and checksummed (``fletcher32``: a
-corrupted chunk raises on read instead of returning wrong numbers).
+(``gzip`` level 3 by default, or ``lzf``) and checksummed (``fletcher32``: a
+corrupted chunk raises on read instead of returning wrong numbers). With gzip the
+writer deflates the grid chunks itself (:mod:`dstenv.data.codec`, the same bytes
+HDF5's filters produce) so that a ``pignistic_prev`` equal to the previous frame's
+``pignistic`` (every step kept) is compressed once; readers see no difference.
 
 ===================  ======================  =========================================
 dataset              shape, dtype            meaning (axes: :mod:`dstenv.grid`)
@@ -29,9 +32,10 @@ dataset              shape, dtype            meaning (axes: :mod:`dstenv.grid`)
                                              :mod:`dstenv.dst`), never quantised
 ===================  ======================  =========================================
 
-Measured at 256 x 256 (default city, stride 10; ``dstenv bench data``): uint8 +
-gzip 6 stores about 24 KB per frame, against 919 KB uncompressed uint8 and 2.9 MB
-as float32; gzip 4 gave 38 KB, gzip 9 22 KB at 4x the write time, lzf 67 KB.
+Measured at 256 x 256 (default city; ``dstenv bench data``): uint8 + gzip 3 (the
+default) stores about 30-35 KB per frame with every step kept and 40-45 KB at
+stride 10, against 919 KB uncompressed uint8 and 2.9 MB as float32; gzip 6 gives
+about 25 / 33 KB at 2-3x the compression time, gzip 1 40 / 53 KB, lzf 85 KB.
 
 Quantisation: when ``attrs["prob_dtype"] == "uint8"`` the probabilities are stored
 as ``q = rint(255 * p)`` and read as ``p' = q / 255``, so ``|p' - p| <= 1/510``

@@ -35,10 +35,18 @@ from dstenv.segment.checkpoint import load_segmenter
 from dstenv.segment.evaluate import batches, evaluate
 from dstenv.segment.metrics import ConfusionMeter
 from dstenv.segment.registry import create_segmenter
-from dstenv.segment.replay import Episode, check_replay, filter_episode, record_episodes
+from dstenv.segment.replay import (
+    Episode,
+    check_replay,
+    episode_targets,
+    filter_episode,
+    record_episodes,
+    split_index,
+    stored_inputs,
+)
 from dstenv.segment.train import resolve_device, train
 
-__all__ = ["PRESETS", "default_benchmark_config", "preset_config", "run_benchmark", "split_index"]
+__all__ = ["PRESETS", "default_benchmark_config", "preset_config", "run_benchmark"]
 
 
 def default_benchmark_config() -> dict[str, Any]:
@@ -168,68 +176,6 @@ def _generate(dcfg: dict[str, Any], out: Path, progress: bool) -> None:
     generate(spec, out, workers=int(dcfg["workers"]), progress=progress)
 
 
-def split_index(files: list[Path]) -> tuple[list[dict[str, Any]], dict[str, Any]]:
-    """Frames of a list of shards (e.g. ``ShardDataset.files``) with their origin.
-
-    Returns:
-        ``(frames, config)``: ``frames`` lists ``{"file", "index", "seed", "step",
-        "moving"}`` in dataset order (entry k is ``ShardDataset[k]``); ``config`` is
-        the pipeline configuration the shards were generated with.
-
-    Raises:
-        FileNotFoundError: no shard.
-        ValueError: shards made with different configurations.
-    """
-    from dstenv.data.shards import ShardReader
-
-    if not files:
-        raise FileNotFoundError("no shards for this split (run dstenv generate first)")
-    frames, config = [], None
-    for f in files:
-        with ShardReader(f) as r:
-            if config is None:
-                config = r.attrs["config"]
-            elif r.attrs["config"] != config:
-                raise ValueError(f"{f}: generated with another configuration than {files[0]}")
-            for i in range(len(r)):
-                d = r.get(i, ["seed", "step", "class_counts"])
-                frames.append(
-                    {
-                        "file": str(f),
-                        "index": i,
-                        "seed": int(d["seed"]),
-                        "step": int(d["step"]),
-                        "moving": int(d["class_counts"][CLASSES.index("moving")]),
-                    }
-                )
-    return frames, config
-
-
-def _targets(frames: list[dict[str, Any]], max_episodes: int | None = None) -> dict[int, list[int]]:
-    targets: dict[int, list[int]] = {}
-    for fr in frames:
-        if fr["seed"] not in targets and max_episodes is not None and len(targets) >= max_episodes:
-            continue
-        targets.setdefault(fr["seed"], []).append(fr["step"])
-    return targets
-
-
-def _stored(
-    frames: list[dict[str, Any]], seed: int, steps: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    from dstenv.data.shards import ShardReader
-
-    by_step = {fr["step"]: fr for fr in frames if fr["seed"] == seed}
-    xs, labs = [], []
-    for s in steps:
-        fr = by_step[int(s)]
-        with ShardReader(fr["file"]) as r:
-            d = r.get(fr["index"], ["pignistic", "pignistic_prev", "labels"])
-        xs.append(np.concatenate([d["pignistic"], d["pignistic_prev"]]))
-        labs.append(d["labels"])
-    return np.stack(xs), np.stack(labs)
-
-
 def _score_dst(
     seg: Any, episodes: list[Episode]
 ) -> tuple[ConfusionMeter, dict[tuple[int, int], np.ndarray]]:
@@ -325,15 +271,15 @@ def run_benchmark(
 
     # DST: replay the test episodes once, check, then one filter run per parameter set
     t = time.perf_counter()
-    test_eps = record_episodes(gen_config, _targets(test_frames), progress)
+    test_eps = record_episodes(gen_config, episode_targets(test_frames), progress)
     for ep in test_eps[:2]:
-        check_replay(ep, *_stored(test_frames, ep.seed, ep.steps), gen_params)
+        check_replay(ep, *stored_inputs(test_frames, ep.seed, ep.steps), gen_params)
     dst_segs = [create_segmenter("dst", preset=p) for p in cfg["dst_presets"]]
     timings["replay_test_s"] = time.perf_counter() - t
     if cfg["tune"]["enabled"]:
         t = time.perf_counter()
         train_eps = record_episodes(
-            gen_config, _targets(train_frames, cfg["tune"]["episodes"]), progress
+            gen_config, episode_targets(train_frames, cfg["tune"]["episodes"]), progress
         )
         dst_segs.append(
             create_segmenter(
@@ -378,7 +324,7 @@ def run_benchmark(
             seg.describe(),
         )
         preds[seg.label] = {}
-        for k in sorted(_example_ids(test_frames, cfg["examples"])):  # for the example figure
+        for k in sorted(report.example_ids(test_frames, cfg["examples"])):  # for the example figure
             fr = test_frames[k]
             x = torch.as_tensor(test_ds[k]["x"])[None]
             preds[seg.label][(fr["seed"], fr["step"])] = seg.predict(x)[0].numpy()
@@ -405,62 +351,5 @@ def run_benchmark(
         "timings_s": timings,
     }
     results["goal"] = _goal(segs, kinds)
-    _write_report(results, out, test_frames, test_eps, preds, cfg["examples"])
+    report.write_report(results, out, test_frames, test_eps, preds, cfg["examples"])
     return results
-
-
-def _example_ids(frames: list[dict[str, Any]], n: int) -> set[int]:
-    """Frames with the most moving cells, one per episode (deterministic)."""
-    order = sorted(range(len(frames)), key=lambda k: (-frames[k]["moving"], k))
-    chosen, seeds = [], set()
-    for k in order:
-        if frames[k]["seed"] not in seeds:
-            chosen.append(k)
-            seeds.add(frames[k]["seed"])
-        if len(chosen) >= n:
-            break
-    return set(chosen)
-
-
-def _write_report(results, out: Path, frames, episodes, preds, n_examples: int) -> None:
-    figs = out / "figures"
-    report.write_json(out / "results.json", results)
-    (out / "results.md").write_text(report.markdown_table(results))
-    report.plot_confusions(results, figs / "confusion_all.png", "all")
-    report.plot_confusions(results, figs / "confusion_visible.png", "visible")
-    if results["histories"]:
-        report.plot_curves(results["histories"], figs / "training_curves.png")
-    by_seed = {ep.seed: ep for ep in episodes}
-    examples = []
-    for k in sorted(_example_ids(frames, n_examples)):
-        fr = frames[k]
-        ep = by_seed[fr["seed"]]
-        j = int(np.searchsorted(ep.steps, fr["step"]))
-        gen = DSTParams.from_dict(results["data"]["generation_dst_params"])
-        betp_m = filter_episode(
-            Episode(
-                ep.seed,
-                ep.sensor,
-                ep.gis,
-                ep.poses,
-                ep.steps[j : j + 1],
-                ep.labels[j : j + 1],
-                ep.visible[j : j + 1],
-                ep.cell_size,
-            ),
-            gen,
-        )[0, 4]
-        examples.append(
-            {
-                "title": f"seed {fr['seed']} step {fr['step']}",
-                "betp_moving": betp_m,
-                "predictions": {
-                    lab: p[(fr["seed"], fr["step"])]
-                    for lab, p in preds.items()
-                    if (fr["seed"], fr["step"]) in p
-                },
-                "labels": ep.labels[j],
-            }
-        )
-    if examples:
-        report.plot_examples(examples, figs / "examples.png")

@@ -32,7 +32,7 @@ def _train(args: argparse.Namespace) -> int:
         "seed": args.seed,
         "device": args.device,
     }
-    for key in ("epochs", "batch_size", "lr", "loss", "crop", "num_workers"):
+    for key in ("epochs", "batch_size", "lr", "loss", "crop", "num_workers", "weight_power"):
         if getattr(args, key) is not None:
             cfg[key] = getattr(args, key)
     if args.stream is not None:
@@ -146,6 +146,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         nargs=5,
         metavar="W",
         help="fixed class weights (default: median frequency of the training split)",
+    )
+    p.add_argument(
+        "--weight-power",
+        type=float,
+        help="raise the median-frequency class weights to this power (default 1: paper eq. 2)",
     )
     p.add_argument("--epochs", type=int)
     p.add_argument("--batch-size", type=int)

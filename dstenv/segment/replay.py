@@ -17,21 +17,32 @@ honestly in two stages:
 
 :func:`check_replay` compares the replay with the generation parameters against
 the stored BetP, so a replay that drifted from the stored data raises instead of
-scoring different frames.
+scoring different frames. :func:`split_index`, :func:`episode_targets` and
+:func:`stored_inputs` find the episodes and stored frames of a shard split.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from dstenv.dst.frame import CLASSES
 from dstenv.dst.params import DSTParams
 from dstenv.grid import relative_pose
 
-__all__ = ["Episode", "filter_episode", "record_episodes", "check_replay"]
+__all__ = [
+    "Episode",
+    "filter_episode",
+    "record_episodes",
+    "check_replay",
+    "split_index",
+    "episode_targets",
+    "stored_inputs",
+]
 
 
 @dataclass
@@ -178,3 +189,74 @@ def check_replay(
             f"replay of episode seed {episode.seed} differs from the stored BetP by {diff:.4f} "
             f"(> {atol:.4f}) with the generation DST parameters"
         )
+
+
+def split_index(files: list[Path]) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+    """Frames of a list of shards (e.g. ``ShardDataset.files``) with their origin.
+
+    Returns:
+        ``(frames, config)``: ``frames`` lists ``{"file", "index", "seed", "step",
+        "moving"}`` in dataset order (entry k is ``ShardDataset[k]``); ``config`` is
+        the pipeline configuration the shards were generated with.
+
+    Raises:
+        FileNotFoundError: no shard.
+        ValueError: shards made with different configurations.
+    """
+    from dstenv.data.shards import ShardReader
+
+    if not files:
+        raise FileNotFoundError("no shards for this split (run dstenv generate first)")
+    frames, config = [], None
+    for f in files:
+        with ShardReader(f) as r:
+            if config is None:
+                config = r.attrs["config"]
+            elif r.attrs["config"] != config:
+                raise ValueError(f"{f}: generated with another configuration than {files[0]}")
+            for i in range(len(r)):
+                d = r.get(i, ["seed", "step", "class_counts"])
+                frames.append(
+                    {
+                        "file": str(f),
+                        "index": i,
+                        "seed": int(d["seed"]),
+                        "step": int(d["step"]),
+                        "moving": int(d["class_counts"][CLASSES.index("moving")]),
+                    }
+                )
+    return frames, config
+
+
+def episode_targets(
+    frames: list[dict[str, Any]], max_episodes: int | None = None
+) -> dict[int, list[int]]:
+    """Episode seed -> stored steps, from :func:`split_index` frames.
+
+    Args:
+        frames: as returned by :func:`split_index`.
+        max_episodes: keep only the first this many episodes (in frame order).
+    """
+    targets: dict[int, list[int]] = {}
+    for fr in frames:
+        if fr["seed"] not in targets and max_episodes is not None and len(targets) >= max_episodes:
+            continue
+        targets.setdefault(fr["seed"], []).append(fr["step"])
+    return targets
+
+
+def stored_inputs(
+    frames: list[dict[str, Any]], seed: int, steps: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Stored ``(K, 10, H, W) float32`` BetP t/t-1 and ``(K, H, W) uint8`` labels of an episode."""
+    from dstenv.data.shards import ShardReader
+
+    by_step = {fr["step"]: fr for fr in frames if fr["seed"] == seed}
+    xs, labs = [], []
+    for s in steps:
+        fr = by_step[int(s)]
+        with ShardReader(fr["file"]) as r:
+            d = r.get(fr["index"], ["pignistic", "pignistic_prev", "labels"])
+        xs.append(np.concatenate([d["pignistic"], d["pignistic_prev"]]))
+        labs.append(d["labels"])
+    return np.stack(xs), np.stack(labs)

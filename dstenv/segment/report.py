@@ -15,9 +15,13 @@ from typing import Any
 import numpy as np
 
 from dstenv.dst.frame import CLASSES
+from dstenv.dst.params import DSTParams
 from dstenv.frame import IGNORE_INDEX
+from dstenv.segment.replay import Episode, filter_episode
 
 __all__ = [
+    "write_report",
+    "example_ids",
     "write_json",
     "markdown_table",
     "plot_confusions",
@@ -243,3 +247,77 @@ def plot_examples(examples: list[dict[str, Any]], path: str | Path) -> Path:
     handles = [plt.Rectangle((0, 0), 1, 1, color=CLASS_COLORS[k]) for k in range(len(CLASSES))]
     fig.legend(handles, CLASSES, loc="lower center", ncol=len(CLASSES), fontsize=7)
     return _save(fig, Path(path))
+
+
+def example_ids(frames: list[dict[str, Any]], n: int) -> set[int]:
+    """Frames with the most moving cells, one per episode (deterministic)."""
+    order = sorted(range(len(frames)), key=lambda k: (-frames[k]["moving"], k))
+    chosen, seeds = [], set()
+    for k in order:
+        if frames[k]["seed"] not in seeds:
+            chosen.append(k)
+            seeds.add(frames[k]["seed"])
+        if len(chosen) >= n:
+            break
+    return set(chosen)
+
+
+def write_report(
+    results: dict[str, Any],
+    out: Path,
+    frames: list[dict[str, Any]],
+    episodes: list[Episode],
+    preds: dict[str, dict[tuple[int, int], np.ndarray]],
+    n_examples: int,
+) -> None:
+    """Write ``results.json``, ``results.md`` and ``figures/*.png`` into ``out``.
+
+    Args:
+        results: the benchmark results.
+        out: output directory.
+        frames: test frames (:func:`dstenv.segment.replay.split_index`).
+        episodes: the replayed test episodes (for the DST BetP(moving) panel).
+        preds: segmenter label -> ``{(seed, step): (H, W) prediction}`` of the examples.
+        n_examples: example rows (frames chosen by :func:`example_ids`).
+    """
+    figs = out / "figures"
+    write_json(out / "results.json", results)
+    (out / "results.md").write_text(markdown_table(results))
+    plot_confusions(results, figs / "confusion_all.png", "all")
+    plot_confusions(results, figs / "confusion_visible.png", "visible")
+    if results["histories"]:
+        plot_curves(results["histories"], figs / "training_curves.png")
+    by_seed = {ep.seed: ep for ep in episodes}
+    examples = []
+    for k in sorted(example_ids(frames, n_examples)):
+        fr = frames[k]
+        ep = by_seed[fr["seed"]]
+        j = int(np.searchsorted(ep.steps, fr["step"]))
+        gen = DSTParams.from_dict(results["data"]["generation_dst_params"])
+        betp_m = filter_episode(
+            Episode(
+                ep.seed,
+                ep.sensor,
+                ep.gis,
+                ep.poses,
+                ep.steps[j : j + 1],
+                ep.labels[j : j + 1],
+                ep.visible[j : j + 1],
+                ep.cell_size,
+            ),
+            gen,
+        )[0, 4]
+        examples.append(
+            {
+                "title": f"seed {fr['seed']} step {fr['step']}",
+                "betp_moving": betp_m,
+                "predictions": {
+                    lab: p[(fr["seed"], fr["step"])]
+                    for lab, p in preds.items()
+                    if (fr["seed"], fr["step"]) in p
+                },
+                "labels": ep.labels[j],
+            }
+        )
+    if examples:
+        plot_examples(examples, figs / "examples.png")

@@ -239,10 +239,14 @@ def _parking(surface, face, cfg, rng, res, avoid: np.ndarray,
             continue
         s0 = (length - n * SLOT_LENGTH) / 2
         yaw = float(np.arctan2(-along[1], -along[0]))  # with the adjacent traffic (right-hand)
-        for k in range(n):
-            c = start + along * (s0 + (k + 0.5) * SLOT_LENGTH) + inward * curb / 2
-            if len(avoid) and np.hypot(*(avoid - c).T).min() < SLOT_LENGTH / 2 + curb + sw:
-                continue
+        # all slot centres of the side at once (same arithmetic as one slot at a time)
+        centres = (start + along * (s0 + (np.arange(n)[:, None] + 0.5) * SLOT_LENGTH)
+                   + inward * curb / 2)
+        if len(avoid):
+            near = np.hypot(avoid[None, :, 0] - centres[:, None, 0],
+                            avoid[None, :, 1] - centres[:, None, 1]).min(1)
+            centres = centres[near >= SLOT_LENGTH / 2 + curb + sw]
+        for c in centres:
             a = c - along * SLOT_LENGTH / 2 - inward * curb / 2
             b = c + along * SLOT_LENGTH / 2 + inward * curb / 2
             fill_rect(surface, min(a[0], b[0]), max(a[0], b[0]), min(a[1], b[1]),

@@ -85,6 +85,23 @@ def test_streaming_workers_yield_different_frames():
     assert not torch.equal(next(iter(ds))["x"], items[0]["x"])
 
 
+def test_episodes_per_map_cli_and_streaming(tmp_path):
+    common = ["--frames", "6", "--seed", "4", "--split", "train", *TINY_ARGS,
+              "--frames-per-shard", "6", "--episodes-per-map", "3"]
+    assert main(["generate", "--out", str(tmp_path / "a"), *common]) == 0
+    with ShardReader(tmp_path / "a" / "train" / "shard-00000.h5") as r:
+        seeds = [int(r[i].seed) for i in range(len(r))]
+        steps = [int(r[i].step) for i in range(len(r))]
+        assert r.attrs["task"]["episodes_per_map"] == 3
+    # 2 kept steps per episode (3, 6), 3 episodes on the first map
+    assert steps == [3, 6] * 3 and len(set(seeds)) == 1
+    assert main(["generate", "--out", str(tmp_path / "b"), *common]) == 0
+    assert _digests(tmp_path / "a") == _digests(tmp_path / "b")
+    ds = StreamingDataset(TINY, seed=3, episode_length=7, stride=3, max_frames=4,
+                          episodes_per_map=2)
+    assert len(list(ds)) == 4
+
+
 def test_worker_pool_matches_serial(tmp_path):
     common = ["--frames", "4", "--seed", "2", "--split", "train", *TINY_ARGS]
     assert main(["generate", "--out", str(tmp_path / "serial"), *common]) == 0

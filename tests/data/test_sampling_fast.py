@@ -10,7 +10,7 @@ import pytest
 
 from dstenv.data import generate as gen
 from dstenv.data.sampling import (
-    episode_seeds, iter_frames, scenario_config, split_of_seed, traffic_seed,
+    iter_frames, scenario_config, split_of_seed, traffic_seed,
 )
 from dstenv.data.shards import ShardReader
 from dstenv.pipeline import Pipeline

@@ -15,9 +15,10 @@ __all__ = ["__version__"]
 def _register() -> None:
     try:
         from dstenv.envs.registration import register_envs
-    except ImportError:  # envs package not importable (e.g. gymnasium missing)
+
+        register_envs()
+    except ImportError:  # gymnasium missing: the numpy core still works
         return
-    register_envs()
 
 
 _register()

@@ -4,7 +4,8 @@
   ``ShardReader``, ``ShardError``;
 * :mod:`dstenv.data.manifest`: ``manifest.json`` of a dataset directory;
 * :mod:`dstenv.data.sampling`: disjoint train/val/test map seeds, frame sampling;
-* :mod:`dstenv.data.generate`: ``dstenv generate`` (processes or Ray);
+* :mod:`dstenv.data.generate`: ``dstenv generate`` (processes or Ray); call it from
+  Python as ``dstenv.data.generate.generate(spec, out)``;
 * :mod:`dstenv.data.datasets`: ``ShardDataset`` and ``StreamingDataset`` (PyTorch).
 
 Names are imported lazily so that ``import dstenv.data`` does not import torch.
@@ -18,14 +19,14 @@ from typing import Any
 __all__ = [
     "ShardWriter", "ShardReader", "ShardError",
     "ManifestError", "load_manifest", "write_manifest",
-    "GenerateSpec", "generate",
+    "GenerateSpec",
     "ShardDataset", "StreamingDataset",
 ]
 
 _WHERE = {
     "ShardWriter": "shards", "ShardReader": "shards", "ShardError": "shards",
     "ManifestError": "manifest", "load_manifest": "manifest", "write_manifest": "manifest",
-    "GenerateSpec": "generate", "generate": "generate",
+    "GenerateSpec": "generate",
     "ShardDataset": "datasets", "StreamingDataset": "datasets",
 }
 

@@ -11,7 +11,9 @@
 ``convert`` writes one shard per sequence (``DIR/<split>/kitti-SSSS.h5``, the format
 of ``dstenv generate``) and ``DIR/manifest.json``. ``evaluate`` scores the DST
 baseline (argmax of the stored BetP) and any trained checkpoint on such a
-directory with the benchmark's metrics.
+directory with the benchmark's metrics (:mod:`dstenv.segment.evaluate`);
+``dstenv benchmark --data DIR --checkpoint PT`` does the same and writes the
+benchmark's report.
 """
 
 from __future__ import annotations
@@ -145,28 +147,26 @@ def _render(args: argparse.Namespace) -> int:
 def _evaluate(args: argparse.Namespace) -> int:
     from dstenv.cli import CLIError
     from dstenv.data import ShardDataset
-    from dstenv.dst import CLASSES, DSTParams
-    from dstenv.segment.checkpoint import load_segmenter
-    from dstenv.segment.evaluate import batches, evaluate
-    from dstenv.segment.segmenters import DSTSegmenter
+    from dstenv.dst import CLASSES
+    from dstenv.segment.evaluate import load_checkpoints, score_segmenters, stored_dst_segmenter
+    from dstenv.segment.replay import split_index
 
     data = ShardDataset(args.data, inputs="fcn10")
     if len(data) == 0:
         raise CLIError(f"{args.data}: no frames")
-    segs = [DSTSegmenter(DSTParams.default(), label="dst (stored BetP)")]
-    segs += [load_segmenter(c, "cpu") for c in args.checkpoint]
+    segs = [stored_dst_segmenter(split_index(data.files)[1], label="dst (stored BetP)")]
+    segs += load_checkpoints(args.checkpoint, int(data[0]["x"].shape[0]), device="cpu")
     results = {}
     names = " ".join(f"{c[:8]:>8}" for c in CLASSES)
     header = f"{'segmenter':<24} {'cells':<8} {'mIoU':>6} {names}"
     print(f"{len(data)} frames from {args.data}\n{header}")
-    for seg in segs:
-        summary = evaluate(seg, batches(data, args.batch_size)).summary(CLASSES)
-        results[seg.label] = summary
+    for label, meter in score_segmenters(segs, data, args.batch_size).items():
+        summary = results[label] = meter.summary(CLASSES)
         for cells in ("all", "visible"):
             s = summary[cells]
             iou = " ".join(f"{'-' if v is None else f'{v:.3f}':>8}" for v in s["iou"].values())
             miou = "-" if s["miou"] is None else f"{s['miou']:.3f}"
-            print(f"{seg.label:<24} {cells:<8} {miou:>6} {iou}")
+            print(f"{label:<24} {cells:<8} {miou:>6} {iou}")
     if args.json:
         Path(args.json).write_text(json.dumps(results, indent=1, default=float) + "\n")
         print(f"wrote {args.json}")

@@ -15,12 +15,21 @@ Stages (each resumable: rerunning the same command reuses finished work):
 
 Every segmenter is scored on exactly the same frames (same episode seeds and
 steps), over all labelled cells and over visible cells.
+
+**Evaluation-only data** (``source = "kitti"`` shards of ``dstenv kitti convert``,
+or shards without a train split) has no training split and cannot be replayed
+through the simulator: :func:`run_benchmark` then scores the ``dst`` variant of the
+generation parameters on the stored BetP, re-runs the filter over the stored
+``sensor``/``gis``/``ego_pose`` for the other presets and ``tune.params`` only when
+the shards hold every filtered frame (:func:`dstenv.segment.replay.stored_episodes`),
+lists the variants it cannot score with the reason, and scores the given
+checkpoints (e.g. trained on simulated data) instead of training models.
 """
 
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -32,7 +41,7 @@ from dstenv.dst.frame import CLASSES
 from dstenv.dst.params import DSTParams
 from dstenv.segment import report
 from dstenv.segment.checkpoint import load_segmenter
-from dstenv.segment.evaluate import batches, evaluate
+from dstenv.segment.evaluate import batches, evaluate, load_checkpoints
 from dstenv.segment.metrics import ConfusionMeter
 from dstenv.segment.registry import create_segmenter
 from dstenv.segment.replay import (
@@ -41,6 +50,7 @@ from dstenv.segment.replay import (
     episode_targets,
     filter_episode,
     record_episodes,
+    shard_attrs,
     split_index,
     stored_inputs,
 )
@@ -69,6 +79,9 @@ def default_benchmark_config() -> dict[str, Any]:
             "episodes": 8,  # training episodes replayed for the search
             "budget": 30,  # parameter sets scored
             "seed": 0,
+            # fixed dst-tuned parameters (DSTParams fields), e.g. those a simulated
+            # benchmark found; {} = search them on the train split
+            "params": {},
         },
         "models": ["unet-light"],  # learned segmenters to train (dstenv.segment.models.MODELS)
         "model_kwargs": {},  # model name -> builder options
@@ -224,6 +237,7 @@ def run_benchmark(
     log: Callable[[str], None] = print,
     preset: str = "custom",
     command: str | None = None,
+    checkpoints: Sequence[str | Path] = (),
 ) -> dict[str, Any]:
     """Run the whole benchmark and write its report into ``out``.
 
@@ -235,6 +249,8 @@ def run_benchmark(
         log: receives one-line messages.
         preset: name recorded in the report.
         command: command line recorded in the report.
+        checkpoints: trained networks (``dstenv train``) scored besides ``models``; on
+            evaluation-only data (module docstring) the only learned segmenters.
 
     Returns:
         The JSON-compatible results (also in ``out/results.json``).
@@ -255,8 +271,25 @@ def run_benchmark(
     timings["data_s"] = time.perf_counter() - t
 
     test_ds = ShardDataset(data_dir, split="test", inputs="fcn10")
+    if len(test_ds) == 0:
+        raise ValueError(f"{data_dir}: no test frames (no shard of split 'test')")
     train_ds = ShardDataset(data_dir, split="train", inputs="fcn10")
     val_ds = ShardDataset(data_dir, split="val", inputs="fcn10")
+    source = shard_attrs(test_ds.files).get("source", "sim")
+    if len(train_ds) == 0 or source == "kitti":
+        from dstenv.segment.stored import evaluate_stored
+
+        results, frames, preds = evaluate_stored(
+            cfg, test_ds, checkpoints, device, progress, log, source
+        )
+        results = {"preset": preset, "command": command, **results}
+        results["data"]["dir"] = str(data_dir)
+        results["timings_s"] = {**timings, **results["timings_s"]}
+        segs = results["segmenters"]
+        results["goal"] = _goal(segs, {k: v["kind"] for k, v in segs.items()})
+        report.write_report(results, out, frames, None, preds, cfg["examples"])
+        return results
+    extra = load_checkpoints(checkpoints, device=device, taken=cfg["models"])  # fail early
     test_frames, gen_config = split_index(test_ds.files)
     train_frames, train_config = split_index(train_ds.files)
     if train_config != gen_config:
@@ -276,7 +309,9 @@ def run_benchmark(
         check_replay(ep, *stored_inputs(test_frames, ep.seed, ep.steps), gen_params)
     dst_segs = [create_segmenter("dst", preset=p) for p in cfg["dst_presets"]]
     timings["replay_test_s"] = time.perf_counter() - t
-    if cfg["tune"]["enabled"]:
+    if cfg["tune"]["params"]:
+        dst_segs.append(create_segmenter("dst-tuned", params=cfg["tune"]["params"]))
+    elif cfg["tune"]["enabled"]:
         t = time.perf_counter()
         train_eps = record_episodes(
             gen_config, episode_targets(train_frames, cfg["tune"]["episodes"]), progress
@@ -306,7 +341,7 @@ def run_benchmark(
     timings["dst_eval_s"] = time.perf_counter() - t
 
     # learned models: train on train, select on val, score on the stored test frames
-    histories = {}
+    histories, learned = {}, []
     for name in cfg["models"]:
         t = time.perf_counter()
         tcfg = dict(cfg["train"])
@@ -316,12 +351,13 @@ def run_benchmark(
             tcfg, train_ds, val_ds if len(val_ds) else None, mdir, progress=progress, log=log
         )
         timings[f"train_{name}_s"] = time.perf_counter() - t
-        seg = load_segmenter(mdir / "best.pt", device)
+        learned.append(load_segmenter(mdir / "best.pt", device))
+    for seg in learned + extra:
         meter = evaluate(seg, batches(test_ds, cfg["eval_batch_size"]), progress=progress)
         segs[seg.label], kinds[seg.label], described[seg.label] = (
             meter.summary(CLASSES),
             "learned",
-            seg.describe(),
+            {**seg.describe(), **({"checkpoint": seg.checkpoint} if seg in extra else {})},
         )
         preds[seg.label] = {}
         for k in sorted(report.example_ids(test_frames, cfg["examples"])):  # for the example figure

@@ -81,6 +81,8 @@ def _benchmark(args: argparse.Namespace) -> int:
     cfg = preset_config(args.preset, overrides)
     parts = ["dstenv", "benchmark", "--preset", args.preset, "--out", args.out]
     parts += ["--data", args.data] if args.data else []
+    for ckpt in args.checkpoint:
+        parts += ["--checkpoint", ckpt]
     for item in args.set or []:
         parts += ["--set", item]
     command = " ".join(shlex.quote(a) for a in parts)
@@ -92,6 +94,7 @@ def _benchmark(args: argparse.Namespace) -> int:
         log=(lambda m: None) if args.quiet else print,
         preset=args.preset,
         command=command,
+        checkpoints=args.checkpoint,
     )
     out = Path(args.out)
     print((out / "results.md").read_text())
@@ -168,7 +171,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="compare DST and FCN-DST segmenters on held-out maps",
         description="Generate data, train the learned segmenters, tune DST, and score every "
         "segmenter on a test split of unseen map seeds. Writes results.md, "
-        "results.json and figures/*.png into --out. Rerun to resume.",
+        "results.json and figures/*.png into --out. Rerun to resume. On evaluation-only "
+        "data (--data from dstenv kitti convert, or without a train split) nothing is "
+        "trained or tuned: DST is scored from the stored grids and the --checkpoint "
+        "networks (e.g. trained on simulated data) on the stored frames.",
     )
     b.add_argument(
         "--preset",
@@ -178,6 +184,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     b.add_argument("--out", default="benchmark-out", metavar="DIR", help="output directory")
     b.add_argument("--data", metavar="DIR", help="use existing shards instead of generating")
+    b.add_argument(
+        "--checkpoint",
+        action="append",
+        default=[],
+        metavar="PT",
+        help="also score this trained network (dstenv train); repeatable",
+    )
     b.add_argument(
         "--set",
         action="append",

@@ -1,16 +1,33 @@
-"""Scoring a segmenter on a dataset: confusion matrices over all and visible cells."""
+"""Scoring segmenters on stored frames: confusion matrices over all and visible cells.
+
+Shared by ``dstenv benchmark`` and ``dstenv kitti evaluate``: :func:`load_checkpoints`
+(trained networks, checked against the data's input channels),
+:func:`stored_dst_segmenter` (argmax of the stored BetP, with the parameters the
+shards were made with) and :func:`score_segmenters`.
+"""
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+from typing import Any
 
 import torch
 from tqdm import tqdm
 
+from dstenv.dst.frame import CLASSES
+from dstenv.dst.params import DSTParams
 from dstenv.segment.metrics import ConfusionMeter
-from dstenv.segment.segmenters import Segmenter
+from dstenv.segment.segmenters import DSTSegmenter, Segmenter, TorchSegmenter
 
-__all__ = ["evaluate", "batches"]
+__all__ = [
+    "evaluate",
+    "batches",
+    "load_checkpoints",
+    "stored_dst_segmenter",
+    "score_segmenters",
+    "dst_preset_name",
+]
 
 
 def batches(dataset, batch_size: int = 8) -> Iterable[dict[str, torch.Tensor]]:
@@ -44,3 +61,88 @@ def evaluate(
         pred = segmenter.predict(torch.as_tensor(batch["x"]))
         meter.update(pred, torch.as_tensor(batch["labels"]), torch.as_tensor(batch["visible"]))
     return meter
+
+
+def dst_preset_name(params: DSTParams) -> str | None:
+    """``"default"`` or ``"paper"`` if ``params`` equal that preset, else ``None``."""
+    for name in ("default", "paper"):
+        if DSTParams.preset(name) == params:
+            return name
+    return None
+
+
+def stored_dst_segmenter(config: dict[str, Any], label: str | None = None) -> DSTSegmenter:
+    """The DST baseline on stored BetP: its parameters are the shards' ``config["dst"]``.
+
+    Args:
+        config: the shards' configuration (``split_index(...)[1]``).
+        label: table label; default ``"dst (<preset>)"``, or ``"dst (stored)"`` when
+            the parameters match no preset.
+    """
+    params = DSTParams.from_dict(config.get("dst", {}))
+    name = dst_preset_name(params) or "stored"
+    return DSTSegmenter(params, "dst", label or f"dst ({name})")
+
+
+def load_checkpoints(
+    paths: Sequence[str | Path],
+    in_channels: int = 10,
+    num_classes: int = len(CLASSES),
+    device: str | torch.device = "cpu",
+    taken: Sequence[str] = (),
+) -> list[TorchSegmenter]:
+    """Load trained networks to score on data with ``in_channels`` input channels.
+
+    Labels are the model names, made unique with the checkpoint path when two
+    checkpoints hold the same model or the name is in ``taken``; the path is also
+    in the attribute ``checkpoint``.
+
+    Raises:
+        FileNotFoundError, ValueError: a missing or unreadable checkpoint, or one whose
+            input channels or classes do not match the data (one line naming the file).
+    """
+    from dstenv.segment.checkpoint import load_segmenter
+
+    segs = []
+    for path in paths:
+        seg = load_segmenter(path, device)
+        if seg.in_channels != in_channels:
+            raise ValueError(
+                f"{path}: checkpoint takes {seg.in_channels} input channels but the data "
+                f"gives {in_channels} (BetP at t and t-1)"
+            )
+        if seg.num_classes != num_classes:
+            raise ValueError(
+                f"{path}: checkpoint predicts {seg.num_classes} classes, the data has {num_classes}"
+            )
+        seg.checkpoint = str(path)
+        segs.append(seg)
+    names = [s.label for s in segs] + list(taken)
+    for seg in segs:
+        if names.count(seg.label) > 1:
+            seg.label = f"{seg.label} ({seg.checkpoint})"
+    return segs
+
+
+def score_segmenters(
+    segmenters: Sequence[Segmenter],
+    dataset: Any,
+    batch_size: int = 8,
+    progress: bool = False,
+) -> dict[str, ConfusionMeter]:
+    """Score every segmenter on the same stored frames.
+
+    Args:
+        segmenters: each reads the dataset's ``x`` as is (stored BetP t / t-1).
+        dataset: a map-style dataset of ``{"x", "labels", "visible"}`` (e.g.
+            :class:`dstenv.data.ShardDataset` with ``inputs="fcn10"``).
+        batch_size: frames per batch.
+        progress: tqdm bars.
+
+    Returns:
+        label -> :class:`ConfusionMeter`, in ``segmenters`` order.
+    """
+    return {
+        seg.label: evaluate(seg, batches(dataset, batch_size), progress=progress)
+        for seg in segmenters
+    }

@@ -19,6 +19,13 @@ honestly in two stages:
 the stored BetP, so a replay that drifted from the stored data raises instead of
 scoring different frames. :func:`split_index`, :func:`episode_targets` and
 :func:`stored_inputs` find the episodes and stored frames of a shard split.
+
+Evaluation-only datasets (KITTI conversions, or simulated shards without a train
+split) cannot be replayed through the simulator. :func:`stored_episodes` rebuilds
+their :class:`Episode` objects from the stored per-frame ``sensor``, ``gis`` and
+``ego_pose`` instead -- honestly only when the shards hold *every* filtered step
+from the first one on (otherwise the filter state between two stored frames is
+lost, and it says so).
 """
 
 from __future__ import annotations
@@ -42,6 +49,9 @@ __all__ = [
     "split_index",
     "episode_targets",
     "stored_inputs",
+    "filter_period",
+    "stored_episodes",
+    "shard_attrs",
 ]
 
 
@@ -260,3 +270,77 @@ def stored_inputs(
         xs.append(np.concatenate([d["pignistic"], d["pignistic_prev"]]))
         labs.append(d["labels"])
     return np.stack(xs), np.stack(labs)
+
+
+def filter_period(config: Mapping[str, Any]) -> int:
+    """Steps between two DST updates of a shard's producer.
+
+    ``update_every`` of a KITTI conversion (:func:`dstenv.kitti.sequence.default_config`);
+    the simulator updates the filter on every step (1).
+    """
+    return int(config.get("update_every", 1))
+
+
+def stored_episodes(
+    frames: list[dict[str, Any]], config: Mapping[str, Any]
+) -> tuple[list[tuple[Episode, np.ndarray]], str | None]:
+    """Episodes rebuilt from the stored inputs, if the shards hold every filtered step.
+
+    Args:
+        frames: as returned by :func:`split_index`.
+        config: the shards' configuration (its ``grid.cell_size`` and
+            :func:`filter_period` are used).
+
+    Returns:
+        ``(episodes, None)``: per episode seed (sorted), an :class:`Episode` whose
+        time axis is the stored frames (``steps = arange(K)``) and the ``(K,) int64``
+        stored step numbers; or ``([], reason)`` when some episode's stored steps are
+        not ``0, p, 2p, ...`` (``p`` = :func:`filter_period`), naming it.
+    """
+    from dstenv.data.shards import ShardReader
+
+    period = filter_period(config)
+    by_seed: dict[int, list[dict[str, Any]]] = {}
+    for fr in frames:
+        by_seed.setdefault(fr["seed"], []).append(fr)
+    for seed in sorted(by_seed):
+        steps = np.array(sorted(fr["step"] for fr in by_seed[seed]), dtype=np.int64)
+        if not np.array_equal(steps, period * np.arange(len(steps))):
+            return [], (
+                f"episode {seed} stores steps {', '.join(map(str, steps[:4]))}"
+                f"{', ...' if len(steps) > 4 else ''} but the DST filter ran on every "
+                f"{period} step(s) from 0: the filter state between stored frames is lost "
+                "(store every filtered frame, e.g. kitti convert --stride 1 --warmup 0)"
+            )
+    episodes = []
+    names = ["sensor", "gis", "ego_pose", "labels", "visible"]
+    for seed in sorted(by_seed):
+        rows = sorted(by_seed[seed], key=lambda fr: fr["step"])
+        got: dict[str, list[np.ndarray]] = {n: [] for n in names}
+        for fr in rows:
+            with ShardReader(fr["file"]) as r:
+                d = r.get(fr["index"], names)
+            for n in names:
+                got[n].append(np.asarray(d[n]))
+        ep = Episode(
+            seed=int(seed),
+            sensor=np.stack(got["sensor"]).astype(np.uint8),
+            gis=np.stack(got["gis"]).astype(np.uint8),
+            poses=np.stack(got["ego_pose"]).astype(np.float64),
+            steps=np.arange(len(rows), dtype=np.int64),
+            labels=np.stack(got["labels"]).astype(np.uint8),
+            visible=np.stack(got["visible"]).astype(bool),
+            cell_size=float(config["grid"]["cell_size"]),
+        )
+        episodes.append((ep, np.array([fr["step"] for fr in rows], dtype=np.int64)))
+    return episodes, None
+
+
+def shard_attrs(files: list[Path]) -> dict[str, Any]:
+    """Root attributes of the first shard (``source``, ``config``, ``cell_size``...)."""
+    from dstenv.data.shards import ShardReader
+
+    if not files:
+        raise FileNotFoundError("no shards for this split")
+    with ShardReader(files[0]) as r:
+        return dict(r.attrs)

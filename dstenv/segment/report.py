@@ -67,7 +67,16 @@ def markdown_table(results: dict[str, Any]) -> str:
     """
     lines = [f"# Segmenter benchmark ({results.get('preset', 'custom')} preset)", ""]
     data = results.get("data", {})
-    if data:
+    if data.get("evaluation_only"):
+        lines += [
+            f"Evaluation-only data ({data.get('source', '?')}): {data.get('test_frames', '?')} "
+            f"test frames from {data.get('test_episodes', '?')} episode(s)/sequence(s), no train "
+            f"split; grid {data.get('grid_shape', '?')} cells of {data.get('cell_size', '?')} m. "
+            "DST from the stored BetP (or the filter re-run over the stored inputs), learned "
+            "models from the given checkpoints.",
+            "",
+        ]
+    elif data:
         lines += [
             f"Test split: {data.get('test_frames', '?')} frames from "
             f"{data.get('test_episodes', '?')} held-out map seeds (never used in training); "
@@ -110,6 +119,10 @@ def markdown_table(results: dict[str, Any]) -> str:
                 )
                 + " |"
             )
+        lines.append("")
+    if results.get("unscored"):
+        lines += ["## Not scored", ""]
+        lines += [f"- **{k}**: {why}" for k, why in results["unscored"].items()]
         lines.append("")
     goal = results.get("goal")
     if goal:
@@ -266,7 +279,7 @@ def write_report(
     results: dict[str, Any],
     out: Path,
     frames: list[dict[str, Any]],
-    episodes: list[Episode],
+    episodes: list[Episode] | None,
     preds: dict[str, dict[tuple[int, int], np.ndarray]],
     n_examples: int,
 ) -> None:
@@ -276,7 +289,8 @@ def write_report(
         results: the benchmark results.
         out: output directory.
         frames: test frames (:func:`dstenv.segment.replay.split_index`).
-        episodes: the replayed test episodes (for the DST BetP(moving) panel).
+        episodes: the replayed test episodes (for the DST BetP(moving) panel), or
+            ``None`` to read the stored BetP and labels of the frames.
         preds: segmenter label -> ``{(seed, step): (H, W) prediction}`` of the examples.
         n_examples: example rows (frames chosen by :func:`example_ids`).
     """
@@ -287,9 +301,25 @@ def write_report(
     plot_confusions(results, figs / "confusion_visible.png", "visible")
     if results["histories"]:
         plot_curves(results["histories"], figs / "training_curves.png")
-    by_seed = {ep.seed: ep for ep in episodes}
     examples = []
-    for k in sorted(example_ids(frames, n_examples)):
+    if episodes is None:  # evaluation-only data: the stored BetP and labels
+        from dstenv.data.shards import ShardReader
+
+        for k in sorted(example_ids(frames, n_examples)):
+            fr = frames[k]
+            with ShardReader(fr["file"]) as r:
+                d = r.get(fr["index"], ["pignistic", "labels"])
+            key = (fr["seed"], fr["step"])
+            examples.append(
+                {
+                    "title": f"episode {fr['seed']} step {fr['step']}",
+                    "betp_moving": np.asarray(d["pignistic"][CLASSES.index("moving")]),
+                    "predictions": {lab: p[key] for lab, p in preds.items() if key in p},
+                    "labels": np.asarray(d["labels"]),
+                }
+            )
+    by_seed = {ep.seed: ep for ep in episodes or []}
+    for k in sorted(example_ids(frames, n_examples)) if episodes is not None else []:
         fr = frames[k]
         ep = by_seed[fr["seed"]]
         j = int(np.searchsorted(ep.steps, fr["step"]))

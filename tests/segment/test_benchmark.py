@@ -67,12 +67,19 @@ def test_cli_benchmark_on_existing_data_and_errors(tiny, tmp_path, capsys):
             str(out / "data"),
             "--set",
             "tune.enabled=false",
+            "--checkpoint",
+            str(out / "models" / "unet-light" / "best.pt"),
             "--quiet",
         ]
     )
     assert rc == 0
     again = json.loads((tmp_path / "results.json").read_text())
     assert "dst-tuned" not in again["segmenters"]
+    # an extra checkpoint of the same model gets its path as label; same weights, same scores
+    ckpt = str(out / "models" / "unet-light" / "best.pt")
+    extra = again["segmenters"][f"unet-light ({ckpt})"]
+    assert extra["describe"]["checkpoint"] == ckpt
+    assert extra["all"] == res["segmenters"]["unet-light"]["all"]
     # same data, same seed: the same numbers as the first run
     assert again["segmenters"]["unet-light"]["all"] == res["segmenters"]["unet-light"]["all"]
     assert again["segmenters"]["dst (paper)"]["all"] == res["segmenters"]["dst (paper)"]["all"]

@@ -1,0 +1,144 @@
+"""``dstenv benchmark`` on converted KITTI shards with a checkpoint trained on simulated data."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from dstenv.cli import main
+from dstenv.segment.checkpoint import save_checkpoint
+from dstenv.segment.replay import split_index, stored_episodes
+from dstenv.segment.segmenters import TorchSegmenter
+
+from .conftest import make_sequence
+
+
+@pytest.fixture(scope="module")
+def sim_checkpoint(tmp_path_factory):
+    """A tiny U-Net trained for one epoch on 8 simulated 32 x 32 frames."""
+    from dstenv.data import ShardDataset
+    from dstenv.data.generate import GenerateSpec, generate
+    from dstenv.data.sampling import scenario_config
+    from dstenv.segment.train import train
+
+    tmp = tmp_path_factory.mktemp("sim")
+    spec = GenerateSpec(
+        config=scenario_config(None, {"grid": {"height": 32, "width": 32}}), frames=8, seed=0,
+        scenario="default", split="train", frames_per_shard=8, episode_length=24, stride=4,
+        warmup=4,
+    )
+    generate(spec, tmp / "data", progress=False)
+    cfg = {"model": "unet-light", "model_kwargs": {"base": 4, "depth": 2}, "epochs": 1,
+           "batch_size": 4, "device": "cpu"}
+    train(cfg, ShardDataset(tmp / "data", split="train"), None, tmp / "m", progress=False,
+          log=lambda m: None)
+    return tmp / "m" / "last.pt"
+
+
+@pytest.fixture(scope="module")
+def kitti_root(tmp_path_factory):
+    return make_sequence(tmp_path_factory.mktemp("kitti") / "root")
+
+
+def _convert(root, out, *extra):
+    assert main(["kitti", "convert", "--root", str(root), "--sequences", "0001", "--warmup", "0",
+                 "--out", str(out), *extra]) == 0
+    return out
+
+
+def _bench(data, out, *extra):
+    return main(["benchmark", "--data", str(data), "--out", str(out), "--quiet",
+                 "--set", "eval_batch_size=2", *extra])
+
+
+def test_every_frame_stored_scores_every_dst_variant(kitti_root, sim_checkpoint, tmp_path):
+    ds = _convert(kitti_root, tmp_path / "ds", "--stride", "1")
+    out = tmp_path / "b"
+    assert _bench(ds, out, "--checkpoint", str(sim_checkpoint),
+                  "--set", "tune.params={alpha=0.5}") == 0
+    res = json.loads((out / "results.json").read_text())
+    segs = res["segmenters"]
+    assert list(segs) == ["dst (default)", "dst (paper)", "dst-tuned", "unet-light"]
+    assert [segs[k]["kind"] for k in segs] == ["dst", "dst", "dst", "learned"]
+    assert segs["dst-tuned"]["describe"]["params"]["alpha"] == 0.5
+    assert segs["unet-light"]["describe"]["checkpoint"] == str(sim_checkpoint)
+    assert res["unscored"] == {}
+    assert res["data"]["source"] == "kitti" and res["data"]["test_frames"] == 6
+    assert res["data"]["grid_shape"] == [256, 256] and res["histories"] == {}
+    # every segmenter on exactly the same cells
+    cells = {(v["all"]["cells"], v["visible"]["cells"]) for v in segs.values()}
+    assert len(cells) == 1 and next(iter(cells))[1] > 0
+    for name in ("results.md", "figures/confusion_all.png", "figures/confusion_visible.png",
+                 "figures/examples.png"):
+        assert (out / name).stat().st_size > 0, name
+    md = (out / "results.md").read_text()
+    assert "Evaluation-only data (kitti): 6 test frames" in md and "--checkpoint" in md
+
+
+def test_refiltered_preset_matches_stored_preset(kitti_root, tmp_path):
+    """Re-running `default` over the inputs of a `paper` conversion == converting with `default`."""
+    a = _convert(kitti_root, tmp_path / "default", "--stride", "1")
+    b = _convert(kitti_root, tmp_path / "paper", "--stride", "1", "--dst-preset", "paper")
+    assert _bench(a, tmp_path / "ra") == 0 and _bench(b, tmp_path / "rb") == 0
+    ra = json.loads((tmp_path / "ra" / "results.json").read_text())["segmenters"]
+    rb = json.loads((tmp_path / "rb" / "results.json").read_text())["segmenters"]
+    assert list(rb)[0] == "dst (paper)"  # the stored BetP of the paper conversion
+    for label in ("dst (default)", "dst (paper)"):
+        for scope in ("all", "visible"):
+            ca = np.array(ra[label][scope]["confusion"])
+            cb = np.array(rb[label][scope]["confusion"])
+            # BetP stored as uint8 (within 1/510): argmax may flip only on near-ties
+            assert np.abs(ca - cb).sum() <= 1e-3 * ca.sum(), (label, scope)
+    assert rb["dst (default)"]["all"]["cells"] == ra["dst (default)"]["all"]["cells"] > 0
+
+
+def test_sparse_frames_say_which_variants_are_not_scored(kitti_root, sim_checkpoint, tmp_path):
+    ds = _convert(kitti_root, tmp_path / "ds", "--stride", "2")
+    frames, config = split_index(sorted((ds / "test").glob("*.h5")))
+    episodes, reason = stored_episodes(frames, config)
+    assert episodes == [] and "stores steps 0, 2, 4" in reason and "every 1 step(s)" in reason
+    out = tmp_path / "b"
+    assert _bench(ds, out, "--checkpoint", str(sim_checkpoint)) == 0
+    res = json.loads((out / "results.json").read_text())
+    assert list(res["segmenters"]) == ["dst (default)", "unet-light"]
+    assert set(res["unscored"]) == {"dst (paper)", "dst-tuned"}
+    assert "filter state between stored frames is lost" in res["unscored"]["dst (paper)"]
+    assert "no train split to tune on" in res["unscored"]["dst-tuned"]
+    md = (out / "results.md").read_text()
+    assert "## Not scored" in md and "**dst (paper)**" in md
+
+
+def test_bad_checkpoint_and_no_test_frames_are_one_line_errors(kitti_root, tmp_path, capsys):
+    ds = _convert(kitti_root, tmp_path / "ds", "--stride", "2")
+    seg = TorchSegmenter("unet-light", {"base": 4, "depth": 2}, in_channels=5)
+    bad = save_checkpoint(tmp_path / "five.pt", {"spec": seg.spec(),
+                                                 "model": seg.model.state_dict()})
+    capsys.readouterr()
+    assert _bench(ds, tmp_path / "b", "--checkpoint", str(bad)) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "takes 5 input channels but the data gives 10" in err
+    assert main(["kitti", "evaluate", "--data", str(ds), "--checkpoint", str(bad)]) == 2
+    assert "takes 5 input channels" in capsys.readouterr().err
+    val = _convert(kitti_root, tmp_path / "val", "--stride", "2", "--split", "val")
+    capsys.readouterr()
+    assert _bench(val, tmp_path / "c") == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "no test frames" in err
+
+
+@pytest.mark.slow
+def test_real_sample_smoke(real_root, sim_checkpoint, tmp_path):
+    """The 40-frame real sample, every frame stored: a smoke test, not the paper's split."""
+    ds = tmp_path / "ds"
+    assert main(["kitti", "convert", "--root", str(real_root), "--sequences", "0003",
+                 "--stride", "1", "--warmup", "0", "--out", str(ds)]) == 0
+    assert _bench(ds, tmp_path / "b", "--checkpoint", str(sim_checkpoint)) == 0
+    res = json.loads((tmp_path / "b" / "results.json").read_text())
+    segs = res["segmenters"]
+    assert list(segs) == ["dst (default)", "dst (paper)", "unet-light"]
+    assert res["data"]["test_frames"] == 40 and set(res["unscored"]) == {"dst-tuned"}
+    assert len({v["all"]["cells"] for v in segs.values()}) == 1
+    # real moving cars are found by the DST filter
+    assert segs["dst (default)"]["all"]["iou"]["moving"] > 0.1

@@ -1,0 +1,59 @@
+"""``dstenv benchmark`` on simulated shards without a train split (evaluation only)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from dstenv.segment.benchmark import preset_config, run_benchmark
+from dstenv.segment.replay import split_index, stored_episodes
+
+
+def _generate(out, stride, warmup):
+    from dstenv.data.generate import GenerateSpec, generate
+    from dstenv.data.sampling import scenario_config
+
+    spec = GenerateSpec(
+        config=scenario_config(None, {"grid": {"height": 32, "width": 32}}), frames=6, seed=3,
+        scenario="default", split="test", frames_per_shard=8, episode_length=6, stride=stride,
+        warmup=warmup,
+    )
+    generate(spec, out, progress=False)
+    return out
+
+
+def _run(data, out):
+    cfg = preset_config("tiny", {"models": [], "tune": {"params": {"alpha": 0.3}}})
+    return run_benchmark(cfg, out, data_dir=data, progress=False, log=lambda m: None)
+
+
+def test_every_step_stored_rebuilds_episodes_and_scores_presets(tmp_path):
+    data = _generate(tmp_path / "data", stride=1, warmup=0)
+    frames, config = split_index(sorted((data / "test").glob("*.h5")))
+    episodes, reason = stored_episodes(frames, config)
+    assert reason is None and len(episodes) == 1
+    ep, steps = episodes[0]
+    assert steps.tolist() == [0, 1, 2, 3, 4, 5] and ep.sensor.shape == (6, 32, 32)
+    assert np.array_equal(ep.steps, np.arange(6))
+    res = _run(data, tmp_path / "out")
+    segs = res["segmenters"]
+    assert list(segs) == ["dst (default)", "dst (paper)", "dst-tuned"]
+    assert res["unscored"] == {} and res["data"]["source"] == "sim"
+    assert res["data"]["evaluation_only"] and res["histories"] == {}
+    assert len({v["all"]["cells"] for v in segs.values()}) == 1
+    assert (tmp_path / "out" / "figures" / "examples.png").stat().st_size > 0
+
+
+def test_strided_frames_score_only_the_stored_betp(tmp_path):
+    data = _generate(tmp_path / "data", stride=2, warmup=1)
+    res = _run(data, tmp_path / "out")
+    assert list(res["segmenters"]) == ["dst (default)"]
+    assert set(res["unscored"]) == {"dst (paper)", "dst-tuned"}
+    assert "stores steps 1, 3, 5" in res["unscored"]["dst-tuned"]
+    assert "## Not scored" in (tmp_path / "out" / "results.md").read_text()
+
+
+def test_no_test_split_is_an_error(tmp_path):
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(ValueError, match="no test frames"):
+        _run(tmp_path / "empty", tmp_path / "out")

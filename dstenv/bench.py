@@ -11,10 +11,14 @@ from __future__ import annotations
 import argparse
 import importlib
 import json
+import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-__all__ = ["BENCHMARKS", "register", "run_benchmark"]
+import numpy as np
+
+__all__ = ["BENCHMARKS", "median_ms", "register", "run_benchmark"]
 
 #: benchmark name -> (module with ``run(args)``, one-line description)
 BENCHMARKS: dict[str, tuple[str, str]] = {
@@ -27,6 +31,22 @@ BENCHMARKS: dict[str, tuple[str, str]] = {
     "env": ("dstenv.envs.bench", "DSTGrid-v0 steps/s vs highway-env OccupancyGrid"),
     "data": ("dstenv.data.bench", "labelled frames per hour and bytes per frame on disk"),
 }
+
+
+def median_ms(fn: Callable[[], Any], repeats: int, warmup: int = 1) -> float:
+    """Median wall time of ``fn()`` over ``repeats`` calls [ms], after ``warmup`` calls.
+
+    The warm-up calls compile numba kernels and fill caches; the median resists the
+    noise of a shared machine better than the mean.
+    """
+    for _ in range(warmup):
+        fn()
+    times = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t)
+    return float(np.median(times) * 1e3)
 
 
 def run_benchmark(name: str, args: argparse.Namespace) -> dict[str, Any]:

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from dstenv import __version__
-from dstenv.data.shards import ShardReader, class_names
+from dstenv.data.shards import ShardReader, class_names, partial_path
 
 __all__ = [
     "MANIFEST_NAME",
@@ -52,19 +52,28 @@ class ManifestError(ValueError):
     """A manifest is unreadable or does not match the shard files it lists."""
 
 
-def atomic_write_text(path: str | Path, text: str) -> None:
-    """Write ``text`` to ``path`` via a temporary file, fsync and rename."""
+def atomic_write_bytes(path: str | Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` via ``path.partial``, fsync and rename (parents created).
+
+    A crash leaves either the old file or the new one, never a half-written file.
+    """
     path = Path(path)
-    tmp = path.with_name(path.name + ".partial")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = partial_path(path)
     try:
-        with open(tmp, "w", encoding="utf-8") as fh:
-            fh.write(text)
+        with open(tmp, "wb") as fh:
+            fh.write(data)
             fh.flush()
             os.fsync(fh.fileno())
         os.replace(tmp, path)
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+
+
+def atomic_write_text(path: str | Path, text: str) -> None:
+    """:func:`atomic_write_bytes` of UTF-8 text."""
+    atomic_write_bytes(path, text.encode("utf-8"))
 
 
 def scan_shards(root: str | Path) -> list[Path]:

@@ -10,13 +10,12 @@ local Ray is started with ``--workers`` CPUs.
 from __future__ import annotations
 
 import hashlib
-import os
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from dstenv.data.shards import partial_path
+from dstenv.data.manifest import atomic_write_bytes
 
 __all__ = ["run_ray", "shard_bytes"]
 
@@ -32,20 +31,6 @@ def shard_bytes(task: Any) -> tuple[bytes, dict[str, Any]]:
     with tempfile.TemporaryDirectory(prefix="dstenv-shard-") as tmp:
         entry = write_shard(task, tmp)
         return (Path(tmp) / task.file).read_bytes(), entry
-
-
-def _write_atomic(path: Path, data: bytes) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = partial_path(path)
-    try:
-        with open(tmp, "wb") as fh:
-            fh.write(data)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
 
 
 def run_ray(todo: list[Any], out: Path, address: str, workers: int,
@@ -88,7 +73,7 @@ def run_ray(todo: list[Any], out: Path, address: str, workers: int,
             data, entry = ray.get(ready[0])
             if hashlib.sha256(data).hexdigest() != entry["sha256"]:
                 raise OSError(f"{task.file}: bytes from Ray do not match their SHA-256")
-            _write_atomic(out / task.file, data)
+            atomic_write_bytes(out / task.file, data)
             results[task.file] = entry
             update(task.frames)
         return results

@@ -10,12 +10,12 @@ float64), so the figures can be compared across machines.
 from __future__ import annotations
 
 import argparse
-import time
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
+from dstenv.bench import median_ms
 from dstenv.grid import GridSpec
 from dstenv.sensing.gis import MapError, gis_grid
 from dstenv.sensing.labels import label_grid, visible_mask
@@ -87,16 +87,6 @@ def synthetic_city(
     return world_map, agents, np.array([mid + 12.0, mid - 1.7, 0.0])
 
 
-def _median_ms(fn: Callable[[], Any], repeats: int) -> float:
-    fn()  # compile / warm caches
-    times = []
-    for _ in range(repeats):
-        t = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t)
-    return float(np.median(times) * 1e3)
-
-
 def run(args: argparse.Namespace) -> dict[str, Any]:
     """Time each sensing function; return ``{name: {"ms": ..., "x_ref": ...}}``."""
     repeats = args.repeats or (20 if args.quick else 300)
@@ -131,7 +121,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     ref_ms = None
     for name, fn in cases.items():
         reps = max(repeats // 20, 3) if "60k" in name else repeats
-        ms = _median_ms(fn, reps)
+        ms = median_ms(fn, reps)
         ref_ms = ref_ms or ms
         results[name] = {"ms": ms, "x_ref": ms / ref_ms}
         print(f"{name:42s} {ms:8.3f} ms  {ms / ref_ms:7.2f} x ref")

@@ -10,12 +10,12 @@ same process, so the numbers compare across machines. Goal: chain <= 2 ms.
 from __future__ import annotations
 
 import argparse
-import time
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
+from dstenv.bench import median_ms
 from dstenv.grid import GridSpec
 from dstenv.sim.world import World
 
@@ -26,17 +26,6 @@ BENCH_CONFIG = {
     "map": {"blocks_x": 3, "blocks_y": 3},
     "traffic": {"cars": 14, "cyclists": 2, "pedestrians": 12, "parked_density": 0.08},
 }
-
-
-def _median_ms(fn: Callable[[], Any], repeats: int) -> float:
-    for _ in range(3):
-        fn()  # compile / warm caches
-    times = []
-    for _ in range(repeats):
-        t = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t)
-    return float(np.median(times) * 1e3)
 
 
 def run(args: argparse.Namespace) -> dict[str, Any]:
@@ -84,7 +73,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     results: dict[str, Any] = {"agents": len(world.agents)}
     ref_ms = None
     for name, fn in cases.items():
-        ms = _median_ms(fn, repeats)
+        ms = median_ms(fn, repeats, warmup=3)
         ref_ms = ref_ms or ms
         results[name] = {"ms": ms, "x_ref": ms / ref_ms}
         print(f"{name:34s} {ms:8.3f} ms  {ms / ref_ms:7.2f} x ref")

@@ -11,7 +11,7 @@ import pytest
 from dstenv.dst import CLASSES
 from dstenv.grid import GridSpec
 from dstenv.sensing import Lidar, label_grid, visible_mask
-from dstenv.sim.types import Agents, MapClass, WorldMap
+from dstenv.sim.types import Agents, WorldMap
 
 from .worlds import agents, rect_map
 

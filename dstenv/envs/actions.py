@@ -43,6 +43,9 @@ def default_action_config() -> dict[str, Any]:
         "initial_speed_index": 2,  # index into target_speeds at reset
         "speed_gain": 1.0,  # [1/s] accel = gain * (target - speed), clipped
         "max_accel": 3.0,  # [m/s^2] continuous-action scale and discrete accel limit
+        # [m/s^2] discrete braking limit: below the reward's hard_brake_threshold, so a
+        # SLOWER meta-action brakes comfortably; continuous control can brake harder
+        "brake_decel": 2.4,
         "max_steer": 0.5,  # [rad] continuous-action steering scale
     }
 
@@ -84,6 +87,7 @@ class _CityMeta:
         self.index = int(np.clip(cfg["initial_speed_index"], 0, len(self.speeds) - 1))
         self.gain = float(cfg["speed_gain"])
         self.max_accel = float(cfg["max_accel"])
+        self.brake = min(float(cfg["brake_decel"]), self.max_accel)
         self.world = world
 
     def world_action(self, action: Any) -> tuple[float, float]:
@@ -96,7 +100,7 @@ class _CityMeta:
             self.index = min(self.index + 1, len(self.speeds) - 1)
         w = self.world
         v = w.ego_speed
-        accel = float(np.clip(self.gain * (self.speeds[self.index] - v), -self.max_accel,
+        accel = float(np.clip(self.gain * (self.speeds[self.index] - v), -self.brake,
                               self.max_accel))
         look = float(np.clip(2.5 + 0.6 * v, 4.0, 15.0))
         target = w.route_polyline(ahead=look, spacing=look)[-1]

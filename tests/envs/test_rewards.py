@@ -30,3 +30,24 @@ def test_braking_at_threshold_is_not_hard():
     cfg = default_reward_config()
     t = reward_terms(StepOutcome(0.0, 0.0, decel=2.5, collision=False, off_road=False), cfg)
     assert t["hard_brake"] == 0.0 and t["speed"] == 0.0
+
+
+def test_slower_meta_action_brakes_comfortably():
+    """A SLOWER meta-action never earns the hard-braking penalty (issue 8's finding)."""
+    import gymnasium as gym
+
+    import dstenv  # noqa: F401
+    from .conftest import SMALL_CITY
+
+    env = gym.make("DSTGrid-v0", config=SMALL_CITY)
+    env.reset(seed=4)
+    speeds, brakes = [], []
+    for action in [2] * 40 + [0] * 30:  # reach the top speed, then slow down twice
+        _, _, terminated, truncated, info = env.step(action)
+        speeds.append(env.unwrapped.pipeline.world.ego_speed)
+        brakes.append(info["rewards"]["hard_brake"])
+        if terminated or truncated:
+            break
+    env.close()
+    assert max(speeds) > 6.0 and speeds[-1] < max(speeds) - 3.0  # it did slow down
+    assert all(b == 0.0 for b in brakes)

@@ -125,7 +125,8 @@ def env_config(args: EnvArgs, observation: str | None = None) -> dict[str, Any]:
         raise ValueError(f"--env-config: expected a JSON object, got {type(cfg).__name__}")
     if observation is not None:
         cfg = {**cfg, "observation": {**cfg.get("observation", {}), "type": observation}}
-    return cfg
+    # the baselines choose speed only: the route fixes the turns (Discrete(3))
+    return {**cfg, "action": {"turns": False, **cfg.get("action", {})}}
 
 
 def make_env(args: EnvArgs, observation: str | None = None, ego_state: str = "none",

@@ -5,11 +5,13 @@ agent's action into what the world source's ``step`` takes:
 
 * ``"discrete"``: meta-actions. On a highway-env scene, ``Discrete(5)``
   :data:`META_ACTIONS` = highway-env's own (its route-following ``MDPVehicle``;
-  LEFT / RIGHT change lane). On the city, ``Discrete(3)``
-  :data:`CITY_META_ACTIONS` (SLOWER, IDLE, FASTER) step a target speed through
-  ``target_speeds`` (a P-controller with gain ``speed_gain`` tracks it) while the
-  autopilot's route-following steering drives the planned route: the agent decides
-  when to slow, e.g. before a blind junction.
+  LEFT / RIGHT change lane). On the city, ``Discrete(5)`` with the same names:
+  SLOWER / IDLE / FASTER step a target speed through ``target_speeds`` (a
+  P-controller with gain ``speed_gain`` tracks it), LEFT / RIGHT choose the turn at
+  the next junction (``World.set_turn``; ignored where the junction has no such
+  turn), and the autopilot's route-following steering drives the planned route: the
+  agent decides where to go and when to slow, e.g. before a blind junction.
+  ``turns = false`` keeps only the first three (``Discrete(3)``: speed only).
 * ``"continuous"``: ``Box(-1, 1, (2,), float32)`` = (acceleration, steering) as
   fractions of ``max_accel`` [m/s^2] and ``max_steer`` [rad], positive steering to
   the left.
@@ -29,8 +31,8 @@ __all__ = ["META_ACTIONS", "CITY_META_ACTIONS", "ActionMode", "ACTIONS", "action
 
 #: Discrete action index -> meta-action name (highway-env scenes: all five).
 META_ACTIONS: tuple[str, ...] = ("SLOWER", "IDLE", "FASTER", "LEFT", "RIGHT")
-#: The city's discrete actions: the longitudinal three (the route fixes the turns).
-CITY_META_ACTIONS: tuple[str, ...] = META_ACTIONS[:3]
+#: The city's discrete actions: the same names; LEFT / RIGHT pick the next junction's turn.
+CITY_META_ACTIONS: tuple[str, ...] = META_ACTIONS
 _HIGHWAY_NAMES = {"SLOWER": "SLOWER", "IDLE": "IDLE", "FASTER": "FASTER",
                   "LEFT": "LANE_LEFT", "RIGHT": "LANE_RIGHT"}
 
@@ -39,6 +41,7 @@ def default_action_config() -> dict[str, Any]:
     """The ``action`` config section (units in comments)."""
     return {
         "type": "discrete",  # "discrete" (meta-actions) | "continuous" (accel, steer)
+        "turns": True,  # city: LEFT / RIGHT choose the next junction's turn; false: speed only
         "target_speeds": [0.0, 4.5, 9.0],  # [m/s] speeds SLOWER / FASTER step through
         "initial_speed_index": 2,  # index into target_speeds at reset
         "speed_gain": 1.0,  # [1/s] accel = gain * (target - speed), clipped
@@ -92,9 +95,12 @@ class _CityMeta:
 
     def world_action(self, action: Any) -> tuple[float, float]:
         from dstenv.sim.ego import pure_pursuit
+        from dstenv.sim.lanes import Turn
 
         name = CITY_META_ACTIONS[int(action)]
-        if name == "SLOWER":
+        if name in ("LEFT", "RIGHT"):
+            self.world.set_turn(Turn[name])
+        elif name == "SLOWER":
             self.index = max(self.index - 1, 0)
         elif name == "FASTER":
             self.index = min(self.index + 1, len(self.speeds) - 1)
@@ -123,7 +129,9 @@ class ActionMode:
         if self.name == "discrete":
             if len(cfg["target_speeds"]) < 1:
                 raise ConfigError("config.action.target_speeds: needs at least one speed")
-            return spaces.Discrete(len(CITY_META_ACTIONS if source == "city" else META_ACTIONS))
+            if source == "city":
+                return spaces.Discrete(len(CITY_META_ACTIONS) if cfg["turns"] else 3)
+            return spaces.Discrete(len(META_ACTIONS))
         return spaces.Box(-1.0, 1.0, (2,), dtype=np.float32)
 
     def controller(self, cfg: dict[str, Any], world: Any, source: str) -> Controller:

@@ -58,11 +58,13 @@ class DSTGridEnv(gym.Env):
 
     ``config["action"]["type"]`` (:mod:`dstenv.envs.actions`):
 
-    * ``"discrete"`` (default): meta-actions. City: ``Discrete(3)`` = ``0 SLOWER,
-      1 IDLE, 2 FASTER``, stepping a target speed through ``target_speeds``
-      (default 0, 4.5, 9 m/s) while the autopilot's route-following steering drives
-      the planned route. highway-env scenes: ``Discrete(5)``, the same three plus
-      ``3 LEFT, 4 RIGHT`` lane changes (highway-env's ``DiscreteMetaAction``).
+    * ``"discrete"`` (default): meta-actions, ``Discrete(5)`` = ``0 SLOWER, 1 IDLE,
+      2 FASTER, 3 LEFT, 4 RIGHT``. SLOWER / FASTER step a target speed through
+      ``target_speeds`` (default 0, 4.5, 9 m/s). City: LEFT / RIGHT choose the turn
+      at the next junction (no effect where it has none) while the autopilot's
+      route-following steering drives the planned route; ``turns = false`` gives
+      ``Discrete(3)``, speed only. highway-env scenes: LEFT / RIGHT change lane
+      (highway-env's ``DiscreteMetaAction``).
     * ``"continuous"``: ``Box(-1, 1, (2,), float32)``, (acceleration, steering)
       scaled by ``max_accel`` [m/s^2] and ``max_steer`` [rad], positive = left.
 

@@ -14,7 +14,7 @@ from dstenv.sim import spawn
 from dstenv.sim.citygen import generate_city
 from dstenv.sim.config import MAP_KINDS, default_config
 from dstenv.sim.ego import bicycle_step, hits, pure_pursuit
-from dstenv.sim.lanes import LaneKind, LaneNetwork, lane_pose, project_on_lane
+from dstenv.sim.lanes import LaneKind, LaneNetwork, Turn, lane_pose, project_on_lane
 from dstenv.sim.traffic import choose_successor, route_point, traffic_step
 from dstenv.sim.types import AgentKind, Agents, WorldMap
 
@@ -171,6 +171,36 @@ class World:
         st["route"][-1] = spawn.plan_route(net, lane, self.rng, ROUTE_LEN)
         st["grant"][-1] = -1
         self._update_flags()
+
+    def set_turn(self, turn: Turn) -> bool:
+        """Choose the ego's manoeuvre at its next junction (the rest of the route re-planned).
+
+        Args:
+            turn: :class:`dstenv.sim.lanes.Turn` (STRAIGHT, LEFT, RIGHT).
+
+        Returns:
+            True if the next junction offers that manoeuvre from the ego's lane and the
+            route now takes it; False (route unchanged) if it does not, or if the ego is
+            already inside the junction.
+        """
+        net, st = self._map.lanes, self._state
+        route = st["route"][-1]
+        if net.kind[route[0]] == LaneKind.CONNECTOR:
+            return False  # too late: already inside the junction
+        k = next((i for i in range(1, len(route))
+                  if route[i] >= 0 and net.kind[route[i]] == LaneKind.CONNECTOR), None)
+        if k is None:
+            return False
+        options = [int(c) for c in net.successors(int(route[k - 1]))
+                   if net.kind[c] == LaneKind.CONNECTOR and net.turn[c] == int(turn)]
+        if not options:
+            return False
+        if int(route[k]) in options:
+            return True
+        if st["grant"][-1] == route[k]:
+            st["grant"][-1] = -1  # the reservation was for the old connector
+        route[k:] = spawn.plan_route(net, options[0], self.rng, len(route) - k)
+        return True
 
     # ------------------------------------------------------------------ views
     @property

@@ -34,9 +34,14 @@ def test_parse_args_types_and_round_trip() -> None:
 
 def test_env_config_merges_observation_and_rejects_bad_json() -> None:
     args = EnvArgs(env_config='{"grid": {"height": 40}, "observation": {"type": "image"}}')
+    speed_only = {"turns": False}  # the baselines choose speed; the route fixes the turns
     assert env_config(args, "pignistic") == {"grid": {"height": 40},
-                                             "observation": {"type": "pignistic"}}
-    assert env_config(EnvArgs()) == {}
+                                             "observation": {"type": "pignistic"},
+                                             "action": speed_only}
+    assert env_config(EnvArgs()) == {"action": speed_only}
+    own = EnvArgs(env_config='{"action": {"max_accel": 2.4}}')
+    assert env_config(own) == {"action": {"turns": False, "max_accel": 2.4}}
+    assert env_config(EnvArgs(env_config='{"action": {"turns": true}}'))["action"]["turns"]
     with pytest.raises(ValueError, match="--env-config"):
         env_config(EnvArgs(env_config="{grid"))
     with pytest.raises(ValueError, match="JSON object"):

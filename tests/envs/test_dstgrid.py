@@ -175,3 +175,28 @@ def test_human_render_mode_runs_headless(monkeypatch):
     assert clone._window is None
     env.close()
     assert env._window is None
+
+
+def test_city_turn_meta_actions_steer_the_route():
+    import gymnasium as gym
+
+    from dstenv.sim.lanes import LaneKind, Turn
+
+    env = gym.make("DSTGrid-v0", config=SMALL_CITY)
+    assert env.action_space.n == 5
+    env.reset(seed=2)
+    world = env.unwrapped.pipeline.world
+    net = world.map.lanes
+    turned = 0
+    for t in range(60):
+        action = 3 if t % 2 else 4  # LEFT, RIGHT alternately: the last valid one wins
+        env.step(action)
+        route = world.route
+        if net.kind[route[0]] != LaneKind.CONNECTOR:
+            k = next((i for i in range(1, len(route)) if net.kind[route[i]] == LaneKind.CONNECTOR), None)
+            turned += k is not None and net.turn[route[k]] in (Turn.LEFT, Turn.RIGHT)
+    env.close()
+    assert turned > 0
+    speed_only = gym.make("DSTGrid-v0", config={**SMALL_CITY, "action": {"turns": False}})
+    assert speed_only.action_space.n == 3
+    speed_only.close()

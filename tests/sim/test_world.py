@@ -194,3 +194,28 @@ def test_a_stuck_agent_is_replaced_out_of_sight():
         assert np.hypot(*(a.xy[i] - before[i])) > 1.0
         assert np.hypot(*(a.xy[i] - w.ego_pose[:2])) >= 60.0
         assert w.map.lanes.kind[w.agent_lanes[i]] == lane_kind
+
+
+def test_set_turn_replans_the_next_junction():
+    from dstenv.sim.lanes import LaneKind, Turn
+
+    outcomes = {Turn.LEFT: 0, Turn.RIGHT: 0}
+    for seed in range(4):
+        world = World(seed=seed)
+        net = world.map.lanes
+        for _ in range(6):
+            for _ in range(25):
+                world.step()
+            for turn in outcomes:
+                before = world.route
+                if world.set_turn(turn):
+                    route = world.route
+                    k = next(i for i in range(1, len(route))
+                             if net.kind[route[i]] == LaneKind.CONNECTOR)
+                    assert net.turn[route[k]] == turn
+                    assert np.array_equal(route[:k], before[:k])  # up to the junction: same
+                    outcomes[turn] += 1
+                else:
+                    assert np.array_equal(world.route, before)
+            assert not world.collision and not world.off_road
+    assert outcomes[Turn.LEFT] > 0 and outcomes[Turn.RIGHT] > 0

@@ -15,7 +15,7 @@ from typing import Any
 import gymnasium as gym
 
 from rl_common import EnvArgs, EpisodeResult, evaluate_policy, make_env, opt, parse_args
-from rl_common import summarize, write_results_csv
+from rl_common import report_run
 
 
 @dataclass
@@ -56,11 +56,7 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
     """Command-line entry point; returns the summary (:func:`rl_common.summarize`)."""
     args = parse_args(Args, argv)
     name, results = run(args)
-    summary = summarize(results)
-    print(name, {k: round(v, 3) for k, v in summary.items()})
-    if args.csv:
-        write_results_csv(args.csv, [(name, results)])
-    return summary
+    return report_run(name, results, args.csv)
 
 
 if __name__ == "__main__":

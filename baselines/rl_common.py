@@ -38,7 +38,7 @@ import dstenv  # noqa: F401  (registers the DSTGrid-* ids)
 __all__ = [
     "opt", "parse_args", "to_argv", "EnvArgs", "env_config", "make_env", "EGO_STATES",
     "EgoStateObservation",
-    "RouteProgress", "Policy", "EpisodeResult", "run_episode", "summarize",
+    "RouteProgress", "Policy", "EpisodeResult", "run_episode", "summarize", "report_run",
     "evaluate_policy", "write_results_csv",
     "atomic_write_bytes", "atomic_write_text", "machine_info",
 ]
@@ -347,6 +347,15 @@ def write_results_csv(path: str | Path,
     for name, results in runs:
         writer.writerows([name, *dataclasses.astuple(r)] for r in results)
     atomic_write_text(path, buf.getvalue())
+
+
+def report_run(name: str, results: list[EpisodeResult], csv: str = "") -> dict[str, float]:
+    """Print one policy's summary, optionally write its episodes to ``csv``; return it."""
+    summary = summarize(results)
+    print(name, {k: round(v, 3) for k, v in summary.items()})
+    if csv:
+        write_results_csv(csv, [(name, results)])
+    return summary
 
 
 # -- files and machine ---------------------------------------------------------------------

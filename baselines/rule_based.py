@@ -28,7 +28,7 @@ import numpy as np
 from gymnasium import spaces
 
 from rl_common import EnvArgs, EpisodeResult, env_config, evaluate_policy, make_env, opt
-from rl_common import parse_args, summarize, write_results_csv
+from rl_common import parse_args, report_run
 
 DRIVERS = ("autopilot", "constant")
 
@@ -133,11 +133,7 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
     """Command-line entry point; returns the summary (:func:`rl_common.summarize`)."""
     args = parse_args(Args, argv)
     name, results = run(args)
-    summary = summarize(results)
-    print(name, {k: round(v, 3) for k, v in summary.items()})
-    if args.csv:
-        write_results_csv(args.csv, [(name, results)])
-    return summary
+    return report_run(name, results, args.csv)
 
 
 if __name__ == "__main__":

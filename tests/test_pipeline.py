@@ -14,21 +14,11 @@ from dstenv.pipeline import Pipeline, default_config
 from dstenv.sensing.labels import label_grid
 
 
-def _city_available() -> bool:
-    try:
-        from dstenv.sim.world import World  # noqa: F401
-    except ImportError:
-        return False
-    return True
-
-
-needs_city = pytest.mark.skipif(not _city_available(), reason="dstenv.sim.World not available")
-
 GRID = {"height": 48, "width": 40, "cell_size": 1.0}
 HIGHWAY = {"source": "highway", "grid": GRID, "lidar": {"beams": 360},
            "highway": {"resolution": 0.5}, "frame": {"masses": True, "lidar_points": True}}
 CITY = {"grid": GRID, "lidar": {"beams": 360}, "frame": {"masses": True, "lidar_points": True}}
-SOURCES = [pytest.param(HIGHWAY, id="highway"), pytest.param(CITY, id="city", marks=needs_city)]
+SOURCES = [pytest.param(HIGHWAY, id="highway"), pytest.param(CITY, id="city")]
 
 
 @pytest.mark.parametrize("cfg", SOURCES)

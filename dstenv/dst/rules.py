@@ -10,7 +10,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from dstenv.dst.frame import CARDINALITY, EMPTY, FREE, M, NUM_CLASSES, NUM_SETS, OCCUPIED, OMEGA
+from dstenv.dst.frame import (
+    CARDINALITY, EMPTY, FREE, M, NUM_CLASSES, NUM_SETS, OCCUPIED, OMEGA, subsets_of,
+)
 
 __all__ = [
     "vacuous",
@@ -21,15 +23,9 @@ __all__ = [
     "specialise",
     "mass_within",
     "pignistic",
-    "PIGNISTIC_MATRIX",
 ]
 
 SET_AXIS = -3
-
-#: ``(5, 32) float64``: BetP(x) = sum_A PIGNISTIC_MATRIX[x, A] * m(A); entry 1/|A| if x in A.
-PIGNISTIC_MATRIX: np.ndarray = np.array(
-    [[(a >> x & 1) / CARDINALITY[a] if a else 0.0 for a in range(NUM_SETS)] for x in range(NUM_CLASSES)]
-)
 
 
 def _check(m: np.ndarray, name: str = "m") -> np.ndarray:
@@ -169,8 +165,7 @@ def mass_within(m: np.ndarray, subset: int) -> np.ndarray:
         ``(..., H, W)`` in the input's precision.
     """
     m = _check(m)
-    idx = [a for a in range(1, NUM_SETS) if a & ~subset == 0]
-    return m[..., idx, :, :].sum(axis=SET_AXIS)
+    return m[..., subsets_of(subset), :, :].sum(axis=SET_AXIS)
 
 
 def pignistic(m: np.ndarray) -> np.ndarray:

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 from typing import Any
 
-import pytest
 
 #: A grid just above NatureCNN's 36 x 36 minimum.
 SMALL_GRID: dict[str, Any] = {"height": 40, "width": 40, "cell_size": 1.0}
@@ -25,13 +24,3 @@ SMALL_HIGHWAY: dict[str, Any] = {
     "highway": {"resolution": 0.5},
 }
 
-
-def city_available() -> bool:
-    try:
-        from dstenv.sim.world import World  # noqa: F401
-    except ImportError:
-        return False
-    return True
-
-
-needs_city = pytest.mark.skipif(not city_available(), reason="dstenv.sim.World not available")

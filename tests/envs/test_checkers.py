@@ -10,34 +10,14 @@ from gymnasium.utils.env_checker import check_env as gym_check_env
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 import dstenv  # noqa: F401
-from dstenv.config import list_scenarios, load_scenario, scenario_path
 from dstenv.envs.registration import VARIANTS
 
-from .conftest import SMALL_CITY, SMALL_GRID, city_available
+from .conftest import SMALL_CITY, SMALL_GRID
 
 SMALL = {**SMALL_CITY, "highway": {"resolution": 0.5}}
 
 
-def _ids() -> list:
-    out = []
-    scenarios = list_scenarios()
-    for env_id, (kwargs, _) in VARIANTS.items():
-        highway = kwargs.get("preset", {}).get("source") == "highway"
-        marks = []
-        if not (highway or city_available()):
-            marks.append(pytest.mark.skip(reason="dstenv.sim.World not available"))
-        scenario = kwargs.get("scenario")
-        if scenario is not None and scenario not in scenarios:
-            marks.append(pytest.mark.skip(reason=f"scenario {scenario!r} not shipped"))
-        elif scenario is not None:
-            osm = load_scenario(scenario)["world"]["map"].get("osm_file", "")
-            if osm and not (scenario_path(scenario).parent / osm).is_file():
-                marks.append(pytest.mark.skip(reason=f"OSM file {osm!r} not shipped"))
-        out.append(pytest.param(env_id, marks=marks))
-    return out
-
-
-@pytest.mark.parametrize("env_id", _ids())
+@pytest.mark.parametrize("env_id", list(VARIANTS))
 def test_gymnasium_check_env(env_id):
     env = gym.make(env_id, config=SMALL, render_mode="rgb_array")
     with warnings.catch_warnings():
@@ -46,7 +26,7 @@ def test_gymnasium_check_env(env_id):
     env.close()
 
 
-@pytest.mark.parametrize("env_id", _ids())
+@pytest.mark.parametrize("env_id", list(VARIANTS))
 def test_sb3_check_env(env_id):
     env = gym.make(env_id, config=SMALL)
     with warnings.catch_warnings():

@@ -12,7 +12,7 @@ import dstenv  # noqa: F401
 from dstenv.config import ConfigError
 from dstenv.envs import DSTGridEnv
 
-from .conftest import SMALL_CITY, SMALL_HIGHWAY, needs_city
+from .conftest import SMALL_CITY, SMALL_HIGHWAY
 
 
 def _assert_same(a, b, where=""):
@@ -42,7 +42,7 @@ def _rollout(config, seed, steps, id_="DSTGrid-RL-v0"):
 
 @pytest.mark.parametrize("config,id_", [
     (SMALL_HIGHWAY, "DSTGrid-Highway-v0"),
-    pytest.param(SMALL_CITY, "DSTGrid-RL-v0", marks=needs_city),
+    pytest.param(SMALL_CITY, "DSTGrid-RL-v0"),
 ])
 def test_same_seed_same_observations_and_infos_over_100_steps(config, id_):
     cfg = {**config, "info": {"lidar_points": True}}
@@ -58,7 +58,7 @@ def test_same_seed_same_observations_and_infos_over_100_steps(config, id_):
 
 @pytest.mark.parametrize("config,id_", [
     (SMALL_HIGHWAY, "DSTGrid-Highway-v0"),
-    pytest.param(SMALL_CITY, "DSTGrid-RL-v0", marks=needs_city),
+    pytest.param(SMALL_CITY, "DSTGrid-RL-v0"),
 ])
 def test_pickled_env_continues_identically(config, id_):
     env = gym.make(id_, config=config)

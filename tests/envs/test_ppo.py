@@ -9,7 +9,7 @@ from stable_baselines3 import PPO
 
 import dstenv  # noqa: F401
 
-from .conftest import SMALL_HIGHWAY, needs_city
+from .conftest import SMALL_HIGHWAY
 
 
 def _ppo(env_id: str, config: dict, steps: int) -> PPO:
@@ -28,7 +28,6 @@ def test_ppo_cnn_policy_runs_on_highway_variant():
     assert 0 <= int(action) < 5
 
 
-@needs_city
 def test_ppo_cnn_policy_few_hundred_steps_on_occluded_task():
     # the occlusion task at its RL size (84 x 84): a few hundred steps, ~6 s
     model = _ppo("DSTGrid-Occluded-v0", {}, 320)

@@ -111,6 +111,25 @@ PRESETS: dict[str, dict[str, Any]] = {
         "device": "cpu",
         "examples": 1,
     },
+    # about a minute on 2 cores: CI's proof that every stage of the main job runs in a
+    # fresh venv (generate, tune, train one short epoch, score, report)
+    "smoke": {
+        "data": {
+            "scenario": "dense",
+            "frames": 60,
+            "grid": 48,
+            "episode_length": 40,
+            "stride": 5,
+            "warmup": 5,
+            "frames_per_shard": 32,
+        },
+        "tune": {"episodes": 2, "budget": 4},
+        "models": ["unet-light"],
+        "model_kwargs": {"unet-light": {"base": 8, "depth": 2}},
+        "train": {"epochs": 1, "batch_size": 4},
+        "device": "cpu",
+        "examples": 1,
+    },
     # <= 30 min on a 2-core CPU: the README's main job
     "cpu": {
         "data": {

@@ -180,7 +180,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--preset",
         default="cpu",
         choices=sorted(PRESETS),
-        help="cpu: <= 30 min on a 2-core CPU (default); gpu: the full benchmark; tiny: smoke test",
+        help="cpu: <= 30 min on a 2-core CPU (default); gpu: the full benchmark; smoke: every stage in about a minute (CI); tiny: the test suite's run",
     )
     b.add_argument("--out", default="benchmark-out", metavar="DIR", help="output directory")
     b.add_argument("--data", metavar="DIR", help="use existing shards instead of generating")

@@ -23,7 +23,6 @@ import dataclasses
 import json
 import os
 import platform
-import tempfile
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -34,6 +33,7 @@ import numpy as np
 from gymnasium import spaces
 
 import dstenv  # noqa: F401  (registers the DSTGrid-* ids)
+from dstenv.io import atomic_write_bytes, atomic_write_text
 
 __all__ = [
     "opt", "parse_args", "to_argv", "EnvArgs", "env_config", "make_env", "EGO_STATES",
@@ -359,25 +359,6 @@ def report_run(name: str, results: list[EpisodeResult], csv: str = "") -> dict[s
 
 
 # -- files and machine ---------------------------------------------------------------------
-def atomic_write_bytes(path: str | Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` through a temporary file in the same directory + rename."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
-def atomic_write_text(path: str | Path, text: str) -> None:
-    """:func:`atomic_write_bytes` for UTF-8 text."""
-    atomic_write_bytes(path, text.encode("utf-8"))
-
-
 def machine_info() -> dict[str, Any]:
     """Where a run happened: host, CPU model, core count, library versions."""
     import stable_baselines3

@@ -1,10 +1,16 @@
 """The ``dstenv`` command.
 
-Each subcommand lives next to the code it drives; a module listed in
-:data:`COMMANDS` exposes ``register(subparsers)`` that adds its parser(s) and sets
-``func`` (a callable taking the parsed namespace and returning an exit code).
-Modules are imported only when the command line is parsed, so ``dstenv --version``
-stays fast.
+Each subcommand lives next to the code it drives: the module named for it in
+:data:`COMMANDS` exposes ``register(subparsers)``, which adds its parser(s) and
+sets ``func`` (a callable taking the parsed namespace and returning an exit code).
+Only the module of the command being run is imported; ``dstenv --help`` lists
+every command from the one-line help in :data:`COMMANDS`, so ``dstenv --version``
+and ``dstenv --help`` import neither torch, scipy, numba nor any subsystem.
+
+Errors: a :class:`~dstenv.config.CLIError`, :class:`~dstenv.config.ConfigError`
+or an expected OS error (missing file, permission, disk full) is printed as one
+line naming the problem, with exit status 2; anything else is a bug and keeps its
+traceback.
 """
 
 from __future__ import annotations
@@ -15,39 +21,57 @@ import sys
 from collections.abc import Sequence
 
 from dstenv import __version__
+from dstenv.config import CLIError, ConfigError
 
-__all__ = ["COMMANDS", "build_parser", "main"]
+__all__ = ["COMMANDS", "CLIError", "build_parser", "main"]
 
-#: Modules that contribute subcommands, in ``--help`` order.
-COMMANDS: tuple[str, ...] = (
-    "dstenv.data.cli",  # generate, info
-    "dstenv.segment.cli",  # train, benchmark
-    "dstenv.kitti.cli",  # kitti convert
-    "dstenv.sim.cli",  # render
-    "dstenv.bench",  # bench
-)
-
-
-class CLIError(Exception):
-    """A user-facing error: printed as one line, exit status 2."""
+#: command -> (module that registers it, one-line help), in ``--help`` order.
+COMMANDS: dict[str, tuple[str, str]] = {
+    "generate": ("dstenv.data.cli", "generate labelled frames as HDF5 shards"),
+    "info": ("dstenv.data.cli", "describe a shard dataset"),
+    "train": ("dstenv.segment.cli", "train a segmentation network on shards or a stream"),
+    "benchmark": ("dstenv.segment.cli", "compare DST and FCN-DST segmenters on held-out maps"),
+    "kitti": ("dstenv.kitti.cli", "KITTI tracking -> perception-grid shards"),
+    "render": ("dstenv.sim.cli", "draw a simulated scene to PNG"),
+    "bench": ("dstenv.bench", "run a speed benchmark"),
+}
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The full argument parser, with every available subcommand."""
+def _command_of(argv: Sequence[str]) -> str | None:
+    """The subcommand named on the command line (the first non-option word)."""
+    for word in argv:
+        if not word.startswith("-"):
+            return word if word in COMMANDS else None
+    return None
+
+
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The argument parser; only ``command``'s module is imported (all when ``"*"``).
+
+    Commands whose module is not imported get a placeholder parser that carries
+    their one-line help, so ``--help`` lists every command.
+    """
     parser = argparse.ArgumentParser(
         prog="dstenv",
         description="Dempster-Shafer perception grids: simulate, generate data, benchmark.",
     )
     parser.add_argument("--version", action="version", version=f"dstenv {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for name in COMMANDS:
-        importlib.import_module(name).register(sub)
+    modules = {m for m, _ in COMMANDS.values()} if command == "*" else (
+        {COMMANDS[command][0]} if command in COMMANDS else set())
+    for name in dict.fromkeys(m for m, _ in COMMANDS.values()):
+        if name in modules:
+            importlib.import_module(name).register(sub)
+    for name, (_, help_text) in COMMANDS.items():
+        if name not in sub.choices:
+            sub.add_parser(name, help=help_text)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``dstenv`` console script; returns the exit status."""
-    parser = build_parser()
+    argv = list(sys.argv[1:] if argv is None else argv)
+    parser = build_parser(_command_of(argv))
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
         parser.print_help()
@@ -57,16 +81,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("dstenv: interrupted", file=sys.stderr)
         return 130
-    except CLIError as exc:
-        print(f"dstenv {args.command}: error: {exc}", file=sys.stderr)
+    except (CLIError, ConfigError, FileNotFoundError, PermissionError, ValueError,
+            OSError, MemoryError) as exc:
+        print(f"dstenv {args.command}: error: {_one_line(exc)}", file=sys.stderr)
         return 2
-    except Exception as exc:  # noqa: BLE001 - user-facing boundary
-        from dstenv.config import ConfigError
 
-        if isinstance(exc, (ConfigError, FileNotFoundError, PermissionError, ValueError, OSError)):
-            print(f"dstenv {args.command}: error: {exc}", file=sys.stderr)
-            return 2
-        raise
+
+def _one_line(exc: BaseException) -> str:
+    if isinstance(exc, MemoryError):
+        return "out of memory; use a smaller grid, fewer frames per shard or fewer workers"
+    if isinstance(exc, OSError) and exc.filename and exc.strerror:
+        return f"{exc.filename}: {exc.strerror}"
+    text = str(exc) or type(exc).__name__
+    return " ".join(text.split())
 
 
 if __name__ == "__main__":  # pragma: no cover

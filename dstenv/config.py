@@ -1,9 +1,18 @@
-"""Plain-data configuration: validated merging and scenario files.
+"""Plain-data configuration: the one gate that merges and validates it, and scenario files.
 
 Every subsystem owns a ``default_config()`` returning a nested ``dict`` (units in
-comments, HighwayEnv style). User overrides and scenario files are merged into it
-with :func:`merge_config`, which rejects unknown keys by name and lists the allowed
-ones, so a typo never silently falls back to a default.
+comments, HighwayEnv style) and a :class:`Section` that pairs it with a table of
+:class:`Rule` (type, finite range, choices) per key plus cross-key checks. User
+overrides and scenario files are merged with :func:`merge_config`, which rejects
+unknown keys by name and lists the allowed ones, so a typo never silently falls
+back to a default.
+
+:func:`build_config` is the gate: it merges a scenario and overrides once and
+validates every section eagerly, so a bad value is rejected at construction with
+a message that names the key and the allowed range. It returns a
+:class:`Validated` dict (and validated sections), which constructors take as is
+instead of merging again; :func:`section` validates one section for direct use of
+a lower layer (``World({"traffic": {"cars": 3}})``).
 
 Scenario files are TOML files in the top-level ``scenarios/`` directory (installed
 as the ``dstenv.scenarios`` package). A scenario file holds an optional
@@ -13,8 +22,12 @@ as the ``dstenv.scenarios`` package). A scenario file holds an optional
 from __future__ import annotations
 
 import copy
+import importlib
+import math
+import os
 import sys
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -25,7 +38,19 @@ else:  # pragma: no cover
     import tomli as tomllib
 
 __all__ = [
+    "CLIError",
     "ConfigError",
+    "Rule",
+    "Section",
+    "SECTIONS",
+    "Validated",
+    "build_config",
+    "section",
+    "validate_config",
+    "between",
+    "at_least",
+    "one_of",
+    "PROB",
     "merge_config",
     "list_scenarios",
     "scenario_path",
@@ -37,6 +62,240 @@ _SCENARIO_META_KEYS = ("description",)
 
 class ConfigError(ValueError):
     """A configuration or scenario file is invalid; the message names the problem."""
+
+
+class CLIError(Exception):
+    """A user-facing error of the ``dstenv`` command: printed as one line, exit status 2."""
+
+
+# --------------------------------------------------------------------------- rules
+@dataclass(frozen=True)
+class Rule:
+    """What values one key accepts: a closed/open numeric range or a set of choices.
+
+    Numbers are always required to be finite; ``lo``/``hi`` are inclusive unless
+    ``lo_open``/``hi_open``. Every numeric key should have a sane upper bound, so
+    that a typo (``1e9`` cars) is an error rather than an hour of work or an
+    out-of-memory kill.
+    """
+
+    lo: float | None = None
+    hi: float | None = None
+    lo_open: bool = False
+    hi_open: bool = False
+    choices: tuple[Any, ...] | None = None
+    unit: str = ""
+    what: str = "value"  # what a choice is, for messages ("scene")
+
+    def describe(self) -> str:
+        """The allowed values, for error messages (``"in (0, 360] deg"``)."""
+        if self.choices is not None:
+            return "one of " + ", ".join(repr(c) for c in self.choices)
+        unit = f" {self.unit}" if self.unit else ""
+        if self.hi is None:
+            return f"{'>' if self.lo_open else '>='} {self.lo:g}{unit}"
+        if self.lo is None:
+            return f"{'<' if self.hi_open else '<='} {self.hi:g}{unit}"
+        left, right = "(" if self.lo_open else "[", ")" if self.hi_open else "]"
+        return f"in {left}{self.lo:g}, {self.hi:g}{right}{unit}"
+
+    def check(self, value: Any, path: str) -> None:
+        """Raise :class:`ConfigError` naming ``path`` unless ``value`` is allowed."""
+        if self.choices is not None:
+            if value not in self.choices:
+                raise ConfigError(f"{path}: unknown {self.what} {value!r}; allowed: "
+                                  + ", ".join(str(c) for c in self.choices))
+            return
+        values = value if isinstance(value, (list, tuple)) else [value]
+        for v in values:
+            ok = isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+            if ok and self.lo is not None:
+                ok = v > self.lo if self.lo_open else v >= self.lo
+            if ok and self.hi is not None:
+                ok = v < self.hi if self.hi_open else v <= self.hi
+            if not ok:
+                raise ConfigError(f"{path}: must be {self.describe()}, got {value!r}")
+
+
+def between(lo: float, hi: float, unit: str = "", *, lo_open: bool = False,
+            hi_open: bool = False) -> Rule:
+    """A number in ``[lo, hi]`` (open ends on request)."""
+    return Rule(lo, hi, lo_open, hi_open, unit=unit)
+
+
+def at_least(lo: float, hi: float, unit: str = "", *, lo_open: bool = False) -> Rule:
+    """A number ``>= lo`` (``> lo`` with ``lo_open``) and at most the sanity bound ``hi``."""
+    return Rule(lo, hi, lo_open, unit=unit)
+
+
+def one_of(*choices: Any, what: str = "value") -> Rule:
+    """One of the listed values (``what`` names a choice in messages)."""
+    return Rule(choices=tuple(choices), what=what)
+
+
+#: A probability.
+PROB = between(0.0, 1.0)
+
+#: A cross-key check: ``(key, predicate(section) -> ok, what it must be)``.
+Check = tuple[str, Callable[[Mapping[str, Any]], bool], str]
+
+
+@dataclass(frozen=True)
+class Section:
+    """A configuration section: its defaults, a rule table and cross-key checks.
+
+    Attributes:
+        defaults: returns the complete default section (a new dict per call).
+        rules: nested like the defaults; a leaf is a :class:`Rule`.
+        checks: cross-key checks, run after every rule passed.
+    """
+
+    defaults: Callable[[], dict[str, Any]]
+    rules: Mapping[str, Any]
+    checks: Sequence[Check] = ()
+
+    def validate(self, cfg: Mapping[str, Any], where: str) -> None:
+        """Raise :class:`ConfigError` on the first bad value of ``cfg``."""
+        _check_rules(cfg, self.rules, where)
+        for key, ok, why in self.checks:
+            if not ok(cfg):
+                raise ConfigError(f"{_join(where, key)}: {why}")
+
+
+def _join(where: str, key: str) -> str:
+    return f"{where}.{key}" if where else key
+
+
+def _check_rules(cfg: Mapping[str, Any], rules: Mapping[str, Any], where: str) -> None:
+    for key, value in cfg.items():
+        path = _join(where, key)
+        rule = rules.get(key)
+        if isinstance(value, Mapping):
+            _check_rules(value, rule if isinstance(rule, Mapping) else {}, path)
+        elif isinstance(rule, Rule):
+            rule.check(value, path)
+        else:
+            _check_finite(value, path)
+
+
+def _check_finite(value: Any, path: str) -> None:
+    """Numbers without a rule must still be finite (NaN and inf are never a setting)."""
+    values = value if isinstance(value, (list, tuple)) else [value]
+    for v in values:
+        if isinstance(v, float) and not math.isfinite(v):
+            raise ConfigError(f"{path}: must be a finite number, got {value!r}")
+
+
+#: section name -> ``"module:attribute"`` of its :class:`Section`, imported only when
+#: that section is validated (so validating the core never imports gymnasium).
+SECTIONS: dict[str, str] = {
+    "source": "dstenv.pipeline:SOURCE_SECTION",
+    "world": "dstenv.sim.config:SECTION",
+    "highway": "dstenv.sim.highway:SECTION",
+    "lidar": "dstenv.sensing.config:LIDAR",
+    "gis": "dstenv.sensing.config:GIS",
+    "labels": "dstenv.sensing.config:LABELS",
+    "grid": "dstenv.grid:SECTION",
+    "dst": "dstenv.dst.params:SECTION",
+    "frame": "dstenv.pipeline:FRAME_SECTION",
+    "observation": "dstenv.envs.observation:SECTION",
+    "action": "dstenv.envs.actions:SECTION",
+    "reward": "dstenv.envs.rewards:SECTION",
+    "info": "dstenv.envs.dstgrid:INFO_SECTION",
+}
+
+
+def _section_spec(name: str) -> Section:
+    try:
+        module, attr = SECTIONS[name].split(":")
+    except KeyError:
+        known = ", ".join(SECTIONS)
+        raise ConfigError(f"unknown config section {name!r}; known: {known}") from None
+    return getattr(importlib.import_module(module), attr)
+
+
+class Validated(dict):
+    """A configuration or section that passed :func:`build_config` / :func:`section`.
+
+    Constructors take it as is; a plain dict is merged and validated first.
+    """
+
+
+def _mark(cfg: Mapping[str, Any]) -> Validated:
+    return Validated({k: _mark(v) if isinstance(v, dict) and k in SECTIONS else v
+                      for k, v in cfg.items()})
+
+
+def section(name: str, overrides: Mapping[str, Any] | None = None,
+            where: str | None = None) -> Validated:
+    """One validated section: ``overrides`` merged over its defaults and checked.
+
+    A :class:`Validated` section is returned unchanged (no second merge).
+
+    Raises:
+        ConfigError: unknown key, wrong type, or a value outside its rule (named).
+    """
+    if isinstance(overrides, Validated):
+        return overrides
+    where = where or name
+    spec = _section_spec(name)
+    cfg = merge_config(spec.defaults(), overrides, where)
+    spec.validate(cfg, where)
+    return Validated(cfg)
+
+
+def validate_config(cfg: Mapping[str, Any], where: str = "config") -> Validated:
+    """Validate every section of a full configuration eagerly.
+
+    Sections named in :data:`SECTIONS` are checked against their rule tables; any
+    other key must hold finite numbers. Returns the configuration marked
+    :class:`Validated`.
+    """
+    for name, value in cfg.items():
+        path = _join(where, name)
+        if name in SECTIONS:
+            spec = _section_spec(name)
+            if isinstance(value, Mapping):
+                spec.validate(value, path)
+            else:  # a top-level scalar such as ``source``
+                spec.validate({name: value}, where)
+        elif isinstance(value, Mapping):
+            _check_rules(value, {}, path)
+        else:
+            _check_finite(value, path)
+    return _mark(cfg)
+
+
+Override = Mapping[str, Any] | tuple[str, Mapping[str, Any] | None] | None
+
+
+def build_config(scenario: str | Path | None = None, *overrides: Override,
+                 defaults: Mapping[str, Any] | None = None) -> Validated:
+    """The configuration gate: defaults <- scenario file <- overrides, validated once.
+
+    Args:
+        scenario: a shipped scenario name or a ``.toml`` path; ``None`` for none.
+        *overrides: partial configurations merged in order; each is a mapping or
+            ``(name, mapping)`` where ``name`` labels it in error messages.
+        defaults: the complete defaults; :func:`dstenv.pipeline.default_config` when
+            ``None`` (the environment passes its own, with its extra sections).
+
+    Returns:
+        The full configuration, every section validated (:class:`Validated`).
+
+    Raises:
+        ConfigError: naming the file or key and the allowed values.
+    """
+    if defaults is None:
+        from dstenv.pipeline import default_config
+
+        defaults = default_config()
+    cfg = load_scenario(scenario, defaults) if scenario is not None else dict(defaults)
+    for i, item in enumerate(overrides):
+        name, value = item if isinstance(item, tuple) else ("config" if i == 0 else
+                                                             f"override {i + 1}", item)
+        cfg = merge_config(cfg, value, name)
+    return validate_config(cfg, "")
 
 
 def merge_config(
@@ -114,18 +373,25 @@ def list_scenarios() -> list[str]:
 def scenario_path(name_or_path: str | Path) -> Path:
     """Resolve a scenario name (``"dense"``) or a path to a ``.toml`` file.
 
+    A bare name (no ``.toml`` suffix, no folder) always means a shipped scenario,
+    so a file or folder called ``dense`` in the working directory never shadows it;
+    write ``./dense.toml`` (or any path with a folder or the suffix) for a file.
+
     Raises:
         ConfigError: if no such scenario exists (listing the known names).
     """
+    text = str(name_or_path)
     candidate = Path(name_or_path)
-    if candidate.suffix == ".toml" or candidate.exists():
+    if candidate.suffix == ".toml" or "/" in text or (os.sep != "/" and os.sep in text):
         if not candidate.is_file():
-            raise ConfigError(f"scenario file not found: {candidate}")
+            raise ConfigError(f"scenario file not found: {candidate}; give an existing "
+                              f".toml file or a shipped name ({', '.join(list_scenarios())})")
         return candidate
-    path = _scenario_dir() / f"{name_or_path}.toml"
+    path = _scenario_dir() / f"{text}.toml"
     if not path.is_file():
         known = ", ".join(list_scenarios())
-        raise ConfigError(f"unknown scenario {str(name_or_path)!r}; known scenarios: {known}")
+        raise ConfigError(f"unknown scenario {text!r}; known scenarios: {known} "
+                          f"(a file needs its .toml suffix or a folder, e.g. ./{text}.toml)")
     return path
 
 

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["GridSpec", "relative_pose"]
+__all__ = ["GridSpec", "relative_pose", "SECTION"]
 
 
 @dataclass(frozen=True)
@@ -83,7 +83,8 @@ class GridSpec:
         i0, j0 = self.ego_cell
         rows = (i0 - np.arange(self.height, dtype=np.float64)) * self.cell_size
         cols = (j0 - np.arange(self.width, dtype=np.float64)) * self.cell_size
-        return np.broadcast_to(rows[:, None], self.shape), np.broadcast_to(cols[None, :], self.shape)
+        return (np.broadcast_to(rows[:, None], self.shape),
+                np.broadcast_to(cols[None, :], self.shape))
 
     def to_cell(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Rows and columns of the cells containing ego-frame points.
@@ -127,3 +128,28 @@ def relative_pose(prev_pose: np.ndarray, pose: np.ndarray) -> tuple[float, float
     if dyaw == -np.pi:
         dyaw = np.pi
     return (c * dxw + s * dyw, -s * dxw + c * dyw, float(dyaw))
+
+
+def _grid_defaults() -> dict[str, int | float]:
+    spec = GridSpec()
+    return {
+        "height": spec.height,  # [cells] rows, along ego-forward
+        "width": spec.width,  # [cells] columns, along ego-left
+        "cell_size": spec.cell_size,  # [m]
+    }
+
+
+def _section() -> "object":
+    from dstenv.config import Section, between
+
+    # 4096 x 4096 cells of 32 float32 masses is 2 GiB: beyond that a grid would not
+    # fit this library's intended machines
+    return Section(_grid_defaults, {
+        "height": between(2, 4096, "cells"),
+        "width": between(2, 4096, "cells"),
+        "cell_size": between(0.01, 10.0, "m"),
+    })
+
+
+#: The ``grid`` section of the configuration (:func:`dstenv.config.build_config`).
+SECTION = _section()

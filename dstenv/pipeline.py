@@ -25,7 +25,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from dstenv.config import ConfigError, merge_config
+from dstenv.config import Section, Validated, build_config, one_of
 from dstenv.dst import DSTParams, PerceptionGridFilter
 from dstenv.frame import Frame
 from dstenv.grid import GridSpec, relative_pose
@@ -33,7 +33,8 @@ from dstenv.sensing.gis import MapError, gis_grid
 from dstenv.sensing.labels import label_grid, visible_mask
 from dstenv.sim.types import Agents, WorldMap
 
-__all__ = ["WORLD_SOURCES", "WorldSource", "default_config", "Pipeline"]
+__all__ = ["WORLD_SOURCES", "WorldSource", "default_config", "Pipeline", "SOURCE_SECTION",
+           "FRAME_SECTION"]
 
 
 class WorldSource(Protocol):
@@ -84,26 +85,40 @@ def default_config() -> dict[str, Any]:
     from dstenv.sim.config import default_config as world_defaults
     from dstenv.sim.highway import default_config as highway_defaults
 
+    from dstenv.grid import SECTION as grid_section
+
     sensing = sensing_defaults()
-    spec = GridSpec()
     return {
         "source": "city",  # "city" (dstenv.sim.World) or "highway" (highway-env scene)
         "world": world_defaults(),
         "highway": highway_defaults(),
         "lidar": sensing["lidar"],
-        "grid": {
-            "height": spec.height,  # [cells] rows, along ego-forward
-            "width": spec.width,  # [cells] columns, along ego-left
-            "cell_size": spec.cell_size,  # [m]
-        },
+        "grid": grid_section.defaults(),  # height, width [cells], cell_size [m]
         "gis": sensing["gis"],
         "labels": sensing["labels"],
         "dst": DSTParams.default().to_dict(),  # see dstenv.dst.DSTParams
-        "frame": {
-            "masses": False,  # attach the (32, H, W) masses to every Frame
-            "lidar_points": False,  # attach extras["lidar_points"]: (B, 2) float32 ego frame [m], NaN = no return
-        },
+        "frame": _frame_defaults(),
     }
+
+
+def _frame_defaults() -> dict[str, Any]:
+    return {
+        "masses": False,  # attach the (32, H, W) masses to every Frame
+        # attach extras["lidar_points"]: (B, 2) float32 ego frame [m], NaN = no return
+        "lidar_points": False,
+    }
+
+
+def _SOURCE_RULE() -> Any:  # noqa: N802 - read at validation time: WORLD_SOURCES may grow
+    return one_of(*WORLD_SOURCES, what="world source")
+
+
+#: The top-level ``source`` key (a :data:`WORLD_SOURCES` name).
+SOURCE_SECTION = Section(lambda: {"source": "city"}, {}, (
+    ("source", lambda c: _SOURCE_RULE().check(c["source"], "source") is None,
+     "must be a WORLD_SOURCES key"),))
+#: The ``frame`` section: optional outputs of every :class:`Frame`.
+FRAME_SECTION = Section(_frame_defaults, {})
 
 
 class Pipeline:
@@ -128,16 +143,10 @@ class Pipeline:
                  ) -> None:
         from dstenv.sensing.lidar import Lidar
 
-        self.config = merge_config(default_config(), config, "config")
+        self.config = config if isinstance(config, Validated) else build_config(None, config)
         cfg = self.config
-        if cfg["source"] not in WORLD_SOURCES:
-            raise ConfigError(f"config.source: unknown world source {cfg['source']!r}; "
-                              f"known: {', '.join(WORLD_SOURCES)}")
-        try:
-            self.spec = GridSpec(**cfg["grid"])
-            params = DSTParams.from_dict(cfg["dst"])
-        except ValueError as exc:
-            raise ConfigError(f"config: {exc}") from None
+        self.spec = GridSpec(**cfg["grid"])
+        params = DSTParams.from_dict(cfg["dst"])
         self.lidar = Lidar(cfg["lidar"])
         self.filter = PerceptionGridFilter(self.spec.shape, params, self.spec.cell_size)
         self._world = world

@@ -17,7 +17,8 @@ def test_version(capsys):
 
 
 def test_console_script_help():
-    out = subprocess.run([sys.executable, "-m", "dstenv.cli", "--help"], capture_output=True, text=True)
+    out = subprocess.run([sys.executable, "-m", "dstenv.cli", "--help"],
+                         capture_output=True, text=True)
     assert out.returncode == 0 and "bench" in out.stdout
 
 
@@ -33,3 +34,42 @@ def test_unknown_bench_is_rejected(capsys):
         main(["bench", "nope"])
     assert exc.value.code == 2
     assert "invalid choice" in capsys.readouterr().err
+
+
+HEAVY = ("torch", "scipy", "numba", "dstenv.kitti.readers", "dstenv.segment.registry",
+         "dstenv.data.shards", "h5py", "matplotlib")
+
+
+@pytest.mark.parametrize("argv", [["--version"], ["--help"], []])
+def test_top_level_cli_is_light(argv):
+    code = ("import sys\nfrom dstenv.cli import main\n"
+            f"try:\n    main({argv!r})\nexcept SystemExit:\n    pass\n"
+            f"print('LOADED', [m for m in {HEAVY!r} if m in sys.modules])")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    assert "LOADED []" in out.stdout, out.stdout
+
+
+def test_subcommand_loads_only_its_module():
+    code = ("import sys\nfrom dstenv.cli import main\n"
+            "try:\n    main(['render', '--help'])\nexcept SystemExit:\n    pass\n"
+            "print('LOADED', [m for m in ('torch', 'dstenv.segment.cli', 'dstenv.kitti.cli')"
+            " if m in sys.modules])")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert "--scenario" in out.stdout and "LOADED []" in out.stdout, out.stdout + out.stderr
+
+
+def test_help_lists_every_command(capsys):
+    from dstenv.cli import COMMANDS
+
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    text = capsys.readouterr().out
+    for name, (_, help_text) in COMMANDS.items():
+        assert name in text and help_text.split()[0] in text
+
+
+def test_expected_errors_are_one_line(capsys, tmp_path):
+    assert main(["info", str(tmp_path / "nothing-here")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("dstenv info: error:") and "\n" not in err and "nothing-here" in err

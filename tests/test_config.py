@@ -2,7 +2,9 @@
 
 import pytest
 
-from dstenv.config import ConfigError, load_scenario, merge_config
+from pathlib import Path
+
+from dstenv.config import ConfigError, load_scenario, merge_config, scenario_path
 
 DEFAULTS = {"world": {"lanes": 2, "speed": 10.0, "name": "city", "flag": False}, "seed": 0}
 
@@ -14,7 +16,8 @@ def test_merge_overrides_and_keeps_defaults():
 
 
 def test_unknown_key_names_it_and_allowed_keys():
-    with pytest.raises(ConfigError, match=r"config\.world\.lane: unknown key 'lane'; allowed keys: flag, lanes, name, speed"):
+    msg = r"config\.world\.lane: unknown key 'lane'; allowed keys: flag, lanes, name, speed"
+    with pytest.raises(ConfigError, match=msg):
         merge_config(DEFAULTS, {"world": {"lane": 3}})
 
 
@@ -56,3 +59,52 @@ def test_scenario_file_merges(tmp_path):
     good = tmp_path / "good.toml"
     good.write_text('description = "two lanes"\n[world]\nlanes = 3\n')
     assert load_scenario(good, DEFAULTS)["world"]["lanes"] == 3
+
+
+# -- the configuration gate ------------------------------------------------------------
+from dstenv.config import Validated, build_config, section  # noqa: E402
+
+
+@pytest.mark.parametrize("override, message", [
+    ({"gis": {"offset_std": -0.5}}, r"gis\.offset_std: must be in \[0, 20\] m, got -0\.5"),
+    ({"gis": {"missing_building_prob": -0.1}}, r"gis\.missing_building_prob: must be in \[0, 1\]"),
+    ({"labels": {"moving_threshold": -1.0}}, r"labels\.moving_threshold: must be in \[0, 10\]"),
+    ({"world": {"traffic": {"cars": 100000}}}, r"world\.traffic\.cars: must be in \[0, 500\]"),
+    ({"world": {"map": {"lane_width": 0.0}}}, r"world\.map\.lane_width: must be in \[2, 6\] m"),
+    ({"world": {"ego": {"max_speed": float("nan")}}}, r"world\.ego\.max_speed: must be in"),
+    ({"grid": {"cell_size": float("inf")}}, r"grid\.cell_size: must be in \[0\.01, 10\] m"),
+    ({"grid": {"height": 100000}}, r"grid\.height: must be in \[2, 4096\] cells"),
+    ({"dst": {"alpha": 1.5}}, r"dst\.alpha: must be in \[0, 1\], got 1\.5"),
+    ({"lidar": {"buildings": "voxels"}}, r"lidar\.buildings: unknown value 'voxels'; allowed"),
+    ({"world": {"map": {"lanes_min": 3, "lanes_max": 2}}}, r"world\.map\.lanes_max: must be >="),
+    ({"highway": {"env_config": {"other_vehicles_type": "evilmod.V"}}},
+     r"highway\.env_config\.other_vehicles_type: not an allowed highway-env key"),
+    ({"highway": {"env_config": {"duration": "40"}}}, r"highway\.env_config\.duration: must be"),
+])
+def test_gate_rejects_bad_values_by_name(override, message):
+    with pytest.raises(ConfigError, match=message):
+        build_config(None, override)
+
+
+def test_gate_merges_scenario_then_overrides_in_order():
+    cfg = build_config("dense", {"grid": {"height": 64}}, ("mine", {"grid": {"height": 32}}))
+    assert isinstance(cfg, Validated) and isinstance(cfg["world"], Validated)
+    assert cfg["grid"]["height"] == 32
+    with pytest.raises(ConfigError, match=r"^mine\.grid\.heigth: unknown key"):
+        build_config(None, ("mine", {"grid": {"heigth": 1}}))
+
+
+def test_section_returns_validated_input_unchanged():
+    cfg = build_config()
+    assert section("world", cfg["world"]) is cfg["world"]
+    fresh = section("world", {"traffic": {"cars": 3}})
+    assert fresh["traffic"]["cars"] == 3 and fresh["map"]["kind"] == "procedural"
+
+
+def test_shipped_scenario_wins_over_a_folder_of_the_same_name(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "dense").mkdir()
+    assert scenario_path("dense").parent.name == "scenarios"
+    (tmp_path / "dense.toml").write_text("[grid]\nheight = 40\n")
+    assert scenario_path("./dense.toml") == Path("./dense.toml")
+    assert build_config("./dense.toml")["grid"]["height"] == 40

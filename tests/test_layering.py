@@ -35,7 +35,8 @@ def test_core_never_imports_gym(part):
 
 
 def test_every_subpackage_is_packaged():
-    listed = set(tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"])
+    pyproject = tomllib.loads((ROOT / "pyproject.toml").read_text())
+    listed = set(pyproject["tool"]["setuptools"]["packages"])
     found = {"dstenv"} | {
         "dstenv." + ".".join(p.parent.relative_to(PKG).parts)
         for p in PKG.rglob("__init__.py")

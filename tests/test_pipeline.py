@@ -76,7 +76,8 @@ def test_observed_building_gets_building_belief():
 
 
 def test_errors_are_named():
-    with pytest.raises(ConfigError, match="config.source: unknown world source 'carla'"):
+    msg = "source: unknown world source 'carla'; allowed: city, highway"
+    with pytest.raises(ConfigError, match=msg):
         Pipeline({"source": "carla"})
     with pytest.raises(ConfigError, match="config.dst.beta: unknown key"):
         Pipeline({"dst": {"beta": 1.0}})

@@ -13,8 +13,7 @@ Names are imported lazily so that ``import dstenv.data`` does not import torch.
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+from dstenv._lazy import lazy_attributes
 
 __all__ = [
     "ShardWriter", "ShardReader", "ShardError",
@@ -31,11 +30,4 @@ _WHERE = {
 }
 
 
-def __getattr__(name: str) -> Any:
-    if name in _WHERE:
-        return getattr(importlib.import_module(f"dstenv.data.{_WHERE[name]}"), name)
-    raise AttributeError(f"module 'dstenv.data' has no attribute {name!r}")
-
-
-def __dir__() -> list[str]:
-    return sorted(__all__)
+__getattr__, __dir__ = lazy_attributes(__name__, _WHERE)

@@ -24,7 +24,7 @@ def parse_set(items: list[str]) -> dict[str, Any]:
     Raises:
         CLIError: an item without ``=`` or an empty key.
     """
-    from dstenv.cli import CLIError
+    from dstenv.config import CLIError
 
     out: dict[str, Any] = {}
     for item in items:
@@ -55,7 +55,7 @@ def _grid(text: str) -> tuple[int, int]:
 
 
 def _generate(args: argparse.Namespace) -> int:
-    from dstenv.cli import CLIError
+    from dstenv.config import CLIError
     from dstenv.data.generate import GenerateError, GenerateSpec, generate
     from dstenv.data.sampling import scenario_config
 
@@ -106,7 +106,7 @@ def summarize(root: Path, manifest: dict[str, Any] | None = None, verify: str = 
 
         shards = scan_shards(root)
         if not root.is_dir() or not shards:
-            from dstenv.cli import CLIError
+            from dstenv.config import CLIError
 
             raise CLIError(f"{root}: no manifest.json and no shards (*.h5) found")
         manifest = build_manifest([shard_entry(root, p) for p in shards])
@@ -139,7 +139,11 @@ def format_summary(s: dict[str, Any]) -> str:
         "class distribution (share of labelled cells)",
         f"  {'class':<15}{'ours':>10}{'paper (KITTI)':>16}",
     ]
-    for name, freq in s["class_frequencies"].items():
+    from dstenv.dst.frame import CLASSES
+
+    freqs = s["class_frequencies"]  # JSON sorts keys: print in the classes' own order
+    for name in sorted(freqs, key=lambda n: (CLASSES.index(n) if n in CLASSES else 99, n)):
+        freq = freqs[name]
         paper = PAPER_FREQUENCIES.get(name)
         ref = f"{100 * paper:.2f}%" if paper is not None else "-"
         lines.append(f"  {name:<15}{100 * freq:>9.2f}%{ref:>16}")
@@ -149,7 +153,7 @@ def format_summary(s: dict[str, Any]) -> str:
 def _info(args: argparse.Namespace) -> int:
     import json
 
-    from dstenv.cli import CLIError
+    from dstenv.config import CLIError
     from dstenv.data.manifest import ManifestError
     from dstenv.data.shards import ShardError
 

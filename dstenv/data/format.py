@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
+from dstenv.io import partial_path  # noqa: F401 - re-exported: the shard format's temp name
+
 import json
 from collections.abc import Mapping
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -45,12 +46,6 @@ class ShardError(ValueError):
 def class_names() -> tuple[str, ...]:
     """Class names in channel order, from :data:`dstenv.dst.CLASSES` (the one definition)."""
     return tuple(str(c) for c in CLASSES)
-
-
-def partial_path(path: str | Path) -> Path:
-    """The temporary name a shard is written under before the final rename."""
-    path = Path(path)
-    return path.with_name(path.name + ".partial")
 
 
 def encode_attr(value: Any) -> tuple[Any, bool]:

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
@@ -28,7 +27,8 @@ from typing import Any
 import numpy as np
 
 from dstenv import __version__
-from dstenv.data.shards import ShardReader, class_names, partial_path
+from dstenv.data.shards import ShardReader, class_names
+from dstenv.io import atomic_write_text
 
 __all__ = [
     "MANIFEST_NAME",
@@ -38,7 +38,6 @@ __all__ = [
     "build_manifest",
     "write_manifest",
     "load_manifest",
-    "atomic_write_text",
 ]
 
 MANIFEST_NAME = "manifest.json"
@@ -50,30 +49,6 @@ UNSPLIT = "unsplit"
 
 class ManifestError(ValueError):
     """A manifest is unreadable or does not match the shard files it lists."""
-
-
-def atomic_write_bytes(path: str | Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` via ``path.partial``, fsync and rename (parents created).
-
-    A crash leaves either the old file or the new one, never a half-written file.
-    """
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = partial_path(path)
-    try:
-        with open(tmp, "wb") as fh:
-            fh.write(data)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-
-
-def atomic_write_text(path: str | Path, text: str) -> None:
-    """:func:`atomic_write_bytes` of UTF-8 text."""
-    atomic_write_bytes(path, text.encode("utf-8"))
 
 
 def scan_shards(root: str | Path) -> list[Path]:

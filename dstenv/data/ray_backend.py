@@ -15,7 +15,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from dstenv.data.manifest import atomic_write_bytes
+from dstenv.io import atomic_write_bytes
 
 __all__ = ["run_ray", "shard_bytes"]
 

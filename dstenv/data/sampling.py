@@ -196,17 +196,14 @@ def scenario_config(scenario: str | Path | Mapping[str, Any] | None = None,
             or ``None`` for the defaults.
         overrides: applied last (e.g. ``{"grid": {"height": 64, "width": 64}}``).
 
-    Raises:
-        dstenv.config.ConfigError: unknown scenario or key (named).
-    """
-    from dstenv.config import load_scenario, merge_config
-    from dstenv.pipeline import default_config
+    Returns:
+        The validated configuration of :func:`dstenv.config.build_config`.
 
-    defaults = default_config()
-    if scenario is None:
-        config = defaults
-    elif isinstance(scenario, Mapping):
-        config = merge_config(defaults, scenario, "config")
-    else:
-        config = load_scenario(scenario, defaults=defaults)
-    return merge_config(config, overrides, "override")
+    Raises:
+        dstenv.config.ConfigError: unknown scenario or key, or a bad value (named).
+    """
+    from dstenv.config import build_config
+
+    if isinstance(scenario, Mapping):
+        return build_config(None, ("config", scenario), ("override", overrides))
+    return build_config(scenario, ("override", overrides))

@@ -16,6 +16,7 @@ import numpy as np
 
 from dstenv import __version__
 from dstenv.data.codec import DIRECT_COMPRESSIONS, encode_chunk
+from dstenv.io import fsync_dir
 from dstenv.data.format import (
     BUFFER_BYTES, BUFFER_FRAMES, FORMAT, FORMAT_VERSION, GRID_FIELDS, N_CLASSES, N_MASSES,
     PROB_FIELDS, QUANT_SCALE, SCALAR_FIELDS, class_names, encode_attr, partial_path, short_error,
@@ -287,7 +288,7 @@ class ShardWriter:
         except BaseException:
             self._discard(f)
             raise
-        _fsync_dir(self.path.parent)
+        fsync_dir(self.path.parent)
 
     def _discard(self, f: h5py.File) -> None:
         """Close (ignoring HDF5 errors after a failed write) and delete the partial file."""
@@ -296,19 +297,6 @@ class ShardWriter:
         except (OSError, RuntimeError):
             pass
         self.tmp_path.unlink(missing_ok=True)
-
-
-def _fsync_dir(directory: Path) -> None:
-    try:
-        fd = os.open(directory, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass
-    finally:
-        os.close(fd)
 
 
 def _expect(path: Path, name: str, a: np.ndarray, shape: tuple[int, ...]) -> None:

@@ -244,7 +244,7 @@ def _cell(indent: str, past: list[str]) -> list[str]:
     body.append("# BetP: each set's share 1/|A| once, then the sum per class")
     body += [f"q{d} = o{d} * r{card[d]}" for d in range(nr) if card[d] > 1]
     for x in range(NUM_CLASSES):
-        parts = [f"o{d}" if card[d] == 1 else f"q{d}" 
+        parts = [f"o{d}" if card[d] == 1 else f"q{d}"
                  for d, a in enumerate(REACHABLE) if a >> x & 1]
         body.append(f"betp[{x}, at] = {_sum(parts)}")
     return [f"        {indent}{line}" for line in body]

@@ -176,5 +176,6 @@ class PerceptionGridFilter:
                 raise ValueError(f"{name} must hold integer codes, got dtype {grid.dtype}")
             grid = grid.astype(np.uint8)
         if grid.max(initial=0) > max_code:
-            raise ValueError(f"{name} holds code {int(grid.max())}; allowed codes are 0..{max_code}")
+            raise ValueError(
+                f"{name} holds code {int(grid.max())}; allowed codes are 0..{max_code}")
         return np.ascontiguousarray(grid)

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, fields
 from typing import Any
 
-__all__ = ["DSTParams"]
+__all__ = ["DSTParams", "SECTION"]
 
 
 @dataclass(frozen=True)
@@ -68,3 +68,14 @@ class DSTParams:
     def to_dict(self) -> dict[str, float]:
         """Plain dict of every field (JSON-serialisable)."""
         return {k: float(v) for k, v in asdict(self).items()}
+
+
+def _section() -> Any:
+    from dstenv.config import PROB, Section
+
+    return Section(lambda: DSTParams.default().to_dict(),
+                   {f.name: PROB for f in fields(DSTParams)})
+
+
+#: The ``dst`` section of the configuration (:func:`dstenv.config.build_config`).
+SECTION = _section()

@@ -6,20 +6,13 @@ load lazily so that registering stays cheap.
 
 from __future__ import annotations
 
-from typing import Any
+from dstenv._lazy import lazy_attributes
 
 __all__ = ["DSTGridEnv", "DSTGridObservation", "register_envs"]
 
-_LAZY = {
-    "DSTGridEnv": "dstenv.envs.dstgrid",
-    "DSTGridObservation": "dstenv.envs.wrapper",
-    "register_envs": "dstenv.envs.registration",
+_WHERE = {
+    "DSTGridEnv": "dstgrid",
+    "DSTGridObservation": "wrapper",
+    "register_envs": "registration",
 }
-
-
-def __getattr__(name: str) -> Any:
-    if name in _LAZY:
-        import importlib
-
-        return getattr(importlib.import_module(_LAZY[name]), name)
-    raise AttributeError(f"module 'dstenv.envs' has no attribute {name!r}")
+__getattr__, __dir__ = lazy_attributes(__name__, _WHERE)

@@ -25,9 +25,11 @@ from typing import Any, Protocol
 import numpy as np
 from gymnasium import spaces
 
-from dstenv.config import ConfigError
+from dstenv.config import ConfigError, Section, between
+from dstenv.registry import Registry
 
-__all__ = ["META_ACTIONS", "CITY_META_ACTIONS", "ActionMode", "ACTIONS", "action_mode", "default_action_config"]
+__all__ = ["META_ACTIONS", "CITY_META_ACTIONS", "ActionMode", "ACTIONS", "action_mode",
+           "default_action_config", "SECTION"]
 
 #: Discrete action index -> meta-action name (highway-env scenes: all five).
 META_ACTIONS: tuple[str, ...] = ("SLOWER", "IDLE", "FASTER", "LEFT", "RIGHT")
@@ -143,14 +145,28 @@ class ActionMode:
 
 
 #: mode name -> :class:`ActionMode`
-ACTIONS: dict[str, ActionMode] = {
+ACTIONS: Registry[ActionMode] = Registry("mode", "action.type", {
     "discrete": ActionMode("discrete", {"city": _CityMeta, "highway": _HighwayMeta}),
     "continuous": ActionMode("continuous", {"city": _Continuous, "highway": _Continuous}),
-}
+})
 
 
 def action_mode(name: str) -> ActionMode:
     """Look up a mode, with an error naming the known ones."""
-    if name not in ACTIONS:
-        raise ConfigError(f"config.action.type: unknown mode {name!r}; known: {', '.join(ACTIONS)}")
-    return ACTIONS[name]
+    return ACTIONS.get(name)
+
+
+#: The ``action`` section of the env configuration.
+SECTION = Section(default_action_config, {
+    "target_speeds": between(0.0, 60.0, "m/s"),
+    "initial_speed_index": between(0, 100),
+    "speed_gain": between(0.0, 100.0, "1/s", lo_open=True),
+    "max_accel": between(0.0, 20.0, "m/s^2", lo_open=True),
+    "brake_decel": between(0.0, 20.0, "m/s^2", lo_open=True),
+    "max_steer": between(0.0, 1.2, "rad", lo_open=True),
+}, (
+    ("type", lambda c: action_mode(c["type"]) is not None, "unknown mode"),
+    ("target_speeds", lambda c: len(c["target_speeds"]) >= 1, "needs at least one speed"),
+    ("initial_speed_index", lambda c: c["initial_speed_index"] < len(c["target_speeds"]),
+     "must index target_speeds"),
+))

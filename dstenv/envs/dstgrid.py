@@ -9,7 +9,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from dstenv.config import ConfigError, load_scenario, merge_config
+from dstenv.config import ConfigError, Section, Validated, build_config
 from dstenv.envs.actions import action_mode, default_action_config
 from dstenv.envs.observation import observation_mode
 from dstenv.envs.render import HumanWindow, render_frame
@@ -22,6 +22,11 @@ from dstenv.pipeline import default_config as pipeline_config
 __all__ = ["DSTGridEnv"]
 
 _ENV_SECTIONS = ("observation", "action", "reward", "info")
+
+#: The ``info`` section: optional extras of the step's ``info`` dict.
+INFO_SECTION = Section(lambda: {
+    "lidar_points": False,  # add info["lidar_points"] (B, 2) float32 [m]
+}, {})
 
 
 class DSTGridEnv(gym.Env):
@@ -152,11 +157,8 @@ class DSTGridEnv(gym.Env):
                              f"got {render_mode!r}")
         self.render_mode = render_mode
         self.scenario = scenario
-        base = self.default_config()
-        if scenario is not None:
-            base = load_scenario(scenario, base)
-        base = merge_config(base, preset, "preset")
-        self.config = merge_config(base, config, "config")
+        self.config = build_config(scenario, ("preset", preset), ("config", config),
+                                   defaults=self.default_config())
         self._user_world = world
         self._world = world
         self._window: HumanWindow | None = None
@@ -175,42 +177,59 @@ class DSTGridEnv(gym.Env):
             },
             "action": default_action_config(),
             "reward": default_reward_config(),
-            "info": {
-                "lidar_points": False,  # add info["lidar_points"] (B, 2) float32 [m]
-            },
+            "info": INFO_SECTION.defaults(),
         })
         return cfg
 
     # -- configuration ------------------------------------------------------------------
-    def _configure(self) -> None:
-        cfg = self.config
-        self._obs_name = cfg["observation"]["type"]
-        mode = observation_mode(self._obs_name)
-        self._action = action_mode(cfg["action"]["type"])
+    _STATE = ("config", "_obs_name", "_action", "pipeline", "observation_space",
+              "action_space", "_world")
+
+    def _configure(self, cfg: Mapping[str, Any] | None = None) -> None:
+        """Build the pipeline and spaces for ``cfg`` (default ``self.config``); every
+        attribute is assigned only after everything was built."""
+        cfg = self.config if cfg is None else cfg
+        obs_name = cfg["observation"]["type"]
+        mode = observation_mode(obs_name)
+        action = action_mode(cfg["action"]["type"])
         pipe_cfg = {k: copy.deepcopy(v) for k, v in cfg.items() if k not in _ENV_SECTIONS}
         pipe_cfg["highway"]["action_mode"] = ("meta" if cfg["action"]["type"] == "discrete"
                                               else "continuous")
         pipe_cfg["frame"]["masses"] = pipe_cfg["frame"]["masses"] or mode.needs_masses
         pipe_cfg["frame"]["lidar_points"] = (pipe_cfg["frame"]["lidar_points"]
                                              or cfg["info"]["lidar_points"])
-        self.pipeline = Pipeline(pipe_cfg, world=self._world)
-        self.observation_space = mode.space(self.pipeline.spec.shape)
-        self.action_space = self._action.space(cfg["action"], cfg["source"])
+        pipeline = Pipeline(Validated(pipe_cfg), world=self._user_world)
+        observation_space = mode.space(pipeline.spec.shape)
+        action_space = action.space(cfg["action"], cfg["source"])
+        self.config, self._obs_name, self._action = cfg, obs_name, action
+        self.pipeline, self._world = pipeline, self._user_world
+        self.observation_space, self.action_space = observation_space, action_space
 
     # -- gymnasium API ------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None
               ) -> tuple[np.ndarray, dict[str, Any]]:
         super().reset(seed=seed)
+        saved = None
         if options:
             unknown = set(options) - {"config"}
             if unknown:
-                raise ConfigError(f"reset options: unknown key {sorted(unknown)[0]!r}; allowed: config")
+                raise ConfigError(f"reset options: unknown key {sorted(unknown)[0]!r}; "
+                                  "allowed: config")
             if options.get("config"):
-                self.config = merge_config(self.config, options["config"], "options.config")
-                self._world = self._user_world
-                self._configure()
+                # transactional: validate and build first; restore all if the new
+                # configuration fails to build or to start its first episode
+                cfg = build_config(None, ("options.config", options["config"]),
+                                   defaults=self.config)
+                saved = {k: getattr(self, k) for k in self._STATE}
+                self._configure(cfg)
         episode_seed = int(self.np_random.integers(2**31 - 1))
-        self._frame = self.pipeline.reset(episode_seed)
+        try:
+            self._frame = self.pipeline.reset(episode_seed)
+        except Exception:
+            if saved is not None:
+                for k, v in saved.items():
+                    setattr(self, k, v)
+            raise
         self._world = self.pipeline.world
         self._controller = self._action.controller(self.config["action"], self._world,
                                                    self.config["source"])

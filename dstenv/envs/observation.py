@@ -29,8 +29,9 @@ from gymnasium import spaces
 
 from dstenv.dst import CLASSES, NUM_SETS
 from dstenv.frame import Frame
+from dstenv.registry import Registry
 
-__all__ = ["ObservationMode", "OBSERVATIONS", "IMAGE_CLASSES", "observation_mode"]
+__all__ = ["ObservationMode", "OBSERVATIONS", "IMAGE_CLASSES", "observation_mode", "SECTION"]
 
 #: The classes mapped to the ``image`` channels, in channel order.
 IMAGE_CLASSES: tuple[str, ...] = ("navigable", "building", "static", "moving")
@@ -98,19 +99,26 @@ def _masses(frame: Frame) -> np.ndarray:
 
 
 #: mode name -> :class:`ObservationMode`
-OBSERVATIONS: dict[str, ObservationMode] = {
+OBSERVATIONS: Registry[ObservationMode] = Registry("mode", "observation.type", {
     "pignistic": ObservationMode(len(CLASSES), np.float32, 1.0, False, _pignistic),
     "fcn10": ObservationMode(2 * len(CLASSES), np.float32, 1.0, False, _fcn10),
     "masses": ObservationMode(NUM_SETS, np.float32, 1.0, True, _masses),
     "image": ObservationMode(len(IMAGE_CLASSES), np.uint8, 255, False, _image),
-}
+})
 
 
 def observation_mode(name: str) -> ObservationMode:
     """Look up a mode, with an error naming the known ones."""
-    if name not in OBSERVATIONS:
-        from dstenv.config import ConfigError
+    return OBSERVATIONS.get(name)
 
-        raise ConfigError(f"config.observation.type: unknown mode {name!r}; "
-                          f"known: {', '.join(OBSERVATIONS)}")
-    return OBSERVATIONS[name]
+
+def _section() -> "object":
+    from dstenv.config import Section
+
+    # choices read at validation time, so a mode added to OBSERVATIONS is accepted
+    return Section(lambda: {"type": "image"}, {}, (
+        ("type", lambda c: observation_mode(c["type"]) is not None, "unknown mode"),))
+
+
+#: The ``observation`` section of the env configuration.
+SECTION = _section()

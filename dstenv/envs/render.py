@@ -20,20 +20,12 @@ import numpy as np
 from dstenv.dst import CLASSES
 from dstenv.frame import IGNORE_INDEX, Frame
 from dstenv.grid import GridSpec
+from dstenv.palette import CLASS_RGB
 
 __all__ = ["CLASS_COLORS", "render_frame", "HumanWindow"]
 
-#: ``(5, 3) uint8`` RGB colour of each class in ``CLASSES`` order.
-CLASS_COLORS: np.ndarray = np.array(
-    [
-        [205, 205, 205],  # navigable: light grey road
-        [105, 160, 90],  # non_navigable: green verge / sidewalk
-        [70, 95, 170],  # building: slate blue
-        [245, 170, 30],  # static: orange
-        [225, 35, 35],  # moving: red
-    ],
-    dtype=np.uint8,
-)
+#: ``(5, 3) uint8`` RGB colour of each class in ``CLASSES`` order (:mod:`dstenv.palette`).
+CLASS_COLORS: np.ndarray = CLASS_RGB
 _BG = np.array([24, 24, 28], np.uint8)
 _PANEL_PX = 448  # target panel edge [px]
 _EGO_LENGTH, _EGO_WIDTH = 4.5, 1.9  # [m] footprint drawn for the ego
@@ -94,7 +86,7 @@ def render_frame(frame: Frame, spec: GridSpec, lidar_points: np.ndarray | None =
     Returns:
         ``(Hi, Wi, 3) uint8`` image.
     """
-    from PIL import Image, ImageDraw
+    from PIL import Image, ImageDraw, ImageFont
 
     k = max(1, int(round(_PANEL_PX / max(spec.shape))))
     left = _upscale(_perception_rgb(frame.pignistic), k)
@@ -111,8 +103,11 @@ def render_frame(frame: Frame, spec: GridSpec, lidar_points: np.ndarray | None =
     img[top:top + h, 2 * pad + w:2 * pad + 2 * w] = right
     pil = Image.fromarray(img)
     draw = ImageDraw.Draw(pil)
-    draw.text((pad, 5), "perception grid (BetP; dark = unknown)", fill=(235, 235, 235))
-    draw.text((2 * pad + w, 5), "ground truth (dim = not seen now)", fill=(235, 235, 235))
+    # Pillow's scalable default font: its tiny bitmap font runs words together
+    draw.font = ImageFont.load_default(size=13)
+    draw.text((pad, 4), "perception grid: BetP, dark where unknown", fill=(235, 235, 235))
+    draw.text((2 * pad + w, 4), "ground truth: dim where the sensor sees nothing now",
+              fill=(235, 235, 235))
     x, y = pad, top + h + 6
     for name, col in zip(CLASSES, CLASS_COLORS):
         draw.rectangle([x, y + 2, x + 10, y + 12], fill=tuple(int(c) for c in col))

@@ -10,7 +10,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-__all__ = ["default_reward_config", "StepOutcome", "reward_terms"]
+from dstenv.config import Section, between
+
+__all__ = ["default_reward_config", "StepOutcome", "reward_terms", "SECTION"]
 
 
 def default_reward_config() -> dict[str, Any]:
@@ -68,3 +70,14 @@ def reward_terms(out: StepOutcome, cfg: dict[str, Any]) -> dict[str, float]:
         "hard_brake": cfg["hard_brake"] * float(out.decel > cfg["hard_brake_threshold"]),
         "arrived": cfg["arrived"] * float(out.arrived),
     }
+
+
+_W = between(-1e3, 1e3)  # a reward weight: finite and not absurd
+
+#: The ``reward`` section of the env configuration.
+SECTION = Section(default_reward_config, {
+    "progress": _W, "speed": _W, "collision": _W, "off_road": _W, "hard_brake": _W,
+    "arrived": _W,
+    "target_speed": between(0.0, 60.0, "m/s", lo_open=True),
+    "hard_brake_threshold": between(0.0, 20.0, "m/s^2"),
+})

@@ -9,7 +9,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from dstenv.config import merge_config
+from dstenv.config import build_config
 from dstenv.envs.observation import observation_mode
 from dstenv.envs.render import render_frame
 from dstenv.frame import Frame
@@ -51,7 +51,7 @@ class DSTGridObservation(gym.Wrapper):
         super().__init__(env)
         from dstenv.sim.highway import HighwayWorld
 
-        self.config = merge_config(self.default_config(), config, "config")
+        self.config = build_config(None, ("config", config), defaults=self.default_config())
         cfg = self.config
         self._obs_name = cfg["observation"]["type"]
         mode = observation_mode(self._obs_name)

@@ -8,28 +8,23 @@ Flow: :mod:`~dstenv.kitti.readers` (Velodyne, labels, calibration, OXTS) ->
 :mod:`~dstenv.kitti.osm` (GIS grid from an ``.osm`` file) ->
 :mod:`~dstenv.kitti.sequence` (the DST filter, :class:`dstenv.frame.Frame` objects) ->
 ``dstenv kitti convert`` (:mod:`~dstenv.kitti.cli`) writes shards like ``dstenv generate``.
+
+Names are imported lazily, so ``import dstenv.kitti`` imports neither scipy nor numba.
 """
 
-from dstenv.kitti.ground import classify_points, default_ground_config, fit_ground_plane
-from dstenv.kitti.objects import Boxes, boxes_in_velodyne, moving_flags
-from dstenv.kitti.poses import Trajectory, oxts_to_trajectory
-from dstenv.kitti.readers import (
-    OBJECT_TYPES,
-    Calibration,
-    KittiError,
-    Labels,
-    read_calib,
-    read_labels,
-    read_oxts,
-    read_velodyne,
-)
-from dstenv.kitti.sequence import KittiSequence, convert_sequence, default_config, kitti_config
 
-__all__ = [
-    "KittiError", "OBJECT_TYPES", "Labels", "Calibration",
-    "read_velodyne", "read_labels", "read_calib", "read_oxts",
-    "Trajectory", "oxts_to_trajectory",
-    "Boxes", "boxes_in_velodyne", "moving_flags",
-    "default_ground_config", "fit_ground_plane", "classify_points",
-    "default_config", "kitti_config", "KittiSequence", "convert_sequence",
-]
+from dstenv._lazy import lazy_attributes
+
+_WHERE = {
+    "KittiError": "readers", "OBJECT_TYPES": "readers", "Labels": "readers",
+    "Calibration": "readers", "read_velodyne": "readers", "read_labels": "readers",
+    "read_calib": "readers", "read_oxts": "readers",
+    "Trajectory": "poses", "oxts_to_trajectory": "poses",
+    "Boxes": "objects", "boxes_in_velodyne": "objects", "moving_flags": "objects",
+    "default_ground_config": "ground", "fit_ground_plane": "ground",
+    "classify_points": "ground",
+    "default_config": "sequence", "kitti_config": "sequence", "KittiSequence": "sequence",
+    "convert_sequence": "sequence",
+}
+__all__ = sorted(_WHERE)
+__getattr__, __dir__ = lazy_attributes(__name__, _WHERE)

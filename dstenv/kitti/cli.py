@@ -64,7 +64,7 @@ def _sequences(text: str) -> list[str]:
 
 
 def _convert(args: argparse.Namespace) -> int:
-    from dstenv.cli import CLIError
+    from dstenv.config import CLIError
     from dstenv.data.manifest import MANIFEST_NAME, scan_shards, shard_entry, write_manifest
     from dstenv.data.shards import ShardWriter
     from dstenv.dst import CLASSES
@@ -112,7 +112,7 @@ def _convert(args: argparse.Namespace) -> int:
 
 
 def _render(args: argparse.Namespace) -> int:
-    from dstenv.cli import CLIError
+    from dstenv.config import CLIError
     from dstenv.grid import GridSpec
     from dstenv.kitti.render import render_frame
     from dstenv.kitti.sequence import KittiSequence, convert_sequence, kitti_config
@@ -145,7 +145,7 @@ def _render(args: argparse.Namespace) -> int:
 
 
 def _evaluate(args: argparse.Namespace) -> int:
-    from dstenv.cli import CLIError
+    from dstenv.config import CLIError
     from dstenv.data import ShardDataset
     from dstenv.dst import CLASSES
     from dstenv.segment.evaluate import load_checkpoints, score_segmenters, stored_dst_segmenter

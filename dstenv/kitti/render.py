@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
@@ -10,25 +9,19 @@ import numpy as np
 from dstenv.dst import CLASSES
 from dstenv.frame import IGNORE_INDEX, Frame
 from dstenv.grid import GridSpec
+from dstenv.palette import CLASS_RGB, IGNORE_RGB, SENSOR_RGB, as_float, label_image
+from dstenv.io import atomic_path
 from dstenv.kitti.objects import Boxes
 
 __all__ = ["render_frame"]
 
-# label colours, CLASSES order, then ignore
-_LABEL_RGB = np.array(
-    [[0.55, 0.75, 0.55], [0.85, 0.80, 0.55], [0.45, 0.45, 0.75], [0.15, 0.35, 0.95],
-     [0.95, 0.20, 0.15]]
-)
-_IGNORE_RGB = np.array([0.93, 0.93, 0.93])
-_SENSOR_RGB = np.array([[0.55, 0.55, 0.55], [1.0, 1.0, 1.0], [0.0, 0.0, 0.0]])
+_LABEL_RGB = as_float(CLASS_RGB)
+_IGNORE_RGB = as_float(IGNORE_RGB)
+_SENSOR_RGB = as_float(SENSOR_RGB)
 
 
 def _rgb_labels(labels: np.ndarray) -> np.ndarray:
-    img = np.empty((*labels.shape, 3))
-    img[:] = _IGNORE_RGB
-    for k in range(len(CLASSES)):
-        img[labels == k] = _LABEL_RGB[k]
-    return img
+    return as_float(label_image(labels, IGNORE_INDEX))
 
 
 def render_frame(
@@ -57,13 +50,13 @@ def render_frame(
     x0, x1, y0, y1 = spec.extent
     c = spec.cell_size
     # imshow extent in (left, right, bottom, top) with horizontal = -y (left is left)
-    ext = (-(y1 + c / 2) , -(y0 - c / 2), x0 - c / 2, x1 + c / 2)
+    ext = (-(y1 + c / 2), -(y0 - c / 2), x0 - c / 2, x1 + c / 2)
     fig, axes = plt.subplots(1, 4, figsize=(20, 5.6), constrained_layout=True)
     panels = [
         ("LIDAR points (height colour)", None),
         ("sensor grid: free / occupied / unknown", _SENSOR_RGB[frame.sensor]),
         ("DST BetP(moving)", frame.pignistic[CLASSES.index("moving")]),
-        ("labels (grey: ignore)", _rgb_labels(frame.labels)),
+        ("labels (near-white: ignore)", _rgb_labels(frame.labels)),
     ]
     corners = boxes.corners()
     for ax, (name, img) in zip(axes, panels, strict=True):
@@ -74,9 +67,6 @@ def render_frame(
                 inside = (p[:, 0] > x0) & (p[:, 0] < x1) & (p[:, 1] > y0) & (p[:, 1] < y1)
                 p = p[inside][::2]
                 ax.scatter(-p[:, 1], p[:, 0], s=0.05, c=p[:, 2], cmap="viridis", vmin=-2, vmax=1)
-            ax.set_xlim(ext[0], ext[1])
-            ax.set_ylim(ext[2], ext[3])
-            ax.set_aspect("equal")
         elif img.ndim == 2:
             im = ax.imshow(img, extent=ext, cmap="magma", vmin=0, vmax=1, interpolation="nearest")
             fig.colorbar(im, ax=ax, fraction=0.046)
@@ -87,6 +77,10 @@ def render_frame(
             ax.plot(-poly[:, 1], poly[:, 0], color="cyan" if img is not None and img.ndim == 2
                     else "magenta", lw=0.8)
         ax.plot(0, 0, marker="^", color="red", ms=6)
+        # every panel shows exactly the grid: a far box must not stretch it
+        ax.set_xlim(ext[0], ext[1])
+        ax.set_ylim(ext[2], ext[3])
+        ax.set_aspect("equal")
         ax.set_title(name, fontsize=10)
         ax.set_xlabel("to the right [m] (= -y)")
         ax.set_ylabel("x (forward) [m]")
@@ -96,9 +90,9 @@ def render_frame(
     if title:
         fig.suptitle(title, fontsize=11)
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".partial.png")
-    fig.savefig(tmp, dpi=90)
-    plt.close(fig)
-    os.replace(tmp, path)
+    try:
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, dpi=90, format="png")
+    finally:
+        plt.close(fig)
     return path

@@ -12,27 +12,21 @@ Layout (after segmentation_models_pytorch):
   tuning the DST filter on recorded drives;
 * :mod:`~dstenv.segment.train`, :mod:`~dstenv.segment.checkpoint` -- ``dstenv train``;
 * :mod:`~dstenv.segment.benchmark`, :mod:`~dstenv.segment.report` -- ``dstenv benchmark``.
+
+Names are imported lazily, so ``import dstenv.segment`` does not import torch.
 """
 
 from __future__ import annotations
 
-from dstenv.segment.checkpoint import load_checkpoint, load_segmenter, save_checkpoint
-from dstenv.segment.metrics import ConfusionMeter, confusion_matrix, iou_per_class, mean_iou
-from dstenv.segment.registry import SEGMENTERS, create_segmenter, register_segmenter
-from dstenv.segment.segmenters import DSTSegmenter, Segmenter, TorchSegmenter
+from dstenv._lazy import lazy_attributes
 
-__all__ = [
-    "SEGMENTERS",
-    "create_segmenter",
-    "register_segmenter",
-    "Segmenter",
-    "DSTSegmenter",
-    "TorchSegmenter",
-    "save_checkpoint",
-    "load_checkpoint",
-    "load_segmenter",
-    "ConfusionMeter",
-    "confusion_matrix",
-    "iou_per_class",
-    "mean_iou",
-]
+_WHERE = {
+    "SEGMENTERS": "registry", "create_segmenter": "registry", "register_segmenter": "registry",
+    "Segmenter": "segmenters", "DSTSegmenter": "segmenters", "TorchSegmenter": "segmenters",
+    "save_checkpoint": "checkpoint", "load_checkpoint": "checkpoint",
+    "load_segmenter": "checkpoint",
+    "ConfusionMeter": "metrics", "confusion_matrix": "metrics", "iou_per_class": "metrics",
+    "mean_iou": "metrics",
+}
+__all__ = sorted(_WHERE)
+__getattr__, __dir__ = lazy_attributes(__name__, _WHERE)

@@ -11,12 +11,12 @@ classes), so loading never executes code from the file::
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 from typing import Any
 
 import torch
 
+from dstenv.io import atomic_path
 from dstenv.segment.segmenters import TorchSegmenter
 
 __all__ = ["FORMAT", "save_checkpoint", "load_checkpoint", "load_segmenter"]
@@ -31,16 +31,8 @@ def save_checkpoint(path: str | Path, payload: dict[str, Any]) -> Path:
     A killed process leaves either the previous file or the new one, never half.
     """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    try:
+    with atomic_path(path) as tmp:
         torch.save({"format": FORMAT, "version": _VERSION, **payload}, tmp)
-        with open(tmp, "rb") as fh:
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
     return path
 
 

@@ -22,7 +22,7 @@ def _json_arg(text: str) -> dict[str, Any]:
 
 
 def _train(args: argparse.Namespace) -> int:
-    from dstenv.cli import CLIError
+    from dstenv.config import CLIError
     from dstenv.data import ShardDataset, StreamingDataset
     from dstenv.segment.train import train
 
@@ -180,7 +180,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--preset",
         default="cpu",
         choices=sorted(PRESETS),
-        help="cpu: <= 30 min on a 2-core CPU (default); gpu: the full benchmark; smoke: every stage in about a minute (CI); tiny: the test suite's run",
+        help="cpu: <= 30 min on a 2-core CPU (default); gpu: the full benchmark; "
+        "smoke: every stage in about a minute (CI); tiny: the test suite's run",
     )
     b.add_argument("--out", default="benchmark-out", metavar="DIR", help="output directory")
     b.add_argument("--data", metavar="DIR", help="use existing shards instead of generating")

@@ -8,7 +8,6 @@ example grids), so a report can be redrawn from ``results.json`` alone.
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 from typing import Any
 
@@ -17,6 +16,8 @@ import numpy as np
 from dstenv.dst.frame import CLASSES
 from dstenv.dst.params import DSTParams
 from dstenv.frame import IGNORE_INDEX
+from dstenv.palette import CLASS_RGB, as_float, label_image
+from dstenv.io import atomic_path, atomic_write_bytes
 from dstenv.segment.replay import Episode, filter_episode
 
 __all__ = [
@@ -30,29 +31,14 @@ __all__ = [
     "CLASS_COLORS",
 ]
 
-#: RGB colour per class (navigable, non_navigable, building, static, moving), grey = ignore
-CLASS_COLORS = np.array(
-    [
-        [0.85, 0.85, 0.85],
-        [0.55, 0.75, 0.45],
-        [0.35, 0.35, 0.55],
-        [0.95, 0.65, 0.10],
-        [0.85, 0.10, 0.10],
-    ]
-)
-_IGNORE_COLOR = np.array([1.0, 1.0, 1.0])
-
-
-def _atomic_write(path: Path, data: bytes) -> None:
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    tmp.write_bytes(data)
-    os.replace(tmp, path)
+#: RGB colour per class in ``CLASSES`` order, ``[0, 1]`` floats (:mod:`dstenv.palette`)
+CLASS_COLORS = as_float(CLASS_RGB)
 
 
 def write_json(path: str | Path, results: dict[str, Any]) -> Path:
     """Write ``results`` as indented JSON, atomically."""
     path = Path(path)
-    _atomic_write(path, (json.dumps(results, indent=2, allow_nan=False) + "\n").encode())
+    atomic_write_bytes(path, (json.dumps(results, indent=2, allow_nan=False) + "\n").encode())
     return path
 
 
@@ -152,11 +138,11 @@ def _plt():
 
 
 def _save(fig: Any, path: Path) -> Path:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.stem}.tmp-{os.getpid()}{path.suffix}")
-    fig.savefig(tmp, dpi=110, bbox_inches="tight")
-    os.replace(tmp, path)
-    _plt().close(fig)
+    try:
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, dpi=110, bbox_inches="tight", format=path.suffix.lstrip("."))
+    finally:
+        _plt().close(fig)
     return path
 
 
@@ -166,7 +152,7 @@ def plot_confusions(results: dict[str, Any], path: str | Path, scope: str = "all
     segs = results["segmenters"]
     n = len(segs)
     fig, axes = plt.subplots(1, n, figsize=(3.4 * n, 3.4), squeeze=False)
-    short = [c[:5] for c in CLASSES]
+    short = [c.replace("_", "-") for c in CLASSES]  # whole names: "stati" reads as nothing
     for ax, (label, seg) in zip(axes[0], segs.items()):
         cm = np.asarray(seg[scope]["confusion"], dtype=np.float64)
         rows = cm.sum(1, keepdims=True)
@@ -183,7 +169,7 @@ def plot_confusions(results: dict[str, Any], path: str | Path, scope: str = "all
                     fontsize=7,
                     color="white" if norm[i, j] > 0.6 else "black",
                 )
-        ax.set_xticks(range(len(CLASSES)), short, rotation=45, fontsize=7)
+        ax.set_xticks(range(len(CLASSES)), short, rotation=45, ha="right", fontsize=7)
         ax.set_yticks(range(len(CLASSES)), short, fontsize=7)
         ax.set_title(f"{label}\nmIoU {_fmt(seg[scope]['miou'])}", fontsize=8)
         ax.set_xlabel("predicted", fontsize=7)
@@ -223,12 +209,7 @@ def plot_curves(histories: dict[str, dict[str, list]], path: str | Path) -> Path
 
 
 def _colorize(labels: np.ndarray) -> np.ndarray:
-    lab = np.asarray(labels)
-    rgb = np.empty((*lab.shape, 3))
-    ign = lab == IGNORE_INDEX
-    rgb[~ign] = CLASS_COLORS[np.clip(lab[~ign], 0, len(CLASSES) - 1)]
-    rgb[ign] = _IGNORE_COLOR
-    return rgb
+    return as_float(label_image(np.asarray(labels), IGNORE_INDEX))
 
 
 def plot_examples(examples: list[dict[str, Any]], path: str | Path) -> Path:

@@ -1,8 +1,9 @@
 """Default configuration of the sensing subsystem (sections ``lidar``, ``gis``, ``labels``).
 
-Each section is a plain dict with units in comments (HighwayEnv style). Overrides are
-validated with :func:`dstenv.config.merge_config`: an unknown key raises
-:class:`dstenv.config.ConfigError` naming it and the allowed keys. The pipeline puts
+Each section is a plain dict with units in comments (HighwayEnv style) and a rule
+table (:class:`dstenv.config.Section`); :func:`dstenv.config.build_config` validates
+them: an unknown key or a value out of range raises
+:class:`dstenv.config.ConfigError` naming it and the allowed values. The pipeline puts
 these sections next to ``world``, ``grid`` and ``dst`` in its own config.
 """
 
@@ -11,7 +12,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from dstenv.config import ConfigError, merge_config
+from dstenv.config import PROB, Section, between, one_of, section
 
 __all__ = [
     "default_config",
@@ -21,6 +22,9 @@ __all__ = [
     "lidar_config",
     "gis_config",
     "labels_config",
+    "LIDAR",
+    "GIS",
+    "LABELS",
 ]
 
 
@@ -68,54 +72,52 @@ def default_config() -> dict[str, dict[str, Any]]:
     }
 
 
-def _nonneg(cfg: Mapping[str, Any], key: str, where: str) -> None:
-    if not cfg[key] >= 0:
-        raise ConfigError(f"{where}.{key}: must be >= 0, got {cfg[key]!r}")
+_M = "m"
 
+#: The ``lidar`` section.
+LIDAR = Section(default_lidar_config, {
+    "beams": between(1, 200_000),
+    "fov": between(0.0, 360.0, "deg", lo_open=True),
+    "max_range": between(0.0, 500.0, _M, lo_open=True),
+    "range_noise": between(0.0, 5.0, _M),
+    "dropout": PROB,
+    "mount_x": between(-10.0, 10.0, _M),
+    "mount_y": between(-10.0, 10.0, _M),
+    "buildings": one_of("auto", "polygons", "raster"),
+})
 
-def _prob(cfg: Mapping[str, Any], key: str, where: str) -> None:
-    if not 0.0 <= cfg[key] <= 1.0:
-        raise ConfigError(f"{where}.{key}: must lie in [0, 1], got {cfg[key]!r}")
+#: The ``gis`` section.
+GIS = Section(default_gis_config, {
+    "offset_std": between(0.0, 20.0, _M),
+    "rotation_std": between(0.0, 0.5, "rad"),
+    "missing_building_prob": PROB,
+})
+
+#: The ``labels`` section.
+LABELS = Section(default_labels_config, {
+    "moving_threshold": between(0.0, 10.0, "m/s"),
+})
 
 
 def lidar_config(
     overrides: Mapping[str, Any] | None = None, where: str = "lidar"
 ) -> dict[str, Any]:
-    """Merge and validate a ``lidar`` section.
+    """Merge and validate a ``lidar`` section (a :class:`~dstenv.config.Validated`
+    section is returned as is).
 
     Raises:
         ConfigError: unknown key, wrong type, or a value out of range (named).
     """
-    cfg = merge_config(default_lidar_config(), overrides, where)
-    if cfg["beams"] < 1:
-        raise ConfigError(f"{where}.beams: must be >= 1, got {cfg['beams']!r}")
-    if not 0.0 < cfg["fov"] <= 360.0:
-        raise ConfigError(f"{where}.fov: must lie in (0, 360] deg, got {cfg['fov']!r}")
-    if not cfg["max_range"] > 0.0:
-        raise ConfigError(f"{where}.max_range: must be > 0 m, got {cfg['max_range']!r}")
-    _nonneg(cfg, "range_noise", where)
-    _prob(cfg, "dropout", where)
-    allowed = ("auto", "polygons", "raster")
-    if cfg["buildings"] not in allowed:
-        raise ConfigError(
-            f"{where}.buildings: unknown value {cfg['buildings']!r}; allowed: {', '.join(allowed)}"
-        )
-    return cfg
+    return section("lidar", overrides, where)
 
 
 def gis_config(overrides: Mapping[str, Any] | None = None, where: str = "gis") -> dict[str, Any]:
     """Merge and validate a ``gis`` section (see :func:`lidar_config`)."""
-    cfg = merge_config(default_gis_config(), overrides, where)
-    _nonneg(cfg, "offset_std", where)
-    _nonneg(cfg, "rotation_std", where)
-    _prob(cfg, "missing_building_prob", where)
-    return cfg
+    return section("gis", overrides, where)
 
 
 def labels_config(
     overrides: Mapping[str, Any] | None = None, where: str = "labels"
 ) -> dict[str, Any]:
     """Merge and validate a ``labels`` section (see :func:`lidar_config`)."""
-    cfg = merge_config(default_labels_config(), overrides, where)
-    _nonneg(cfg, "moving_threshold", where)
-    return cfg
+    return section("labels", overrides, where)

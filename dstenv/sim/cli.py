@@ -3,21 +3,19 @@
 from __future__ import annotations
 
 import argparse
-import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-__all__ = ["register", "render_png", "draw_world"]
+from dstenv import palette
+from dstenv.io import atomic_path
 
-#: colours of :class:`dstenv.sim.raster.Surface` codes (yard, building, road, sidewalk,
-#: parking, crosswalk) and of :class:`MapClass` codes (none, building, road, intermediate)
-SURFACE_RGB = np.array([[0.80, 0.86, 0.74], [0.42, 0.40, 0.45], [0.55, 0.55, 0.57],
-                        [0.86, 0.84, 0.80], [0.70, 0.70, 0.66], [0.93, 0.93, 0.93]])
-MAPCLASS_RGB = np.array([[1.0, 1.0, 1.0], [0.42, 0.40, 0.45], [0.55, 0.55, 0.57],
-                         [0.86, 0.84, 0.80]])
+__all__ = ["register", "render_png", "draw_world", "draw_legend", "LEGEND"]
+
+#: colours of surface and map-class codes, ``[0, 1]`` floats (:mod:`dstenv.palette`)
+SURFACE_RGB = palette.as_float(palette.SURFACE_RGB)
+MAPCLASS_RGB = palette.as_float(palette.MAPCLASS_RGB)
 
 
 def draw_world(ax: Any, world: Any, sweep: Any = None, extent: float | None = None,
@@ -68,6 +66,26 @@ def draw_world(ax: Any, world: Any, sweep: Any = None, extent: float | None = No
     ax.set_ylabel("y [m]")
 
 
+#: legend of :func:`draw_world`: (label, face colour) of what it draws
+LEGEND: tuple[tuple[str, Any], ...] = (
+    ("road", SURFACE_RGB[2]), ("sidewalk", SURFACE_RGB[3]), ("parking strip", SURFACE_RGB[4]),
+    ("building", SURFACE_RGB[1]), ("yard / open", SURFACE_RGB[0]),
+    ("moving car", "#d62728"), ("moving cyclist", "#ff7f0e"),
+    ("moving pedestrian", "#e377c2"), ("static agent (parked, stopped)", "#1f3fbf"),
+    ("ego", "#2ca02c"),
+)
+
+
+def draw_legend(ax: Any, lidar: bool = True) -> None:
+    """A legend of :data:`LEGEND` (plus the LIDAR returns) in the axis' corner."""
+    from matplotlib.patches import Patch
+
+    handles = [Patch(facecolor=c, edgecolor="k", linewidth=0.3, label=t) for t, c in LEGEND]
+    if lidar:
+        handles.append(Patch(facecolor="#ffd700", label="LIDAR return"))
+    ax.legend(handles=handles, loc="upper right", fontsize=7, framealpha=0.85)
+
+
 def render_png(world: Any, out: str | Path, sweep: Any = None, extent: float | None = None,
                title: str = "", lanes: bool = False, dpi: int = 150) -> Path:
     """Write a top view of ``world`` to ``out`` (atomically: temp file, then rename)."""
@@ -80,27 +98,22 @@ def render_png(world: Any, out: str | Path, sweep: Any = None, extent: float | N
     fig, ax = plt.subplots(figsize=(9, 9))
     draw_world(ax, world, sweep, extent, lanes)
     ax.set_title(title)
+    draw_legend(ax, sweep is not None)
     fig.tight_layout()
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(suffix=".png", dir=out.parent)
-    os.close(fd)
     try:
-        fig.savefig(tmp, dpi=dpi)
-        os.replace(tmp, out)
+        with atomic_path(out) as tmp:
+            fig.savefig(tmp, dpi=dpi, format="png")
     finally:
         plt.close(fig)
-        if os.path.exists(tmp):
-            os.unlink(tmp)
     return out
 
 
 def _cmd(args: argparse.Namespace) -> int:
-    from dstenv.config import load_scenario, scenario_path
-    from dstenv.sim import World, default_config
+    from dstenv.config import build_config, scenario_path
+    from dstenv.sim import World
 
     path = scenario_path(args.scenario)
-    cfg = load_scenario(path, {"world": default_config()}) if _world_only(path) else \
-        _pipeline_world(path)
+    cfg = build_config(path)
     world = World(cfg["world"], seed=args.seed, base_dir=path.parent)
     for _ in range(args.steps):
         world.step()
@@ -111,28 +124,13 @@ def _cmd(args: argparse.Namespace) -> int:
         except ImportError:  # sensing not part of this build
             Lidar = None
         if Lidar is not None:
-            lidar_cfg = cfg.get("lidar")
-            sweep = Lidar(lidar_cfg).sweep(world.map, world.agents, world.ego_pose,
+            sweep = Lidar(cfg["lidar"]).sweep(world.map, world.agents, world.ego_pose,
                                            np.random.default_rng(args.seed))
     extent = None if args.extent <= 0 else args.extent
     title = f"{path.stem}  seed {args.seed}  t = {world.time:.1f} s"
     out = render_png(world, args.out, sweep, extent, title, lanes=args.lanes)
     print(f"wrote {out}")
     return 0
-
-
-def _world_only(path: Path) -> bool:
-    from dstenv.config import load_scenario
-
-    return set(load_scenario(path)) <= {"world"}
-
-
-def _pipeline_world(path: Path) -> dict[str, Any]:
-    """Validate against the pipeline's full config when the scenario sets other sections."""
-    from dstenv.config import load_scenario
-    from dstenv.pipeline import default_config
-
-    return load_scenario(path, default_config())
 
 
 def register(sub: argparse._SubParsersAction) -> None:

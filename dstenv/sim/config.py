@@ -9,7 +9,9 @@ from __future__ import annotations
 
 from typing import Any
 
-__all__ = ["default_config", "MAP_KINDS"]
+from dstenv.config import PROB, Section, at_least, between, one_of
+
+__all__ = ["default_config", "MAP_KINDS", "SECTION"]
 
 #: Accepted values of ``map.kind``.
 MAP_KINDS = ("procedural", "osm")
@@ -84,3 +86,92 @@ def default_config() -> dict[str, Any]:
             "crossing_pedestrians": 0,  # pedestrians about to cross near the ego's route
         },
     }
+
+
+_M, _MS, _MS2 = "m", "m/s", "m/s^2"
+
+#: Rules of every ``world`` key: finite ranges with sane upper bounds (a typo such as
+#: ``cars = 1e6`` is an error, not an hour of spawning).
+RULES: dict[str, Any] = {
+    "dt": between(0.0, 1.0, "s", lo_open=True),
+    "map": {
+        "kind": one_of(*MAP_KINDS),
+        "resolution": between(0.01, 2.0, _M, lo_open=True),
+        "margin": between(0.0, 500.0, _M),
+        "blocks_x": between(1, 40),
+        "blocks_y": between(1, 40),
+        "block_min": between(30.0, 1000.0, _M),
+        "block_max": between(30.0, 1000.0, _M),
+        "t_junction_prob": PROB,
+        "lanes_min": between(1, 3),
+        "lanes_max": between(1, 3),
+        "lane_width": between(2.0, 6.0, _M),
+        "curb_strip_width": between(0.0, 10.0, _M),
+        "sidewalk_width": between(0.0, 15.0, _M),
+        "parking_prob": PROB,
+        "building_coverage": PROB,
+        "setback_min": between(0.0, 50.0, _M),
+        "setback_max": between(0.0, 50.0, _M),
+        "building_width_min": between(2.0, 200.0, _M),
+        "building_width_max": between(2.0, 200.0, _M),
+        "building_depth_min": between(2.0, 200.0, _M),
+        "building_depth_max": between(2.0, 200.0, _M),
+        "gap_prob": PROB,
+        "gap_min": between(0.0, 100.0, _M),
+        "gap_max": between(0.0, 100.0, _M),
+        "osm_lane_width": between(2.0, 6.0, _M),
+    },
+    "traffic": {
+        "cars": between(0, 500),
+        "cyclists": between(0, 500),
+        "pedestrians": between(0, 1000),
+        "parked_density": PROB,
+        "speed_limit": between(0.0, 60.0, _MS),
+        "cyclist_speed": between(0.0, 20.0, _MS),
+        "pedestrian_speed": between(0.0, 5.0, _MS),
+        "stop_sign_prob": PROB,
+        "signal_prob": PROB,
+        "signal_green": between(4.0, 600.0, "s"),
+        "stop_duration": between(0.0, 60.0, "s"),
+        "halt_rate": between(0.0, 10.0, "1/s"),
+        "halt_duration": between(0.0, 600.0, "s"),
+        "pause_rate": between(0.0, 10.0, "1/s"),
+        "pause_duration": between(0.0, 600.0, "s"),
+        "crossing_prob": PROB,
+    },
+    "ego": {
+        "length": between(1.0, 20.0, _M),
+        "width": between(0.5, 5.0, _M),
+        "wheelbase": between(0.5, 20.0, _M),
+        "max_speed": between(0.0, 60.0, _MS, lo_open=True),
+        "max_accel": between(0.0, 20.0, _MS2, lo_open=True),
+        "max_steer": between(0.0, 1.2, "rad", lo_open=True),
+        "autopilot_speed": between(0.0, 60.0, _MS),
+        "initial_speed": between(0.0, 60.0, _MS),
+    },
+    "task": {
+        "cross_traffic": at_least(0, 50),
+        "parked_near_route": at_least(0, 200),
+        "crossing_pedestrians": at_least(0, 50),
+    },
+}
+
+#: The ``world`` section: defaults, rules and the checks that relate two keys.
+SECTION = Section(default_config, RULES, (
+    ("map.lanes_max", lambda c: c["map"]["lanes_min"] <= c["map"]["lanes_max"],
+     "must be >= map.lanes_min"),
+    ("map.block_max", lambda c: c["map"]["block_min"] <= c["map"]["block_max"],
+     "must be >= map.block_min"),
+    ("map.setback_max", lambda c: c["map"]["setback_min"] <= c["map"]["setback_max"],
+     "must be >= map.setback_min"),
+    ("map.building_width_max",
+     lambda c: c["map"]["building_width_min"] <= c["map"]["building_width_max"],
+     "must be >= map.building_width_min"),
+    ("map.building_depth_max",
+     lambda c: c["map"]["building_depth_min"] <= c["map"]["building_depth_max"],
+     "must be >= map.building_depth_min"),
+    ("map.gap_max", lambda c: c["map"]["gap_min"] <= c["map"]["gap_max"],
+     "must be >= map.gap_min"),
+    ("ego.wheelbase", lambda c: c["ego"]["wheelbase"] <= c["ego"]["length"],
+     "must be <= ego.length"),
+))

@@ -30,10 +30,11 @@ from typing import Any
 
 import numpy as np
 
-from dstenv.config import ConfigError, merge_config
+from dstenv.config import PROB, ConfigError, Rule, Section, between, one_of, section
 from dstenv.sim.types import AgentKind, Agents, MapClass, WorldMap
 
-__all__ = ["SCENES", "META_ACTIONS", "default_config", "HighwayWorld"]
+__all__ = ["SCENES", "META_ACTIONS", "ENV_CONFIG_RULES", "SECTION", "default_config",
+           "HighwayWorld"]
 
 #: highway-env scene id -> ``"module:Class"`` of its environment. Extend it to add a
 #: scene; the class must be a highway-env ``AbstractEnv``.
@@ -70,8 +71,70 @@ def default_config() -> dict[str, Any]:
             "setback": 3.0,  # [m] minimum distance to any lane (sidewalk)
             "gap": 2.0,  # [m] minimum distance between buildings
         },
-        "env_config": {},  # extra highway-env config keys, passed as is
+        "env_config": {},  # extra highway-env config keys (ENV_CONFIG_RULES), checked
     }
+
+
+#: The highway-env configuration keys a scenario may set, each with its allowed
+#: values. An allow-list, never passed through blindly: a class path such as
+#: ``other_vehicles_type`` would make highway-env import any module named in a data
+#: file. Observation, action and simulation frequency are set by dstenv itself.
+ENV_CONFIG_RULES: dict[str, Rule] = {
+    "duration": between(1, 3600, "s"),
+    "initial_vehicle_count": between(0, 200),
+    "vehicles_count": between(0, 200),
+    "vehicles_density": between(0.0, 10.0),
+    "spawn_probability": PROB,
+    "lanes_count": between(1, 8),
+    "ego_spacing": between(0.0, 10.0),
+    "destination": Rule(choices=("o0", "o1", "o2", "o3", None)),
+    "reward_speed_range": between(0.0, 60.0, "m/s"),
+    "collision_reward": between(-1e3, 1e3),
+    "high_speed_reward": between(-1e3, 1e3),
+    "arrived_reward": between(-1e3, 1e3),
+    "right_lane_reward": between(-1e3, 1e3),
+    "lane_change_reward": between(-1e3, 1e3),
+    "normalize_reward": one_of(True, False),
+    "offroad_terminal": one_of(True, False),
+    "screen_width": between(100, 4000, "px"),
+    "screen_height": between(100, 4000, "px"),
+    "scaling": between(0.1, 100.0),
+    "show_trajectories": one_of(True, False),
+    "real_time_rendering": one_of(True, False),
+}
+
+
+def _env_config_ok(cfg: dict[str, Any]) -> bool:
+    for key, value in cfg["env_config"].items():
+        rule = ENV_CONFIG_RULES.get(key)
+        if rule is None:
+            raise ConfigError(f"highway.env_config.{key}: not an allowed highway-env key; "
+                              f"allowed: {', '.join(sorted(ENV_CONFIG_RULES))}")
+        if isinstance(value, (dict, str)) and rule.choices is None:
+            raise ConfigError(f"highway.env_config.{key}: must be {rule.describe()}, "
+                              f"got {value!r}")
+        rule.check(value, f"highway.env_config.{key}")
+    return True
+
+
+#: The ``highway`` section.
+SECTION = Section(default_config, {
+    "scene": one_of(*SCENES, what="scene"),
+    "action_mode": one_of("meta", "continuous"),
+    "target_speeds": between(0.0, 60.0, "m/s"),
+    "resolution": between(0.05, 2.0, "m"),
+    "margin": between(0.0, 500.0, "m"),
+    "max_extent": between(10.0, 5000.0, "m"),
+    "buildings": {
+        "per_hectare": between(0.0, 100.0, "1/ha"),
+        "size_min": between(1.0, 200.0, "m"),
+        "size_max": between(1.0, 200.0, "m"),
+        "setback": between(0.0, 100.0, "m"),
+        "gap": between(0.0, 100.0, "m"),
+    },
+}, (("env_config", _env_config_ok, "invalid highway-env key"),
+    ("buildings.size_max", lambda c: c["buildings"]["size_min"] <= c["buildings"]["size_max"],
+     "must be >= buildings.size_min")))
 
 
 class _NullObservation:
@@ -241,15 +304,9 @@ class HighwayWorld:
 
     def __init__(self, config: dict[str, Any] | None = None, seed: int = 0,
                  env: Any = None, external: bool = False) -> None:
-        self.config = merge_config(default_config(), config, "highway")
-        mode = self.config["action_mode"]
-        if mode not in ("meta", "continuous"):
-            raise ConfigError(f"highway.action_mode: expected 'meta' or 'continuous', got {mode!r}")
+        self.config = section("highway", config)
         if env is None:
-            scene = self.config["scene"]
-            if scene not in SCENES:
-                raise ConfigError(f"highway.scene: unknown scene {scene!r}; known: {', '.join(SCENES)}")
-            env = _load_class(SCENES[scene])(config=self._env_config())
+            env = _load_class(SCENES[self.config["scene"]])(config=self._env_config())
         self.env = env
         self.external = external
         self.dt = 1.0 / float(env.unwrapped.config["policy_frequency"])
@@ -306,9 +363,11 @@ class HighwayWorld:
         if hasattr(at, "actions_indexes"):  # discrete meta-actions
             name = "IDLE" if ego_action is None else ego_action
             if not isinstance(name, str):
-                raise ValueError(f"highway scene in meta mode takes a meta-action name, got {ego_action!r}")
+                raise ValueError("highway scene in meta mode takes a meta-action name, "
+                                 f"got {ego_action!r}")
             if name not in at.actions_indexes:
-                raise ValueError(f"meta-action {name!r} not available; choose from {sorted(at.actions_indexes)}")
+                raise ValueError(f"meta-action {name!r} not available; "
+                                 f"choose from {sorted(at.actions_indexes)}")
             return at.actions_indexes[name]
         accel, steer = (0.0, 0.0) if ego_action is None else (float(v) for v in ego_action)
         lo_a, hi_a = at.acceleration_range
@@ -331,7 +390,8 @@ class HighwayWorld:
         base = self.env.unwrapped
         lanes = base.road.network.lanes_list()
         pts = _mirror(np.concatenate([  # centre-lines every ~2 m
-            _lane_points(ln, np.linspace(0.0, ln.length, int(ln.length // 2) + 2), np.zeros(1))[:, 0]
+            _lane_points(ln, np.linspace(0.0, ln.length, int(ln.length // 2) + 2),
+                         np.zeros(1))[:, 0]
             for ln in lanes]))
         margin, res = self.config["margin"], self.config["resolution"]
         lo = pts.min(axis=0) - margin

@@ -9,10 +9,9 @@ from typing import Any
 
 import numpy as np
 
-from dstenv.config import ConfigError, merge_config
+from dstenv.config import ConfigError, section
 from dstenv.sim import spawn
 from dstenv.sim.citygen import generate_city
-from dstenv.sim.config import MAP_KINDS, default_config
 from dstenv.sim.ego import bicycle_step, hits, pure_pursuit
 from dstenv.sim.lanes import LaneKind, LaneNetwork, Turn, lane_pose, project_on_lane
 from dstenv.sim.traffic import choose_successor, route_point, traffic_step
@@ -53,8 +52,7 @@ class World:
 
     def __init__(self, config: Mapping[str, Any] | None = None, seed: int | None = 0, *,
                  world_map: WorldMap | None = None, base_dir: str | Path | None = None) -> None:
-        self.config = merge_config(default_config(), config, "world")
-        _validate(self.config)
+        self.config = section("world", config)
         self._fixed_map = world_map
         self._base_dir = Path(base_dir) if base_dir is not None else None
         if world_map is None and self.config["map"]["kind"] == "osm":
@@ -309,26 +307,3 @@ class World:
         return load_osm(path, resolution=m["resolution"], lane_width=m["osm_lane_width"],
                         margin=m["margin"], traffic=self.config["traffic"])
 
-
-def _validate(cfg: dict[str, Any]) -> None:
-    """Value checks beyond the key/type checks of ``merge_config``."""
-    m, tr, ego = cfg["map"], cfg["traffic"], cfg["ego"]
-    checks = [
-        ("dt", cfg["dt"] > 0, "must be > 0 s"),
-        ("map.kind", m["kind"] in MAP_KINDS, f"must be one of {', '.join(MAP_KINDS)}"),
-        ("map.lanes_min", 1 <= m["lanes_min"] <= 3, "must be 1..3"),
-        ("map.lanes_max", m["lanes_min"] <= m["lanes_max"] <= 3, "must be lanes_min..3"),
-        ("map.block_max", m["block_min"] <= m["block_max"], "must be >= block_min"),
-        ("map.block_min", m["block_min"] >= 30.0, "must be >= 30 m"),
-        ("map.resolution", 0.01 < m["resolution"] <= 2.0, "must be in (0.01, 2] m"),
-        ("ego.wheelbase", 0 < ego["wheelbase"] <= ego["length"], "must be in (0, ego.length]"),
-    ]
-    for key in ("t_junction_prob", "parking_prob", "building_coverage", "gap_prob"):
-        checks.append((f"map.{key}", 0.0 <= m[key] <= 1.0, "must be in [0, 1]"))
-    for key in ("parked_density", "stop_sign_prob", "signal_prob", "crossing_prob"):
-        checks.append((f"traffic.{key}", 0.0 <= tr[key] <= 1.0, "must be in [0, 1]"))
-    for key in ("cars", "cyclists", "pedestrians"):
-        checks.append((f"traffic.{key}", tr[key] >= 0, "must be >= 0"))
-    for key, ok, why in checks:
-        if not ok:
-            raise ConfigError(f"world.{key}: {why}")

@@ -6,7 +6,8 @@ import json
 
 import pytest
 
-from dstenv.cli import CLIError, main
+from dstenv.cli import main
+from dstenv.config import CLIError
 from dstenv.data.cli import parse_set
 from dstenv.data.generate import GenerateSpec, generate
 

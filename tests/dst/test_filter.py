@@ -122,8 +122,8 @@ def test_matches_reference_over_random_sequence():
 
 def test_reset_and_determinism():
     rng = np.random.default_rng(3)
-    seq = [(rng.integers(0, 3, (8, 8)).astype(np.uint8), rng.integers(0, 4, (8, 8)).astype(np.uint8))
-           for _ in range(5)]
+    seq = [(rng.integers(0, 3, (8, 8)).astype(np.uint8),
+            rng.integers(0, 4, (8, 8)).astype(np.uint8)) for _ in range(5)]
     f = PerceptionGridFilter((8, 8))
     first = [f.update(s, g, (0.2, 0.1, 0.05)) for s, g in seq]
     f.reset()

@@ -122,7 +122,8 @@ def test_reset_options_config_rebuilds_spaces():
 
 
 def test_bad_config_names_the_key():
-    with pytest.raises(ConfigError, match="config.grid.heigth: unknown key 'heigth'; allowed keys: cell_size, height, width"):
+    msg = "config.grid.heigth: unknown key 'heigth'; allowed keys: cell_size, height, width"
+    with pytest.raises(ConfigError, match=msg):
         DSTGridEnv({"grid": {"heigth": 10}})
     with pytest.raises(ConfigError, match="unknown mode 'rgb'"):
         DSTGridEnv({**SMALL_HIGHWAY, "observation": {"type": "rgb"}})
@@ -141,7 +142,8 @@ def test_collision_terminates_with_penalty_and_info_is_complete():
         assert info["rewards"]["collision"] == -10.0
     for key, shape, dtype in [("labels", (40, 40), np.uint8), ("visible", (40, 40), bool),
                               ("sensor", (40, 40), np.uint8), ("gis", (40, 40), np.uint8),
-                              ("ego_pose", (3,), np.float64), ("lidar_points", (360, 2), np.float32)]:
+                              ("ego_pose", (3,), np.float64),
+                              ("lidar_points", (360, 2), np.float32)]:
         assert info[key].shape == shape and info[key].dtype == dtype, key
     assert np.array_equal(info["visible"], info["sensor"] != 0)
 
@@ -193,7 +195,8 @@ def test_city_turn_meta_actions_steer_the_route():
         env.step(action)
         route = world.route
         if net.kind[route[0]] != LaneKind.CONNECTOR:
-            k = next((i for i in range(1, len(route)) if net.kind[route[i]] == LaneKind.CONNECTOR), None)
+            k = next((i for i in range(1, len(route))
+                      if net.kind[route[i]] == LaneKind.CONNECTOR), None)
             turned += k is not None and net.turn[route[k]] in (Turn.LEFT, Turn.RIGHT)
     env.close()
     assert turned > 0

@@ -27,11 +27,12 @@ def test_sections_merge_and_validate():
     msg = r"labels\.speed: unknown key 'speed'; allowed keys: moving_threshold"
     with pytest.raises(ConfigError, match=msg):
         labels_config({"speed": 1.0})
-    with pytest.raises(ConfigError, match="max_range: must be > 0"):
+    with pytest.raises(ConfigError, match=r"lidar\.max_range: must be in \(0, 500\] m, got 0\.0"):
         lidar_config({"max_range": 0.0})
     with pytest.raises(ConfigError, match="fov"):
         lidar_config({"fov": 400.0})
-    with pytest.raises(ConfigError, match="missing_building_prob: must lie in"):
+    msg = r"gis\.missing_building_prob: must be in \[0, 1\], got -0\.1"
+    with pytest.raises(ConfigError, match=msg):
         gis_config({"missing_building_prob": -0.1})
     with pytest.raises(ConfigError, match="expected a number"):
         gis_config({"offset_std": "big"})

@@ -1,0 +1,86 @@
+"""Atomic file writes: the one helper every writer of dstenv uses.
+
+A file appears under its final name complete or not at all: the data go to
+``NAME.partial`` in the same folder (same file system, so the rename is atomic),
+the file is flushed and fsynced, renamed over ``NAME``, and the folder is fsynced
+so the rename itself survives a power cut. On any error the partial file is
+removed and the previous ``NAME``, if any, is left untouched.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+__all__ = ["PARTIAL_SUFFIX", "partial_path", "atomic_path", "atomic_write_bytes",
+           "atomic_write_text", "fsync_file", "fsync_dir"]
+
+#: suffix of a file being written; never a final file (readers and scans skip it)
+PARTIAL_SUFFIX = ".partial"
+
+
+def partial_path(path: str | Path) -> Path:
+    """Where :func:`atomic_path` writes ``path`` before the rename: ``NAME.partial``."""
+    path = Path(path)
+    return path.with_name(path.name + PARTIAL_SUFFIX)
+
+
+def fsync_file(path: str | Path) -> None:
+    """Flush ``path``'s data to disk."""
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def fsync_dir(directory: str | Path) -> None:
+    """Flush a folder's entries (a rename) to disk; a no-op where folders cannot be opened."""
+    try:
+        fd = os.open(directory, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+@contextmanager
+def atomic_path(path: str | Path, fsync: bool = True) -> Iterator[Path]:
+    """Write a file atomically: ``with atomic_path(p) as tmp: write(tmp)``.
+
+    The body writes the complete file to ``tmp`` (``p.partial``, parents created);
+    on a clean exit ``tmp`` is fsynced and renamed to ``p`` and the folder fsynced;
+    on an exception ``tmp`` is deleted and ``p`` keeps its old content.
+    A writer that picks the format from the suffix (matplotlib) must be told it.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = partial_path(path)
+    try:
+        yield tmp
+        if fsync:
+            fsync_file(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    if fsync:
+        fsync_dir(path.parent)
+
+
+def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
+    """Write ``data`` to ``path`` atomically (see :func:`atomic_path`)."""
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(data)
+    return Path(path)
+
+
+def atomic_write_text(path: str | Path, text: str) -> Path:
+    """:func:`atomic_write_bytes` of UTF-8 text."""
+    return atomic_write_bytes(path, text.encode("utf-8"))

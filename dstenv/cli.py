@@ -78,9 +78,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 0
     try:
         return int(args.func(args) or 0)
-    except KeyboardInterrupt:
-        print("dstenv: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM where a command turned it into one
+        terminated = type(exc).__name__ == "Terminated"
+        print(f"dstenv: {'terminated' if terminated else 'interrupted'}; finished work is kept, "
+              "rerun the same command to resume", file=sys.stderr)
+        return 143 if terminated else 130
     except (CLIError, ConfigError, FileNotFoundError, PermissionError, ValueError,
             OSError, MemoryError) as exc:
         print(f"dstenv {args.command}: error: {_one_line(exc)}", file=sys.stderr)

@@ -25,6 +25,7 @@ from itertools import islice
 from pathlib import Path
 from typing import Any
 
+from dstenv.data.lifeline import die_with_parent, sigterm_as_interrupt
 from dstenv.data.manifest import scan_shards, shard_entry, write_manifest
 from dstenv.data.sampling import SPLIT_BUCKETS, SPLITS, episode_seeds, frame_steps, iter_frames
 from dstenv.data.shards import (
@@ -76,15 +77,20 @@ class GenerateSpec:
     compression_level: int = 3
 
     def __post_init__(self) -> None:
-        if self.frames < 1:
-            raise ValueError(f"frames must be >= 1, got {self.frames}")
-        if self.frames_per_shard < 1:
-            raise ValueError(f"frames per shard must be >= 1, got {self.frames_per_shard}")
+        # checked before any work: a bad value must not surface after a whole shard
+        if not 0 <= self.seed < 2**63:
+            raise ValueError(f"seed must be in [0, 2**63), got {self.seed}")
+        if not 1 <= self.frames <= 10**10:
+            raise ValueError(f"frames must be in [1, 1e10], got {self.frames}")
+        if not 1 <= self.frames_per_shard <= 100_000:
+            raise ValueError(f"frames per shard must be in [1, 100000], got "
+                             f"{self.frames_per_shard}")
         if self.split != "auto" and self.split not in SPLITS:
             raise ValueError(f"unknown split {self.split!r}; choose auto, {', '.join(SPLITS)}")
         frame_steps(self.episode_length, self.stride, self.warmup)  # validates
-        if self.episodes_per_map < 1:
-            raise ValueError(f"episodes per map must be >= 1, got {self.episodes_per_map}")
+        if not 1 <= self.episodes_per_map <= 10_000:
+            raise ValueError(f"episodes per map must be in [1, 10000], got "
+                             f"{self.episodes_per_map}")
 
     def meta(self) -> dict[str, Any]:
         """The settings as plain JSON data (without the config)."""
@@ -171,8 +177,9 @@ def write_shard(task: ShardTask, out: str | Path,
 _QUEUE: Any = None
 
 
-def _init_worker(q: Any) -> None:
+def _init_worker(q: Any, parent: int) -> None:
     global _QUEUE
+    die_with_parent(parent)  # a killed `dstenv generate` must not leave workers writing shards
     _QUEUE = q
 
 
@@ -264,16 +271,22 @@ def generate(spec: GenerateSpec, out: str | Path, workers: int = 1, ray_address:
     bar = tqdm(total=spec.frames, initial=sum(e["frames"] for e in done.values()), unit="frame",
                disable=not progress, dynamic_ncols=True, desc="generate", smoothing=0.1)
     try:
-        if ray_address is not None:
-            from dstenv.data.ray_backend import run_ray
+        with sigterm_as_interrupt():  # SIGTERM cleans up like Ctrl-C (workers, partials)
+            if ray_address is not None:
+                from dstenv.data.ray_backend import run_ray
 
-            results = run_ray(todo, out, ray_address, workers, bar.update)
-        elif workers == 1 or len(todo) <= 1:
-            results = _run_serial(todo, out, bar.update)
-        else:
-            results = _run_pool(todo, out, workers, bar.update)
+                results = run_ray(todo, out, ray_address, workers, bar.update)
+            elif workers == 1 or len(todo) <= 1:
+                results = _run_serial(todo, out, bar.update)
+            else:
+                results = _run_pool(todo, out, workers, bar.update)
     except GenerateError:
         raise
+    except cf.process.BrokenProcessPool:
+        n = len(scan_shards(out))
+        raise GenerateError(f"a worker process died (killed by the system: out of memory?); "
+                            f"{n} finished shards kept in {out}; rerun the same command to "
+                            "resume, with fewer --workers if memory is short") from None
     except (OSError, ShardError) as exc:
         n = len(scan_shards(out))
         raise GenerateError(f"{exc}; {n} finished shards kept in {out}, rerun the same command "
@@ -326,7 +339,7 @@ def _run_pool_env(todo: list[ShardTask], out: Path, workers: int,
 
     try:
         with cf.ProcessPoolExecutor(min(workers, len(todo)), mp_context=ctx,
-                                    initializer=_init_worker, initargs=(q,)) as ex:
+                                    initializer=_init_worker, initargs=(q, os.getpid())) as ex:
             pending = {ex.submit(_worker_task, t, str(out)): t for t in todo}
             try:
                 while pending:

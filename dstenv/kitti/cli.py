@@ -19,6 +19,7 @@ benchmark's report.
 from __future__ import annotations
 
 import argparse
+import re
 import json
 import logging
 from pathlib import Path
@@ -57,10 +58,28 @@ def _gis(args: argparse.Namespace, seq: Any):
 
 
 def _sequences(text: str) -> list[str]:
-    names = [s.strip() for s in text.split(",") if s.strip()]
+    """``"3,0005"`` -> ``["0003", "0005"]``: KITTI's 4-digit names, each once."""
+    names = []
+    for word in (s.strip() for s in text.split(",")):
+        if not word:
+            continue
+        if not word.isdigit() or len(word) > 4:
+            raise argparse.ArgumentTypeError(f"{word!r} is not a sequence number like 0003")
+        name = f"{int(word):04d}"
+        if name in names:
+            raise argparse.ArgumentTypeError(f"sequence {name} listed twice")
+        names.append(name)
     if not names:
         raise argparse.ArgumentTypeError("expected a comma-separated list like 0003,0005")
     return names
+
+
+def _split_name(text: str) -> str:
+    """A split is a plain name (a folder of ``--out``), never a path."""
+    if not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9_-]{0,63}", text):
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: a split is a plain name such as test or val (letters, digits, _ and -)")
+    return text
 
 
 def _convert(args: argparse.Namespace) -> int:
@@ -199,7 +218,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     c.add_argument("--stride", type=int, metavar="K",
                    help="keep one frame every K scans (default 5 = 0.5 s; the paper: 10-20)")
     c.add_argument("--warmup", type=int, metavar="K", help="first kept frame (default 5)")
-    c.add_argument("--split", default="test", help="split name stored in the shards (default test)")
+    c.add_argument("--split", default="test", type=_split_name,
+                   help="split name stored in the shards (default test)")
     c.add_argument("--masses", action="store_true", help="also store the raw 32 DST masses")
     c.add_argument("--out", required=True, metavar="DIR", help="output dataset directory")
     c.set_defaults(func=_convert)

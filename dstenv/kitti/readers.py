@@ -204,6 +204,7 @@ def read_labels(path: str | Path) -> Labels:
             raise KittiError(f"{path}:{lineno}: negative frame index {frame}")
         rows.append((frame, track, OBJECT_TYPES.index(tok[2]), _floats(tok[3:17], path, lineno)))
     vals = np.array([r[3] for r in rows], dtype=np.float64).reshape(-1, 14)
+    _check_boxes(path, vals, [r[2] for r in rows])
     return Labels(
         frame=np.array([r[0] for r in rows], dtype=np.int64),
         track=np.array([r[1] for r in rows], dtype=np.int64),
@@ -213,6 +214,38 @@ def read_labels(path: str | Path) -> Labels:
         location=vals[:, 10:13].copy(),
         rotation_y=vals[:, 13].copy(),
     )
+
+
+#: plausible extents of a labelled object: height, width, length [m] and distance [m]
+_MAX_HWL = (6.0, 6.0, 30.0)
+_MAX_DISTANCE = 500.0
+
+
+def _check_boxes(path: Path, vals: np.ndarray, types: list[int]) -> None:
+    """Reject non-finite or absurd boxes (DontCare rows carry the -1/-1000/-10 fillers)."""
+    dontcare = OBJECT_TYPES.index("DontCare")
+    for i, row in enumerate(vals):
+        if not np.isfinite(row).all():
+            raise KittiError(f"{path}: label row {i + 1}: non-finite value; a corrupt label file")
+        if types[i] == dontcare:
+            continue
+        hwl, loc = row[7:10], row[10:13]
+        if (hwl <= 0).any() or (hwl > _MAX_HWL).any():
+            raise KittiError(f"{path}: label row {i + 1}: implausible box size h, w, l = "
+                             f"{hwl.tolist()} m (allowed (0, {_MAX_HWL}] m)")
+        if np.abs(loc).max() > _MAX_DISTANCE:
+            raise KittiError(f"{path}: label row {i + 1}: box {loc.tolist()} m away from the "
+                             f"camera (more than {_MAX_DISTANCE:g} m)")
+
+
+def _check_rotation(path: Path, name: str, m: np.ndarray) -> None:
+    """``m``'s top-left 3x3 block must be a rotation: finite, orthonormal, det +1."""
+    r = m[:3, :3]
+    if not np.isfinite(m).all():
+        raise KittiError(f"{path}: {name} holds non-finite values")
+    if not np.allclose(r @ r.T, np.eye(3), atol=2e-2) or not abs(np.linalg.det(r) - 1) < 2e-2:
+        raise KittiError(f"{path}: {name} is not a rotation (+ translation); a corrupt or "
+                         "hand-edited calibration file")
 
 
 def _pad4(m: np.ndarray) -> np.ndarray:
@@ -249,12 +282,29 @@ def read_calib(path: str | Path) -> Calibration:
         if vals.size != count:
             raise KittiError(f"{path}:{lineno}: {hit} needs {count} values, got {vals.size}")
         mats[name] = vals
+    if not np.isfinite(mats["P2"]).all():
+        raise KittiError(f"{path}: P2 holds non-finite values")
+    for name in ("R_rect", "Tr_velo_cam", "Tr_imu_velo"):
+        _check_rotation(path, name, mats[name].reshape(3, -1))
     return Calibration(
         P2=mats["P2"].reshape(3, 4),
         R_rect=_pad4(mats["R_rect"].reshape(3, 3)),
         Tr_velo_cam=_pad4(mats["Tr_velo_cam"].reshape(3, 4)),
         Tr_imu_velo=_pad4(mats["Tr_imu_velo"].reshape(3, 4)),
     )
+
+
+#: [m] largest plausible move between two OXTS rows (0.1 s apart: 400 km/h)
+_MAX_STEP = 11.0
+
+
+def _ground_distance(a: np.ndarray, b: np.ndarray) -> float:
+    """Horizontal distance [m] between two OXTS rows (equirectangular; small steps)."""
+    r = 6378137.0
+    lat = np.radians(0.5 * (a[0] + b[0]))
+    dy = np.radians(b[0] - a[0]) * r
+    dx = np.radians(b[1] - a[1]) * r * np.cos(lat)
+    return float(np.hypot(dx, dy))
 
 
 def read_oxts(path: str | Path) -> np.ndarray:
@@ -266,7 +316,7 @@ def read_oxts(path: str | Path) -> np.ndarray:
 
     Raises:
         KittiError: missing or empty file, wrong column count, non-numbers,
-            latitudes outside [-90, 90].
+            latitudes outside [-90, 90], a jump of more than 11 m between rows.
     """
     path = Path(path)
     rows = []
@@ -279,6 +329,12 @@ def read_oxts(path: str | Path) -> np.ndarray:
         row = _floats(tok, path, lineno)
         if not np.isfinite(row[:6]).all() or abs(row[0]) >= 90.0:
             raise KittiError(f"{path}:{lineno}: invalid latitude/longitude/attitude")
+        if rows:
+            jump = _ground_distance(rows[-1], row)
+            if jump > _MAX_STEP:
+                raise KittiError(
+                    f"{path}:{lineno}: position jumps {jump:.0f} m from the previous row "
+                    f"(more than {_MAX_STEP:g} m in 0.1 s); a corrupt or concatenated OXTS file")
         rows.append(row)
     if not rows:
         raise KittiError(f"{path}: no OXTS rows")

@@ -49,7 +49,9 @@ def load_checkpoint(path: str | Path) -> dict[str, Any]:
     try:
         ckpt = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as exc:  # noqa: BLE001 - torch raises many types for bad files
-        raise ValueError(f"{path}: cannot read checkpoint: {str(exc).splitlines()[0]}") from None
+        first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+        empty = " (the file is empty)" if path.stat().st_size == 0 else ""
+        raise ValueError(f"{path}: cannot read checkpoint{empty}: {first}") from None
     if not isinstance(ckpt, dict) or ckpt.get("format") != FORMAT:
         raise ValueError(f"{path}: not a dstenv segmenter checkpoint")
     if ckpt.get("version") != _VERSION:
@@ -59,13 +61,32 @@ def load_checkpoint(path: str | Path) -> dict[str, Any]:
     return ckpt
 
 
+_SPEC_KEYS = {"model": str, "model_kwargs": dict, "in_channels": int, "num_classes": int}
+
+
 def load_segmenter(path: str | Path, device: str | torch.device = "cpu") -> TorchSegmenter:
-    """Rebuild the network of a checkpoint and load its weights (eval mode)."""
+    """Rebuild the network of a checkpoint and load its weights (eval mode).
+
+    Raises:
+        ValueError: unreadable file, a missing or malformed ``spec``, or weights that
+            do not fit the network the spec describes (naming the file).
+    """
     ckpt = load_checkpoint(path)
-    spec = ckpt["spec"]
+    spec = ckpt.get("spec")
+    if not isinstance(spec, dict) or not all(isinstance(spec.get(k), t)
+                                             for k, t in _SPEC_KEYS.items()):
+        raise ValueError(f"{path}: checkpoint has no valid 'spec' (needs "
+                         f"{', '.join(_SPEC_KEYS)}); was it written by dstenv train?")
+    if not isinstance(ckpt.get("model"), dict):
+        raise ValueError(f"{path}: checkpoint holds no model weights")
     seg = TorchSegmenter(
         spec["model"], spec["model_kwargs"], spec["in_channels"], spec["num_classes"], device
     )
-    seg.model.load_state_dict(ckpt["model"])
+    try:
+        seg.model.load_state_dict(ckpt["model"])
+    except RuntimeError as exc:
+        first = (str(exc).strip().splitlines() or ["mismatch"])[0]
+        raise ValueError(f"{path}: weights do not fit a {spec['model']} with "
+                         f"{spec['in_channels']} input channels: {first}") from None
     seg.model.eval()
     return seg

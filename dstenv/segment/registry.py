@@ -25,6 +25,8 @@ from dataclasses import dataclass
 from typing import Any
 
 from dstenv.dst.params import DSTParams
+from dstenv.registry import Registry
+from dstenv.segment.models import MODELS
 from dstenv.segment.segmenters import DSTSegmenter, Segmenter, TorchSegmenter
 
 __all__ = [
@@ -77,18 +79,20 @@ def _learned(model_name: str) -> Callable[..., TorchSegmenter]:
     return factory
 
 
-#: name -> :class:`SegmenterEntry`
-SEGMENTERS: dict[str, SegmenterEntry] = {
+def _describe(builder: Callable[..., Any]) -> str:
+    return (builder.__doc__ or "").strip().splitlines()[0] if builder.__doc__ else ""
+
+
+#: name -> :class:`SegmenterEntry`: the DST segmenters, then one learned segmenter per
+#: network of :data:`dstenv.segment.models.MODELS`
+SEGMENTERS: Registry[SegmenterEntry] = Registry("segmenter", "", {
     "dst": SegmenterEntry(_make_dst, "dst", "argmax of the pignistic probability (pure DST)"),
     "dst-tuned": SegmenterEntry(
         _make_dst_tuned, "dst", "DST parameters tuned on the training split"
     ),
-    "unet-light": SegmenterEntry(_learned("unet-light"), "learned", "light U-Net, trains on a CPU"),
-    "unet-temporal": SegmenterEntry(
-        _learned("unet-temporal"), "learned", "U-Net with separate t / t-1 streams"
-    ),
-    "fcn8s-vgg16": SegmenterEntry(_learned("fcn8s-vgg16"), "learned", "the paper's VGG-16 FCN-8s"),
-}
+    **{name: SegmenterEntry(_learned(name), "learned", _describe(builder))
+       for name, builder in MODELS.items()},
+})
 
 
 def register_segmenter(
@@ -105,9 +109,7 @@ def register_segmenter(
     """
     if kind not in ("dst", "learned"):
         raise ValueError(f"segmenter kind must be 'dst' or 'learned', got {kind!r}")
-    if name in SEGMENTERS and not overwrite:
-        raise ValueError(f"segmenter {name!r} is already registered")
-    SEGMENTERS[name] = SegmenterEntry(factory, kind, description)
+    SEGMENTERS.register(name, SegmenterEntry(factory, kind, description), overwrite)
 
 
 def segmenter_kind(name: str) -> str:
@@ -116,9 +118,7 @@ def segmenter_kind(name: str) -> str:
 
 
 def _entry(name: str) -> SegmenterEntry:
-    if name not in SEGMENTERS:
-        raise ValueError(f"unknown segmenter {name!r}; choose from {', '.join(SEGMENTERS)}")
-    return SEGMENTERS[name]
+    return SEGMENTERS.get(name)
 
 
 def create_segmenter(name: str, **kwargs: Any) -> Segmenter:

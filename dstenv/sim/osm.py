@@ -31,7 +31,7 @@ from dstenv.sim.raster import Surface, fill_polygon
 from dstenv.sim.roads import RoadEdge, add_road_lanes, turning_circle
 from dstenv.sim.types import MapClass, WorldMap
 
-__all__ = ["load_osm", "latlon_to_mercator", "EARTH_RADIUS"]
+__all__ = ["load_osm", "latlon_to_mercator", "EARTH_RADIUS", "OSM_LIMITS"]
 
 EARTH_RADIUS = 6378137.0  # [m] as in the KITTI devkit
 #: total lanes assumed per vehicle road type when untagged
@@ -52,6 +52,52 @@ def latlon_to_mercator(lat, lon, scale: float) -> tuple[np.ndarray, np.ndarray]:
     return mx, my
 
 
+#: limits on what an OSM file may ask of this machine (a 1 KB ``.bz2`` can inflate to
+#: gigabytes, a ``<bounds>`` element can span the globe, a tag can claim 1e9 lanes)
+OSM_LIMITS = {
+    "bytes": 1 << 30,  # [B] decompressed XML read at most
+    "nodes": 5_000_000,
+    "ways": 1_000_000,
+    "extent": 20_000.0,  # [m] side of the mapped area at most
+    "raster_cells": 200_000_000,  # map raster cells at most (200 MB of uint8)
+    "lanes": 8,  # lanes of one way at most (larger tags are clamped)
+    "width": 60.0,  # [m] road width at most (larger tags are clamped)
+}
+
+
+class _GuardedStream:
+    """A binary stream that stops past ``OSM_LIMITS["bytes"]`` and refuses DTDs.
+
+    A document type declaration is the door to entity expansion ("billion laughs")
+    and external entities; OSM files never have one, so any ``<!DOCTYPE`` or
+    ``<!ENTITY`` is rejected before the XML parser sees it, whatever expat's version.
+    """
+
+    _BAD = (b"<!DOCTYPE", b"<!ENTITY")
+
+    def __init__(self, raw: Any, path: Path) -> None:
+        self.raw, self.path, self.total, self.tail = raw, path, 0, b""
+
+    def read(self, n: int = -1) -> bytes:
+        data = self.raw.read(n if n and n > 0 else 1 << 16)
+        self.total += len(data)
+        if self.total > OSM_LIMITS["bytes"]:
+            raise ValueError(f"{self.path}: more than {OSM_LIMITS['bytes'] >> 20} MiB of XML "
+                             "(decompressed); cut a smaller extract")
+        window = (self.tail + data).upper()
+        if any(bad in window for bad in self._BAD):
+            raise ValueError(f"{self.path}: XML with a DTD or entity declaration; OSM files "
+                             "have none, so it is refused")
+        self.tail = window[-16:]
+        return data
+
+    def __enter__(self) -> "_GuardedStream":
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.raw.close()
+
+
 def _parse(path: Path) -> tuple[dict, list, list, tuple | None]:
     """Stream the XML: nodes ``{id: (lat, lon)}``, ways ``[(refs, tags)]``, building
     relations ``[(outer way ids, inner way ids)]``, bounds."""
@@ -59,16 +105,22 @@ def _parse(path: Path) -> tuple[dict, list, list, tuple | None]:
     ways, rels, bounds = [], [], None
     opener = bz2.open if path.suffix == ".bz2" else open
     try:
-        with opener(path, "rb") as fh:
+        with _GuardedStream(opener(path, "rb"), path) as fh:
             for _, el in ET.iterparse(fh, events=("end",)):
                 tag = el.tag
                 if tag == "node":
                     nodes[int(el.get("id"))] = (float(el.get("lat")), float(el.get("lon")))
+                    if len(nodes) > OSM_LIMITS["nodes"]:
+                        raise ValueError(f"{path}: more than {OSM_LIMITS['nodes']} nodes; "
+                                         "cut a smaller extract")
                 elif tag == "way":
                     tags = {t.get("k"): t.get("v") for t in el.iter("tag")}
                     if "building" in tags or "highway" in tags:
                         refs = [int(n.get("ref")) for n in el.iter("nd")]
                         ways.append((int(el.get("id")), refs, tags))
+                        if len(ways) > OSM_LIMITS["ways"]:
+                            raise ValueError(f"{path}: more than {OSM_LIMITS['ways']} "
+                                             "building/road ways; cut a smaller extract")
                 elif tag == "relation":
                     tags = {t.get("k"): t.get("v") for t in el.iter("tag")}
                     if "building" in tags and tags.get("type") == "multipolygon":
@@ -97,19 +149,22 @@ def _width(tags: dict[str, str], lane_width: float) -> tuple[float, int, int]:
     oneway = tags.get("oneway", "no") in ("yes", "true", "1", "-1") or kind == "motorway" \
         or tags.get("junction") == "roundabout"
     try:
-        total = max(int(float(tags["lanes"])), 1)
-    except (KeyError, ValueError):
+        total = int(min(max(float(tags["lanes"]), 1.0), OSM_LIMITS["lanes"]))
+    except (KeyError, ValueError, OverflowError):
         total = max(ROAD_LANES.get(kind, 2) // (2 if oneway else 1), 1)
     if oneway:
         fwd, bwd = total, 0
     else:
         fwd = _int(tags.get("lanes:forward"), max((total + 1) // 2, 1))
         bwd = _int(tags.get("lanes:backward"), max(total - fwd, 1))
+    fwd, bwd = min(fwd, OSM_LIMITS["lanes"]), min(bwd, OSM_LIMITS["lanes"])
     try:
         width = float(tags["width"].replace("m", "").strip())
     except (KeyError, ValueError):
         width = (fwd + bwd) * lane_width
-    return max(width, 2.0), fwd, bwd
+    if not math.isfinite(width):
+        width = (fwd + bwd) * lane_width
+    return float(np.clip(width, 2.0, OSM_LIMITS["width"])), fwd, bwd
 
 
 def _int(text: str | None, default: int) -> int:
@@ -117,6 +172,20 @@ def _int(text: str | None, default: int) -> int:
         return max(int(text), 1) if text is not None else default
     except ValueError:
         return default
+
+
+def _check_extent(path: Path, width: float, height: float, margin: float,
+                  resolution: float) -> None:
+    """Refuse a map whose area or raster would not fit (named, with the numbers)."""
+    side = max(width, height)
+    if not math.isfinite(side) or side > OSM_LIMITS["extent"]:
+        raise ValueError(f"{path}: the map spans {side / 1000:.1f} km (its <bounds> or nodes); "
+                         f"at most {OSM_LIMITS['extent'] / 1000:g} km is supported")
+    cells = ((width + 2 * margin) / resolution) * ((height + 2 * margin) / resolution)
+    if cells > OSM_LIMITS["raster_cells"]:
+        raise ValueError(f"{path}: a {resolution:g} m raster of this map needs {cells:.3g} cells "
+                         f"(more than {OSM_LIMITS['raster_cells']:.3g}); use a coarser "
+                         "world.map.resolution or a smaller extract")
 
 
 def load_osm(path: str | Path, *, resolution: float = 0.2, lane_width: float = 3.0,
@@ -159,6 +228,7 @@ def load_osm(path: str | Path, *, resolution: float = 0.2, lane_width: float = 3
     corners = np.stack(latlon_to_mercator([bounds[0], bounds[2]], [bounds[1], bounds[3]], scale),
                        -1) - [mx0, my0]
     (bx0, by0), (bx1, by1) = corners
+    _check_extent(path, bx1 - bx0, by1 - by0, margin, resolution)
     box = shapely.box(bx0, by0, bx1, by1)
 
     def project(refs: list[int]) -> np.ndarray:

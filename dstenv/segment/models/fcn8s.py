@@ -144,7 +144,7 @@ def fcn8s_vgg16(
     dropout: float = 0.5,
     vgg16_weights: str | None = None,
 ) -> SegmentationModel:
-    """The paper's FCN-8s (``fcn8s-vgg16``); see the module docstring."""
+    """The paper's VGG-16 FCN-8s (``fcn8s-vgg16``); see the module docstring."""
     enc = VGG16Encoder(in_channels, fc_channels, dropout)
     if vgg16_weights:
         load_vgg16_weights(enc, vgg16_weights)

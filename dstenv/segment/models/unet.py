@@ -105,7 +105,7 @@ def unet_light(
     depth: int = 3,
     dropout: float = 0.1,
 ) -> SegmentationModel:
-    """The light U-Net (``unet-light``)."""
+    """Light U-Net (``unet-light``, ~0.48 M parameters): trains on a CPU."""
     enc = UNetEncoder(in_channels, base, depth)
     return SegmentationModel(
         enc, UNetDecoder(enc.channels), SegmentationHead(base, num_classes, dropout)
@@ -120,7 +120,7 @@ def unet_temporal(
     depth: int = 3,
     dropout: float = 0.1,
 ) -> SegmentationModel:
-    """The two-stream temporal U-Net (``unet-temporal``)."""
+    """U-Net with separate t and t-1 streams (``unet-temporal``)."""
     enc = TwoStreamEncoder(in_channels, stream, base, depth)
     return SegmentationModel(
         enc, UNetDecoder(enc.channels), SegmentationHead(base, num_classes, dropout)

@@ -1,0 +1,85 @@
+"""Workers die with `dstenv generate`, whatever kills it, and stop writing."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="Linux /proc")
+
+
+def _start(out: Path) -> subprocess.Popen:
+    cmd = [sys.executable, "-m", "dstenv.cli", "generate", "--frames", "4000", "--grid", "32",
+           "--episode-length", "400", "--stride", "1", "--frames-per-shard", "1000",
+           "--workers", "2", "--quiet", "--out", str(out)]
+    return subprocess.Popen(cmd, start_new_session=True, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+
+
+def _group(pgid: int) -> list[int]:
+    """Live (non-zombie) processes of a process group."""
+    pids = []
+    for d in Path("/proc").iterdir():
+        if not d.name.isdigit():
+            continue
+        try:
+            stat = (d / "stat").read_text()
+        except OSError:
+            continue
+        fields = stat[stat.rindex(")") + 2:].split()
+        if int(fields[2]) == pgid and fields[0] != "Z":
+            pids.append(int(d.name))
+    return pids
+
+
+def _wait_for_workers(proc: subprocess.Popen, n: int = 3, timeout: float = 120.0) -> None:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if len(_group(proc.pid)) >= n:  # parent, resource tracker / workers
+            time.sleep(3.0)  # let the workers import and start simulating
+            return
+        assert proc.poll() is None, proc.stderr.read()
+        time.sleep(0.2)
+    pytest.fail("workers did not start")
+
+
+def _wait_gone(pgid: int, timeout: float = 60.0) -> list[int]:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end and _group(pgid):
+        time.sleep(0.1)
+    return _group(pgid)
+
+
+def _files(out: Path) -> set[tuple[str, int]]:
+    return {(str(p), p.stat().st_size) for p in out.rglob("*") if p.is_file()}
+
+
+def test_sigkill_of_the_parent_kills_the_workers(tmp_path):
+    proc = _start(tmp_path / "d")
+    _wait_for_workers(proc)
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    left = _wait_gone(proc.pid)
+    for pid in left:
+        os.kill(pid, signal.SIGKILL)
+    assert not left, f"workers outlived their parent: {left}"
+    before = _files(tmp_path / "d")
+    time.sleep(1.0)
+    assert _files(tmp_path / "d") == before  # nothing writes after the parent died
+
+
+def test_sigterm_cleans_up_and_exits_143(tmp_path):
+    proc = _start(tmp_path / "d")
+    _wait_for_workers(proc)
+    os.kill(proc.pid, signal.SIGTERM)
+    proc.wait(timeout=60)
+    assert proc.returncode == 143, proc.stderr.read()
+    assert not _wait_gone(proc.pid)
+    assert not list((tmp_path / "d").rglob("*.partial"))  # unfinished shards removed
+    assert "rerun the same command" in proc.stderr.read()

@@ -95,6 +95,12 @@ def _one_line(exc: BaseException) -> str:
     if isinstance(exc, OSError) and exc.filename and exc.strerror:
         return f"{exc.filename}: {exc.strerror}"
     text = str(exc) or type(exc).__name__
+    if "Traceback (most recent call last)" in text:
+        # an error re-raised from a worker (torch's DataLoader embeds the worker's whole
+        # traceback in the message): its last line is the worker's own error
+        head = text.strip().splitlines()[0]
+        last = [ln for ln in text.strip().splitlines() if ln.strip()][-1]
+        return f"{' '.join(head.split())} {last.strip()}"
     return " ".join(text.split())
 
 

@@ -73,3 +73,12 @@ def test_expected_errors_are_one_line(capsys, tmp_path):
     assert main(["info", str(tmp_path / "nothing-here")]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("dstenv info: error:") and "\n" not in err and "nothing-here" in err
+
+
+def test_worker_tracebacks_become_one_line(capsys, monkeypatch):
+    import dstenv.cli as cli
+
+    msg = ("Caught ValueError in DataLoader worker process 0.\nOriginal Traceback (most recent "
+           "call last):\n  File \"x.py\", line 1, in f\n    g()\nValueError: shard.h5: bad chunk\n")
+    assert cli._one_line(ValueError(msg)) == ("Caught ValueError in DataLoader worker process "
+                                              "0. ValueError: shard.h5: bad chunk")

@@ -82,7 +82,7 @@ def _generate(args: argparse.Namespace) -> int:
             compression_level=args.gzip_level,
         )
         manifest = generate(spec, args.out, workers=args.workers, ray_address=args.ray,
-                            progress=not args.quiet)
+                            progress=not args.quiet, force_unlock=args.force_unlock)
     except GenerateError as exc:
         raise CLIError(str(exc)) from None
     if not args.quiet:
@@ -208,6 +208,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
                    help="run shards as Ray tasks; no ADDRESS starts a local Ray")
     p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
+    p.add_argument("--force-unlock", action="store_true",
+                   help="take over DIR/.dstenv.lock of a run that died on another host")
     p.set_defaults(func=_generate)
 
     q = sub.add_parser("info", help="describe a shard dataset",

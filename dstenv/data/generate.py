@@ -13,6 +13,7 @@ shards made with other settings. ``DIR/manifest.json`` is written last.
 from __future__ import annotations
 
 import concurrent.futures as cf
+import contextlib
 import dataclasses
 import json
 import multiprocessing
@@ -25,6 +26,7 @@ from itertools import islice
 from pathlib import Path
 from typing import Any
 
+from dstenv.data.lock import DatasetLocked, dataset_lock
 from dstenv.data.lifeline import die_with_parent, sigterm_as_interrupt
 from dstenv.data.manifest import scan_shards, shard_entry, write_manifest
 from dstenv.data.sampling import SPLIT_BUCKETS, SPLITS, episode_seeds, frame_steps, iter_frames
@@ -242,7 +244,7 @@ def _prepare(out: Path, tasks: list[ShardTask]
 
 
 def generate(spec: GenerateSpec, out: str | Path, workers: int = 1, ray_address: str | None = None,
-             progress: bool = True) -> dict[str, Any]:
+             progress: bool = True, force_unlock: bool = False) -> dict[str, Any]:
     """Generate (or resume) a dataset directory and write its manifest.
 
     Args:
@@ -252,6 +254,8 @@ def generate(spec: GenerateSpec, out: str | Path, workers: int = 1, ray_address:
         ray_address: ``None`` for no Ray, ``"local"`` to start a local Ray, else the
             address of a running cluster (``"auto"``, ``"ray://head:10001"``...).
         progress: show a tqdm bar (frames, frames/s) on stderr.
+        force_unlock: take the folder's lock (:mod:`dstenv.data.lock`) even if another
+            owner holds it.
 
     Returns:
         the manifest.
@@ -260,11 +264,24 @@ def generate(spec: GenerateSpec, out: str | Path, workers: int = 1, ray_address:
         GenerateError: unwritable output, settings clash with existing shards, or a
             failed shard (finished shards are kept; rerun to resume).
     """
-    from tqdm import tqdm
-
     out = Path(out)
     if workers < 1:
         raise ValueError(f"workers must be >= 1, got {workers}")
+    with contextlib.ExitStack() as stack:
+        try:  # one writer per folder, even where HDF5 file locking is off (NFS, Lustre)
+            stack.enter_context(dataset_lock(out, force_unlock))
+        except DatasetLocked as exc:
+            raise GenerateError(str(exc)) from None
+        except OSError as exc:
+            raise GenerateError(f"output directory {out} is not writable: "
+                                f"{exc.strerror or exc}") from None
+        return _generate(spec, out, workers, ray_address, progress)
+
+
+def _generate(spec: GenerateSpec, out: Path, workers: int, ray_address: str | None,
+              progress: bool) -> dict[str, Any]:
+    from tqdm import tqdm
+
     tasks = plan(spec)
     done, todo = _prepare(out, tasks)
     # resumed frames count as initial, so frames/s is the rate of this run only

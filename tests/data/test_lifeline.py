@@ -83,3 +83,32 @@ def test_sigterm_cleans_up_and_exits_143(tmp_path):
     assert not _wait_gone(proc.pid)
     assert not list((tmp_path / "d").rglob("*.partial"))  # unfinished shards removed
     assert "rerun the same command" in proc.stderr.read()
+
+
+def test_a_second_writer_is_refused_while_the_first_runs(tmp_path):
+    from dstenv.data.lock import LOCK_NAME, DatasetLocked, dataset_lock
+
+    with dataset_lock(tmp_path / "d") as lock:
+        assert lock.name == LOCK_NAME
+        with pytest.raises(DatasetLocked, match=r"being written by pid \d+ on .*--force-unlock"):
+            with dataset_lock(tmp_path / "d"):
+                pass
+    assert not (tmp_path / "d" / LOCK_NAME).exists()  # released
+
+
+def test_a_stale_lock_of_a_dead_process_is_taken_over(tmp_path):
+    import json
+    import socket
+
+    from dstenv.data.lock import LOCK_NAME, dataset_lock
+
+    d = tmp_path / "d"
+    d.mkdir()
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
+                          capture_output=True, text=True).stdout.strip()
+    (d / LOCK_NAME).write_text(json.dumps({"host": socket.gethostname(), "pid": int(dead)}))
+    with dataset_lock(d):
+        pass
+    (d / LOCK_NAME).write_text(json.dumps({"host": "other-host", "pid": 1}))
+    with dataset_lock(d, force=True):
+        pass

@@ -20,6 +20,7 @@ __all__ = [
     "default_labels_config",
     "lidar_config",
     "gis_config",
+    "gis_is_exact",
     "labels_config",
 ]
 
@@ -46,11 +47,29 @@ def default_lidar_config() -> dict[str, Any]:
 
 
 def default_gis_config() -> dict[str, Any]:
-    """The ``gis`` section: errors of the map / localisation used for the GIS grid."""
+    """The ``gis`` section: the map behind the GIS grid, and how it differs from the world.
+
+    One error is drawn per episode (:meth:`dstenv.sensing.MapError.sample`); the label
+    grid always comes from the true world. See :mod:`dstenv.sensing.mapmodel`.
+    """
     return {
-        "offset_std": 0.0,  # std of the pose offset along ego x and ego y [m]
-        "rotation_std": 0.0,  # std of the heading error [rad]
-        "missing_building_prob": 0.0,  # probability that a building is absent from the map [-]
+        # "map": the imperfect map below; "none": no map at all (every GIS cell
+        # MapClass.NONE, a vacuous map input, as KITTI without an OSM file)
+        "source": "map",
+        "no_map_prob": 0.0,  # [-] chance per episode of "none" anyway (randomise map quality)
+        "offset_std": 0.5,  # std of the localisation offset along ego x and ego y [m]
+        "rotation_std": 0.013,  # std of the heading error [rad] (0.013 rad = 0.75 deg)
+        "missing_building_prob": 0.1,  # [-] chance that a building is absent from the map
+        "extra_building_rate": 0.05,  # [-] buildings in the map that do not exist, per true one
+        "outline_shift_std": 0.5,  # std of the shift of a building outline [m]
+        "outline_scale_std": 0.05,  # std of the relative scale error of an outline [-]
+        # road surface in the map: "lanes" (street centre-line +- lanes x nominal
+        # width / 2, as OSM) or "true" (the world's road raster)
+        "road_width": "lanes",
+        "nominal_lane_width": 3.0,  # [m] lane width a map assumes (OSM has no width tags)
+        # what is neither road nor building in the map (sidewalks are not mapped):
+        # "intermediate" (as the OSM loader) or "none" (no information)
+        "background": "intermediate",
     }
 
 
@@ -114,10 +133,36 @@ def lidar_config(
 def gis_config(overrides: Mapping[str, Any] | None = None, where: str = "gis") -> dict[str, Any]:
     """Merge and validate a ``gis`` section (see :func:`lidar_config`)."""
     cfg = merge_config(default_gis_config(), overrides, where)
+    for key, allowed in (("source", ("map", "none")), ("road_width", ("lanes", "true")),
+                         ("background", ("intermediate", "none"))):
+        if cfg[key] not in allowed:
+            raise ConfigError(
+                f"{where}.{key}: unknown value {cfg[key]!r}; allowed: {', '.join(allowed)}"
+            )
     _nonneg(cfg, "offset_std", where)
     _nonneg(cfg, "rotation_std", where)
+    _nonneg(cfg, "outline_shift_std", where)
     _prob(cfg, "missing_building_prob", where)
+    _prob(cfg, "no_map_prob", where)
+    if not 0.0 <= cfg["extra_building_rate"] <= 1.0:
+        raise ConfigError(f"{where}.extra_building_rate: must lie in [0, 1], "
+                          f"got {cfg['extra_building_rate']!r}")
+    if not 0.0 <= cfg["outline_scale_std"] <= 0.3:
+        raise ConfigError(f"{where}.outline_scale_std: must lie in [0, 0.3], "
+                          f"got {cfg['outline_scale_std']!r}")
+    if not 2.0 <= cfg["nominal_lane_width"] <= 5.0:
+        raise ConfigError(f"{where}.nominal_lane_width: must lie in [2, 5] m, "
+                          f"got {cfg['nominal_lane_width']!r}")
     return cfg
+
+
+def gis_is_exact(cfg: Mapping[str, Any]) -> bool:
+    """The ``gis`` section describes the true map at the true pose (no error to draw)."""
+    return (cfg["source"] == "map" and cfg["no_map_prob"] == 0 and cfg["road_width"] == "true"
+            and cfg["background"] == "intermediate"
+            and all(cfg[k] == 0 for k in ("offset_std", "rotation_std", "missing_building_prob",
+                                          "extra_building_rate", "outline_shift_std",
+                                          "outline_scale_std")))
 
 
 def labels_config(

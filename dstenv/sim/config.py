@@ -9,6 +9,8 @@ from __future__ import annotations
 
 from typing import Any
 
+from dstenv.sim.clutter import default_clutter_config
+
 __all__ = ["default_config", "MAP_KINDS"]
 
 #: Accepted values of ``map.kind``.
@@ -52,12 +54,25 @@ def default_config() -> dict[str, Any]:
             "building_height_min": 6.0,  # [m] roof height of generated buildings, at least
             "building_height_max": 30.0,  # [m] at most (whole ~3 m storeys + roof)
             "kerb_height": 0.12,  # [m] sidewalks / verges (INTERMEDIATE cells) above the road
+            # -- variety (0 / "lattice" everywhere: the ideal world of the clean scenario)
+            "lane_width_jitter": 0.45,  # [m] lane width of each street: lane_width +- this (0..0.7)
+            "curb_strip_jitter": 0.5,  # [m] kerb strip width of an episode: +- this (0..1)
+            "sidewalk_jitter": 0.6,  # [m] sidewalk width of an episode: +- this (0..1)
+            "parking_layout": "irregular",  # "irregular" (gaps, jitter, size mix) | "lattice"
+            "parking_gap_min": 0.5,  # [m] gap between two parked vehicles, at least
+            "parking_gap_max": 3.0,  # [m] at most (irregular layout)
+            "parking_lateral_jitter": 0.3,  # [m] offset in the strip: per side +- this, per car /2
+            "parking_heading_jitter": 2.0,  # [deg] std of a parked vehicle's heading error
+            "parking_mix": [0.25, 0.55, 0.15, 0.05],  # weights of small car, car, van, truck
+            "half_on_sidewalk_prob": 0.08,  # [-] share of (small / normal) cars half on the sidewalk
         },
         "traffic": {
             "cars": 24,  # moving cars
             "cyclists": 4,
             "pedestrians": 14,
             "parked_density": 0.5,  # [-] share of parking-strip slots holding a parked car
+            # weights of small car, car, van, truck among moving cars ([]: one car size)
+            "vehicle_mix": [0.15, 0.65, 0.15, 0.05],
             "speed_limit": 13.9,  # [m/s] desired speed of cars (50 km/h), +-20 % per car
             "cyclist_speed": 5.0,  # [m/s]
             "pedestrian_speed": 1.3,  # [m/s]
@@ -70,7 +85,13 @@ def default_config() -> dict[str, Any]:
             "pause_rate": 0.03,  # [1/s] chance per second that a pedestrian stands still
             "pause_duration": 5.0,  # [s] mean pause of a pedestrian (exponential, at most 4x)
             "crossing_prob": 0.4,  # [-] chance a pedestrian takes a crosswalk it reaches
+            "lateral_drift": 0.15,  # [m] std of a vehicle's drift around its lane centre (0..0.5)
+            "drift_time": 3.0,  # [s] correlation time of that drift
+            "lateral_speed": 0.6,  # [m/s] sideways speed of a car pulling out of a space
+            "pull_out_rate": 0.002,  # [1/s] chance per second that a parked car pulls out
+            "delivery_halt_factor": 4.0,  # [-] vans / trucks halt this much longer than cars
         },
+        "clutter": default_clutter_config(),
         "ego": {
             "length": 4.5,  # [m]
             "width": 1.9,  # [m]

@@ -105,6 +105,9 @@ class WorldMap:
         obstacles: static street clutter absent from the map (:class:`Obstacles`);
             ``None`` becomes :meth:`Obstacles.empty`.
         kerb_height: height of :attr:`MapClass.INTERMEDIATE` ground above the road [m].
+        streets: the street graph as a map provider (OSM) knows it: one ``(K, 2)
+            float64`` centre-line per street segment [m] (empty: unknown).
+        street_lanes: ``(S,) int64`` total lanes (both directions) of each street.
     """
 
     raster: np.ndarray
@@ -116,8 +119,12 @@ class WorldMap:
     building_heights: np.ndarray | None = None
     obstacles: "Obstacles | None" = None
     kerb_height: float = DEFAULT_KERB_HEIGHT
+    streets: list[np.ndarray] = field(default_factory=list)
+    street_lanes: np.ndarray | None = None
 
     def __post_init__(self) -> None:
+        if self.street_lanes is None:
+            self.street_lanes = np.zeros(len(self.streets), np.int64)
         if self.building_heights is None:
             self.building_heights = np.full(len(self.buildings), DEFAULT_BUILDING_HEIGHT)
         self.building_heights = np.asarray(self.building_heights, dtype=np.float64)
@@ -163,7 +170,8 @@ class Agents:
         length: ``(N,) float64`` footprint length along the heading [m].
         width: ``(N,) float64`` footprint width [m].
         kind: ``(N,) uint8`` :class:`AgentKind`.
-        parked: ``(N,) bool`` parked (never moves in this episode).
+        parked: ``(N,) bool`` parked at the kerb (a parked car may pull out, and is
+            then a moving agent).
         height: ``(N,) float64`` body height [m] (a box from the ground up); left
             ``None`` it is :data:`AGENT_HEIGHT` of each agent's kind.
     """

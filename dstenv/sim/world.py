@@ -70,7 +70,8 @@ class World:
             self._map = self._fixed_map
             self._map.kerb_height = self.config["map"]["kerb_height"]
         else:
-            self._map = generate_city(self.config["map"], self.config["traffic"], self.rng)
+            self._map = generate_city(self.config["map"], self.config["traffic"], self.rng,
+                                      self.config["clutter"])
         if not isinstance(self._map.lanes, LaneNetwork):
             raise ValueError("world map has no lane network (WorldMap.lanes)")
         self.time = 0.0
@@ -93,7 +94,7 @@ class World:
         dt = cfg["dt"]
         net = self._map.lanes
         auto = ego_action is None
-        u = self.rng.random((len(st["v"]), 3))
+        u = self.rng.random((len(st["v"]), 4 if cfg["traffic"]["lateral_drift"] > 0 else 3))
         acc, gap = traffic_step(spawn.net_tuple(net), spawn.state_tuple(st), st["idm"],
                                 spawn.rules_tuple(cfg["traffic"]), self.time, dt, u, auto)
         e = len(st["v"]) - 1
@@ -127,6 +128,11 @@ class World:
         self._localise(u[e, 0])
         for i in np.flatnonzero(st["stuck"][:-1]):
             spawn.respawn(self._map, st, int(i), self.rng)
+        rate = cfg["traffic"]["pull_out_rate"]
+        if rate > 0:
+            n = int(st["parked"][:-1].sum())
+            for _ in range(self.rng.poisson(rate * dt * n) if n else 0):
+                spawn.pull_out(self._map, st, self.config, self.rng, ROUTE_LEN)
         self.time = round(self.time + dt, 9)
         self.steps += 1
         self._update_flags()
@@ -215,7 +221,7 @@ class World:
         st = self._state
         return Agents(st["xy"][:-1].copy(), st["yaw"][:-1].copy(), st["v"][:-1].copy(),
                       2 * st["hl"][:-1], 2 * st["hw"][:-1], st["akind"][:-1].copy(),
-                      st["parked"][:-1].copy())
+                      st["parked"][:-1].copy(), st["height"][:-1].copy())
 
     @property
     def agent_lanes(self) -> np.ndarray:
@@ -329,12 +335,53 @@ def _validate(cfg: dict[str, Any]) -> None:
          "must be in [building_height_min, 200] m"),
         ("map.kerb_height", 0.0 <= m["kerb_height"] <= 0.5, "must be in [0, 0.5] m"),
     ]
-    for key in ("t_junction_prob", "parking_prob", "building_coverage", "gap_prob"):
+    checks += [
+        ("map.lane_width", 2.5 <= m["lane_width"] <= 4.5, "must be in [2.5, 4.5] m"),
+        ("map.lane_width_jitter", 0.0 <= m["lane_width_jitter"] <= 0.7, "must be in [0, 0.7] m"),
+        ("map.curb_strip_jitter", 0.0 <= m["curb_strip_jitter"] <= min(1.0, m["curb_strip_width"] - 1.0)
+         or m["curb_strip_jitter"] == 0.0, "must be in [0, min(1, curb_strip_width - 1)] m"),
+        ("map.sidewalk_jitter", 0.0 <= m["sidewalk_jitter"] <= min(1.0, m["sidewalk_width"] - 1.0)
+         or m["sidewalk_jitter"] == 0.0, "must be in [0, min(1, sidewalk_width - 1)] m"),
+        ("map.parking_layout", m["parking_layout"] in ("irregular", "lattice"),
+         "must be 'irregular' or 'lattice'"),
+        ("map.parking_gap_min", 0.0 <= m["parking_gap_min"] <= m["parking_gap_max"],
+         "must be in [0, parking_gap_max] m"),
+        ("map.parking_gap_max", m["parking_gap_max"] <= 20.0, "must be <= 20 m"),
+        ("map.parking_lateral_jitter", 0.0 <= m["parking_lateral_jitter"] <= 1.0,
+         "must be in [0, 1] m"),
+        ("map.parking_heading_jitter", 0.0 <= m["parking_heading_jitter"] <= 15.0,
+         "must be in [0, 15] deg"),
+        ("map.parking_mix", len(m["parking_mix"]) == 4 and min(m["parking_mix"]) >= 0
+         and sum(m["parking_mix"]) > 0,
+         "must be 4 weights >= 0 (small car, car, van, truck), not all 0"),
+    ]
+    for key in ("t_junction_prob", "parking_prob", "building_coverage", "gap_prob",
+                "half_on_sidewalk_prob"):
         checks.append((f"map.{key}", 0.0 <= m[key] <= 1.0, "must be in [0, 1]"))
+    cl = cfg["clutter"]
+    checks.append(("clutter.density", 0.0 <= cl["density"] <= 5.0, "must be in [0, 5]"))
+    for key in ("pole_spacing", "tree_spacing"):
+        checks.append((f"clutter.{key}", 2.0 <= cl[key] <= 500.0, "must be in [2, 500] m"))
+    for key in ("sign_rate", "bin_rate", "bicycle_rate"):
+        checks.append((f"clutter.{key}", 0.0 <= cl[key] <= 50.0, "must be in [0, 50] per 100 m"))
+    for key in ("tree_side_prob", "bollard_prob", "shelter_prob", "front_prob"):
+        checks.append((f"clutter.{key}", 0.0 <= cl[key] <= 1.0, "must be in [0, 1]"))
     for key in ("parked_density", "stop_sign_prob", "signal_prob", "crossing_prob"):
         checks.append((f"traffic.{key}", 0.0 <= tr[key] <= 1.0, "must be in [0, 1]"))
     for key in ("cars", "cyclists", "pedestrians"):
         checks.append((f"traffic.{key}", tr[key] >= 0, "must be >= 0"))
+    checks += [
+        ("traffic.vehicle_mix", len(tr["vehicle_mix"]) == 0 or (
+            len(tr["vehicle_mix"]) == 4 and min(tr["vehicle_mix"]) >= 0
+            and sum(tr["vehicle_mix"]) > 0),
+         "must be [] (one car size) or 4 weights >= 0 (small car, car, van, truck)"),
+        ("traffic.lateral_drift", 0.0 <= tr["lateral_drift"] <= 0.5, "must be in [0, 0.5] m"),
+        ("traffic.drift_time", 0.2 <= tr["drift_time"] <= 60.0, "must be in [0.2, 60] s"),
+        ("traffic.lateral_speed", 0.1 <= tr["lateral_speed"] <= 3.0, "must be in [0.1, 3] m/s"),
+        ("traffic.pull_out_rate", 0.0 <= tr["pull_out_rate"] <= 0.1, "must be in [0, 0.1] 1/s"),
+        ("traffic.delivery_halt_factor", 1.0 <= tr["delivery_halt_factor"] <= 20.0,
+         "must be in [1, 20]"),
+    ]
     for key, ok, why in checks:
         if not ok:
             raise ConfigError(f"world.{key}: {why}")

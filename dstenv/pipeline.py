@@ -29,6 +29,7 @@ from dstenv.config import Section, Validated, build_config, one_of
 from dstenv.dst import DSTParams, PerceptionGridFilter
 from dstenv.frame import Frame
 from dstenv.grid import GridSpec, relative_pose
+from dstenv.sensing.config import gis_is_exact
 from dstenv.sensing.gis import MapError, gis_grid
 from dstenv.sensing.labels import label_grid, visible_mask
 from dstenv.sim.types import Agents, WorldMap
@@ -179,8 +180,8 @@ class Pipeline:
         self._rng = np.random.default_rng([self.seed, 0x5E45])
         gis = self.config["gis"]
         # one map / localisation error per episode: a persistently wrong map
-        self._map_error = (MapError.sample(self._world.map, gis, self._rng)
-                           if any(v > 0 for v in gis.values()) else None)
+        self._map_error = (None if gis_is_exact(gis)
+                           else MapError.sample(self._world.map, gis, self._rng))
         self.filter.reset()
         self.step_index = 0
         self._prev_pose = None

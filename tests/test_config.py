@@ -70,7 +70,7 @@ from dstenv.config import Validated, build_config, section  # noqa: E402
     ({"gis": {"missing_building_prob": -0.1}}, r"gis\.missing_building_prob: must be in \[0, 1\]"),
     ({"labels": {"moving_threshold": -1.0}}, r"labels\.moving_threshold: must be in \[0, 10\]"),
     ({"world": {"traffic": {"cars": 100000}}}, r"world\.traffic\.cars: must be in \[0, 500\]"),
-    ({"world": {"map": {"lane_width": 0.0}}}, r"world\.map\.lane_width: must be in \[2, 6\] m"),
+    ({"world": {"map": {"lane_width": 0.0}}}, r"world\.map\.lane_width: must be in \[2\.5, 4\.5\] m"),
     ({"world": {"ego": {"max_speed": float("nan")}}}, r"world\.ego\.max_speed: must be in"),
     ({"grid": {"cell_size": float("inf")}}, r"grid\.cell_size: must be in \[0\.01, 10\] m"),
     ({"grid": {"height": 100000}}, r"grid\.height: must be in \[2, 4096\] cells"),

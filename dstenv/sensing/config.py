@@ -21,6 +21,7 @@ __all__ = [
     "default_labels_config",
     "lidar_config",
     "gis_config",
+    "gis_is_exact",
     "labels_config",
     "LIDAR",
     "GIS",
@@ -38,6 +39,10 @@ def default_lidar_config() -> dict[str, Any]:
         "dropout": 0.0,  # probability that a beam yields no measurement at all [-]
         "mount_x": 0.0,  # sensor position ahead of the ego centre [m]
         "mount_y": 0.0,  # sensor position left of the ego centre [m]
+        # height of the horizontal scan plane above the road [m]: street clutter
+        # (WorldMap.obstacles) occludes only where z_min <= plane_height <= z_max, so
+        # tree crowns and sign panels above it do not; agents and buildings always do
+        "plane_height": 0.5,
         # building occlusion geometry: "polygons" (exact, WorldMap.buildings),
         # "raster" (exact DDA over BUILDING cells of WorldMap.raster) or "auto"
         # (polygons when the map has any, else the raster)
@@ -46,11 +51,29 @@ def default_lidar_config() -> dict[str, Any]:
 
 
 def default_gis_config() -> dict[str, Any]:
-    """The ``gis`` section: errors of the map / localisation used for the GIS grid."""
+    """The ``gis`` section: the map behind the GIS grid, and how it differs from the world.
+
+    One error is drawn per episode (:meth:`dstenv.sensing.MapError.sample`); the label
+    grid always comes from the true world. See :mod:`dstenv.sensing.mapmodel`.
+    """
     return {
-        "offset_std": 0.0,  # std of the pose offset along ego x and ego y [m]
-        "rotation_std": 0.0,  # std of the heading error [rad]
-        "missing_building_prob": 0.0,  # probability that a building is absent from the map [-]
+        # "map": the imperfect map below; "none": no map at all (every GIS cell
+        # MapClass.NONE, a vacuous map input, as KITTI without an OSM file)
+        "source": "map",
+        "no_map_prob": 0.0,  # [-] chance per episode of "none" anyway (randomise map quality)
+        "offset_std": 0.5,  # std of the localisation offset along ego x and ego y [m]
+        "rotation_std": 0.013,  # std of the heading error [rad] (0.013 rad = 0.75 deg)
+        "missing_building_prob": 0.1,  # [-] chance that a building is absent from the map
+        "extra_building_rate": 0.05,  # [-] buildings in the map that do not exist, per true one
+        "outline_shift_std": 0.5,  # std of the shift of a building outline [m]
+        "outline_scale_std": 0.05,  # std of the relative scale error of an outline [-]
+        # road surface in the map: "lanes" (street centre-line +- lanes x nominal
+        # width / 2, as OSM) or "true" (the world's road raster)
+        "road_width": "lanes",
+        "nominal_lane_width": 3.0,  # [m] lane width a map assumes (OSM has no width tags)
+        # what is neither road nor building in the map (sidewalks are not mapped):
+        # "intermediate" (as the OSM loader) or "none" (no information)
+        "background": "intermediate",
     }
 
 
@@ -83,14 +106,23 @@ LIDAR = Section(default_lidar_config, {
     "dropout": PROB,
     "mount_x": between(-10.0, 10.0, _M),
     "mount_y": between(-10.0, 10.0, _M),
+    "plane_height": between(0.0, 3.0, _M),
     "buildings": one_of("auto", "polygons", "raster"),
 })
 
 #: The ``gis`` section.
 GIS = Section(default_gis_config, {
+    "source": one_of("map", "none"),
+    "no_map_prob": PROB,
     "offset_std": between(0.0, 20.0, _M),
     "rotation_std": between(0.0, 0.5, "rad"),
     "missing_building_prob": PROB,
+    "extra_building_rate": PROB,
+    "outline_shift_std": between(0.0, 10.0, _M),
+    "outline_scale_std": between(0.0, 0.3),
+    "road_width": one_of("lanes", "true"),
+    "nominal_lane_width": between(2.0, 5.0, _M),
+    "background": one_of("intermediate", "none"),
 })
 
 #: The ``labels`` section.
@@ -114,6 +146,15 @@ def lidar_config(
 def gis_config(overrides: Mapping[str, Any] | None = None, where: str = "gis") -> dict[str, Any]:
     """Merge and validate a ``gis`` section (see :func:`lidar_config`)."""
     return section("gis", overrides, where)
+
+
+def gis_is_exact(cfg: Mapping[str, Any]) -> bool:
+    """The ``gis`` section describes the true map at the true pose (no error to draw)."""
+    return (cfg["source"] == "map" and cfg["no_map_prob"] == 0 and cfg["road_width"] == "true"
+            and cfg["background"] == "intermediate"
+            and all(cfg[k] == 0 for k in ("offset_std", "rotation_std", "missing_building_prob",
+                                          "extra_building_rate", "outline_shift_std",
+                                          "outline_scale_std")))
 
 
 def labels_config(

@@ -20,6 +20,7 @@ import numpy as np
 
 from dstenv.grid import GridSpec
 from dstenv.sensing.config import gis_config
+from dstenv.sensing.mapmodel import draw_known_map
 from dstenv.sim.types import MapClass, WorldMap
 
 __all__ = ["MapError", "gis_grid", "lookup_map", "remove_buildings"]
@@ -39,12 +40,14 @@ class MapError:
             missing buildings turned into intermediate space), or ``None`` for the
             true raster.
         dropped: indices into ``WorldMap.buildings`` of the missing buildings.
+        vacuous: there is no map: every GIS cell is ``MapClass.NONE``.
     """
 
     offset: np.ndarray
     rotation: float = 0.0
     raster: np.ndarray | None = None
     dropped: tuple[int, ...] = ()
+    vacuous: bool = False
 
     @classmethod
     def sample(
@@ -59,7 +62,10 @@ class MapError:
             world_map: the true map.
             config: overrides of :func:`dstenv.sensing.config.default_gis_config`.
             rng: the random source (draws: offset (2 normals), rotation (1 normal),
-                then one uniform per building when ``missing_building_prob > 0``).
+                one uniform per building when ``missing_building_prob > 0``, one
+                uniform when ``no_map_prob > 0``, then those of
+                :func:`~dstenv.sensing.mapmodel.draw_known_map` when the map differs
+                from the world in more than the dropped buildings).
 
         Raises:
             ValueError: ``missing_building_prob > 0`` but the map has no building
@@ -69,14 +75,26 @@ class MapError:
         offset = rng.normal(0.0, cfg["offset_std"], 2) if cfg["offset_std"] > 0 else np.zeros(2)
         rotation = float(rng.normal(0.0, cfg["rotation_std"])) if cfg["rotation_std"] > 0 else 0.0
         p = cfg["missing_building_prob"]
-        if p <= 0:
-            return cls(offset, rotation)
-        if not world_map.buildings:
-            raise ValueError(
-                "gis.missing_building_prob > 0 needs WorldMap.buildings polygons; the map has none"
-            )
-        drop = np.flatnonzero(rng.random(len(world_map.buildings)) < p)
-        raster = remove_buildings(world_map, drop)
+        drop = np.zeros(0, np.int64)
+        if p > 0:
+            if not world_map.buildings:
+                raise ValueError("gis.missing_building_prob > 0 needs WorldMap.buildings "
+                                 "polygons; the map has none")
+            drop = np.flatnonzero(rng.random(len(world_map.buildings)) < p)
+        none = cfg["source"] == "none" or (cfg["no_map_prob"] > 0
+                                           and rng.random() < cfg["no_map_prob"])
+        if none:
+            return cls(offset, rotation, None, (), vacuous=True)
+        redraw = (cfg["road_width"] == "lanes" and len(world_map.streets) > 0) \
+            or cfg["background"] != "intermediate" or cfg["extra_building_rate"] > 0 \
+            or ((cfg["outline_shift_std"] > 0 or cfg["outline_scale_std"] > 0)
+                and len(world_map.buildings) > 0)
+        if redraw:
+            raster = draw_known_map(world_map, cfg, rng, drop)
+        elif len(drop):
+            raster = remove_buildings(world_map, drop)
+        else:
+            raster = None
         return cls(offset, rotation, raster, tuple(int(b) for b in drop))
 
 
@@ -106,6 +124,8 @@ def gis_grid(
         if rng is None:
             raise ValueError("gis_grid: a map_error config needs an rng to draw the error from")
         map_error = MapError.sample(world_map, map_error, rng)
+    if map_error is not None and map_error.vacuous:
+        return np.full(spec.shape, MapClass.NONE, dtype=np.uint8)
     if map_error is not None:
         px, py, yaw = pose
         dx, dy = (float(v) for v in map_error.offset)

@@ -5,7 +5,10 @@ Classes follow :data:`dstenv.dst.CLASSES`: the map gives ``building`` (BUILDING)
 footprint of every agent (an oriented box: the cells whose centre lies inside it,
 and at least the cell of its centre so a pedestrian never vanishes) is ``moving``
 when its speed exceeds the threshold, else ``static``. Where footprints overlap,
-``moving`` wins.
+``moving`` wins. Street clutter standing on the ground (``WorldMap.obstacles`` with
+``z_min <`` :data:`GROUND_CLEARANCE`: poles, trunks, hedges, bins, ...) is
+``non_navigable`` with the same footprint rule, under the agents; what hangs above
+(tree crowns, sign panels) leaves the ground label as it is.
 """
 
 from __future__ import annotations
@@ -20,7 +23,10 @@ from dstenv.grid import GridSpec
 from dstenv.sensing.gis import _check_pose, _lookup
 from dstenv.sim.types import Agents, MapClass, WorldMap
 
-__all__ = ["label_grid", "visible_mask", "MAP_TO_CLASS"]
+__all__ = ["label_grid", "visible_mask", "MAP_TO_CLASS", "GROUND_CLEARANCE"]
+
+#: clutter whose bottom is lower than this stands on the ground and is labelled [m]
+GROUND_CLEARANCE: float = 0.3
 
 _NAV = CLASSES.index("navigable")
 _NONNAV = CLASSES.index("non_navigable")
@@ -69,6 +75,18 @@ def label_grid(
     if bad:
         codes = sorted(set(np.unique(raster).tolist()) - set(int(m) for m in MapClass))
         raise ValueError(f"label_grid: the map raster holds codes that are no MapClass: {codes}")
+    obs = world_map.obstacles
+    if len(obs):
+        reach = 0.75 * spec.cell_size * max(spec.shape) + 10.0  # > half diagonal + box size
+        rel = obs.xy - (px, py)
+        k = np.flatnonzero((obs.z_min < GROUND_CLEARANCE) & (np.abs(rel[:, 0]) < reach)
+                           & (np.abs(rel[:, 1]) < reach))
+        if len(k):
+            c, s = math.cos(yaw), math.sin(yaw)
+            _paint_boxes(out, c * rel[k, 0] + s * rel[k, 1], -s * rel[k, 0] + c * rel[k, 1],
+                         obs.yaw[k] - yaw, obs.length[k] / 2, obs.width[k] / 2,
+                         np.full(len(k), _NONNAV, np.uint8), float(spec.cell_size),
+                         np.uint8(_MOVING))
     n = len(agents)
     if n:
         c, s = math.cos(yaw), math.sin(yaw)

@@ -12,6 +12,9 @@ ahead). Each beam returns the distance to the first building or agent it meets:
   ``WorldMap.raster`` up to the first :attr:`MapClass.BUILDING` cell.
 * agents: exact ray / oriented-box intersection (the four edges of
   :meth:`Agents.corners`), binned by angle like the polygons.
+* street clutter (``WorldMap.obstacles``): the same exact box intersection, for the
+  boxes that the scan plane cuts (``z_min <= plane_height <= z_max``: a trunk
+  occludes, the crown above it does not). They are selected once per map.
 
 Noise and dropout come only from the ``np.random.Generator`` passed to
 :meth:`Lidar.sweep`: the same generator state gives the same sweep.
@@ -32,15 +35,18 @@ from dstenv.sensing.config import lidar_config
 from dstenv.sensing.raycast import sensor_grid
 from dstenv.sim.types import Agents, MapClass, WorldMap
 
-__all__ = ["Lidar", "Sweep", "HIT_NONE", "HIT_BUILDING"]
+__all__ = ["Lidar", "Sweep", "HIT_NONE", "HIT_BUILDING", "HIT_OBSTACLE"]
 
 #: ``Sweep.hit_id`` of a beam without return.
 HIT_NONE: int = -1
 #: ``Sweep.hit_id`` of a beam that ended on a building.
 HIT_BUILDING: int = -2
+#: ``Sweep.hit_id`` of a beam that ended on street clutter (``WorldMap.obstacles``).
+HIT_OBSTACLE: int = -3
 
 _NONE_F = np.zeros(0)
 _NONE_B = np.zeros(0, dtype=bool)
+_NO_IDS = np.zeros(0, dtype=np.int32)  # box hit ids = box index
 
 
 @dataclass
@@ -54,7 +60,8 @@ class Sweep:
             ``max_range`` for a beam without return, NaN for a dropped beam.
         hit: ``(B,) bool`` the beam returned from an obstacle.
         hit_id: ``(B,) int32`` what it hit: :data:`HIT_NONE` (-1),
-            :data:`HIT_BUILDING` (-2) or the index ``k >= 0`` of the agent.
+            :data:`HIT_BUILDING` (-2), :data:`HIT_OBSTACLE` (-3, street clutter) or
+            the index ``k >= 0`` of the agent.
         points: ``(B, 2) float64`` ego-frame ``(x, y)`` of the returns [m]; NaN rows
             where ``hit`` is false.
         valid: ``(B,) bool`` the beam produced a measurement (false: dropout).
@@ -83,7 +90,8 @@ class Lidar:
     Args:
         config: overrides of :func:`dstenv.sensing.config.default_lidar_config`
             (``beams``, ``fov`` [deg], ``max_range`` [m], ``range_noise`` [m],
-            ``dropout``, ``mount_x`` / ``mount_y`` [m], ``buildings``).
+            ``dropout``, ``mount_x`` / ``mount_y`` [m], ``plane_height`` [m],
+            ``buildings``).
 
     Raises:
         dstenv.config.ConfigError: on an unknown key or an invalid value.
@@ -106,6 +114,8 @@ class Lidar:
         self._edges = np.zeros((0, 4))
         self._starts = np.zeros(1, np.int64)
         self._boxes = np.zeros((0, 4))
+        self._obs_map: WorldMap | None = None
+        self._obs: tuple[np.ndarray, ...] = ()
 
     def sweep(
         self, world_map: WorldMap, agents: Agents, pose: np.ndarray, rng: np.random.Generator
@@ -143,12 +153,26 @@ class Lidar:
             raster = np.ascontiguousarray(world_map.raster, dtype=np.uint8)
             _cast_raster(raster, float(world_map.origin[0]), float(world_map.origin[1]),
                          float(world_map.resolution), np.uint8(MapClass.BUILDING), *geo)
+        obs = self._load_obstacles(world_map)
+        if len(obs[1]):
+            _cast_boxes(*obs, np.full(len(obs[1]), HIT_OBSTACLE, np.int32), *geo)
         if len(agents):
             f64 = np.float64
             _cast_boxes(np.ascontiguousarray(agents.xy, f64), np.ascontiguousarray(agents.yaw, f64),
                         np.ascontiguousarray(agents.length, f64),
-                        np.ascontiguousarray(agents.width, f64), *geo)
+                        np.ascontiguousarray(agents.width, f64), _NO_IDS, *geo)
         return self._measure(best, best_id, rng)
+
+    def _load_obstacles(self, world_map: WorldMap) -> tuple[np.ndarray, ...]:
+        """The clutter boxes cut by the scan plane, selected once per map."""
+        if self._obs_map is not world_map:
+            o = world_map.obstacles
+            keep = o.at_height(float(self.config["plane_height"]))
+            f64 = np.float64
+            self._obs = tuple(np.ascontiguousarray(a[keep], f64)
+                              for a in (o.xy, o.yaw, o.length, o.width))
+            self._obs_map = world_map
+        return self._obs
 
     def _measure(self, best: np.ndarray, best_id: np.ndarray, rng: np.random.Generator) -> Sweep:
         c, b = self.config, self.beams
@@ -245,9 +269,10 @@ def _cast_edges(edges, starts, boxes, sx, sy, cyaw, syaw, theta0, dtheta, period
 
 
 @numba.njit(cache=True)
-def _cast_boxes(xy, yaw, length, width, sx, sy, cyaw, syaw, theta0, dtheta, periodic, max_range,
-                cos_t, sin_t, best, best_id):  # pragma: no cover - numba
-    """Agents: the four edges of each oriented footprint, hit id = agent index."""
+def _cast_boxes(xy, yaw, length, width, ids, sx, sy, cyaw, syaw, theta0, dtheta, periodic,
+                max_range, cos_t, sin_t, best, best_id):  # pragma: no cover - numba
+    """Oriented boxes (agents, clutter): the four edges of each footprint; hit id =
+    ``ids[k]``, or the box index ``k`` when ``ids`` is empty."""
     cx = np.empty(4)
     cy = np.empty(4)
     for k in range(xy.shape[0]):
@@ -267,9 +292,10 @@ def _cast_boxes(xy, yaw, length, width, sx, sy, cyaw, syaw, theta0, dtheta, peri
             ow = hw if q < 2 else -hw
             cx[q] = lx + ca * ol - sa * ow
             cy[q] = ly + sa * ol + ca * ow
+        hid = ids[k] if ids.shape[0] else k
         for q in range(4):
             p = (q + 1) % 4
-            _cast_segment(cx[q], cy[q], cx[p], cy[p], k, theta0, dtheta, periodic, max_range,
+            _cast_segment(cx[q], cy[q], cx[p], cy[p], hid, theta0, dtheta, periodic, max_range,
                           cos_t, sin_t, best, best_id)
 
 

@@ -17,23 +17,36 @@ from dstenv.sim.lanes import Control, NetworkBuilder
 from dstenv.sim.raster import Surface, fill_rect
 from dstenv.sim.roads import RoadEdge, add_road_lanes
 from dstenv.sim.sidewalks import LANE_OFFSET, add_block_rings
+from dstenv.sim.clutter import place_clutter
+from dstenv.sim.parking import SLOT_LENGTH, side_slots
 from dstenv.sim.types import MapClass, WorldMap
 
 __all__ = ["generate_city", "SLOT_LENGTH"]
 
-SLOT_LENGTH = 6.0  # [m] length of one kerbside parking slot
 STOP_MARGIN = 4.4  # [m] stop line behind the crosswalk's outer walking line
 
 
-def generate_city(cfg: dict[str, Any], traffic: dict[str, Any],
-                  rng: np.random.Generator) -> WorldMap:
-    """Generate a city map from the ``map`` and ``traffic`` config sections.
+def generate_city(cfg: dict[str, Any], traffic: dict[str, Any], rng: np.random.Generator,
+                  clutter: dict[str, Any] | None = None) -> WorldMap:
+    """Generate a city map from the ``map``, ``traffic`` and ``clutter`` config sections
+    (no clutter when ``clutter`` is None).
 
     Returns:
         A :class:`WorldMap` with ``lanes`` a :class:`~dstenv.sim.lanes.LaneNetwork`
         and ``meta`` keys ``surface`` (``(Hm, Wm) uint8`` :class:`Surface` codes),
-        ``parking_slots`` (``(S, 3) float64`` x, y, yaw), ``kind``.
+        ``parking_slots`` (``(S, 6) float64`` x, y, yaw, length, width, height; see
+        :mod:`dstenv.sim.parking`), ``kind``; ``obstacles`` the street clutter
+        (:mod:`dstenv.sim.clutter`); ``streets`` / ``street_lanes`` the centre-lines.
+
+    Geometry jitter (lane width per street, kerb strip and sidewalk width per
+    episode) and clutter draw from a child of ``rng``, so with them switched off the
+    city is the same as without them.
     """
+    real = rng.spawn(1)[0]
+    cfg = dict(cfg)
+    for key, jit in (("curb_strip_width", "curb_strip_jitter"), ("sidewalk_width", "sidewalk_jitter")):
+        if cfg[jit] > 0:
+            cfg[key] = float(cfg[key] + real.uniform(-cfg[jit], cfg[jit]))
     lw, curb, sw = cfg["lane_width"], cfg["curb_strip_width"], cfg["sidewalk_width"]
     margin = cfg["margin"]
     nx, ny = cfg["blocks_x"] + 1, cfg["blocks_y"] + 1
@@ -44,7 +57,11 @@ def generate_city(cfg: dict[str, Any], traffic: dict[str, Any],
     ys = margin + np.concatenate([[0], np.cumsum(spans[nx - 1:])])
     lanes_x = rng.integers(cfg["lanes_min"], cfg["lanes_max"] + 1, nx)
     lanes_y = rng.integers(cfg["lanes_min"], cfg["lanes_max"] + 1, ny)
-    hwx, hwy = lanes_x * lw, lanes_y * lw  # half widths of the streets [m]
+    lwx, lwy = np.full(nx, lw), np.full(ny, lw)  # lane width of each street line [m]
+    if cfg["lane_width_jitter"] > 0:
+        jit = cfg["lane_width_jitter"]
+        lwx, lwy = lw + real.uniform(-jit, jit, nx), lw + real.uniform(-jit, jit, ny)
+    hwx, hwy = lanes_x * lwx, lanes_y * lwy  # half widths of the streets [m]
 
     # street segments (True = exists) and T junctions by merging neighbouring cells
     vseg = np.ones((nx, ny - 1), bool)  # x line i, from y_j to y_j+1
@@ -80,9 +97,11 @@ def generate_city(cfg: dict[str, Any], traffic: dict[str, Any],
     hw_node = np.array([max(hwx[i], hwy[j]) for i in range(nx) for j in range(ny)])
     reach = hw_node + curb + sw / 2  # [m] node -> middle of the crossing sidewalk
     edges = [RoadEdge(nid(i, j), nid(i, j + 1), node_xy[[nid(i, j), nid(i, j + 1)]],
-                      int(lanes_x[i]), int(lanes_x[i])) for i, j in zip(*np.nonzero(vseg))]
+                      int(lanes_x[i]), int(lanes_x[i]), _lw(lwx[i], lw))
+             for i, j in zip(*np.nonzero(vseg))]
     edges += [RoadEdge(nid(i, j), nid(i + 1, j), node_xy[[nid(i, j), nid(i + 1, j)]],
-                       int(lanes_y[j]), int(lanes_y[j])) for i, j in zip(*np.nonzero(hseg))]
+                       int(lanes_y[j]), int(lanes_y[j]), _lw(lwy[j], lw))
+              for i, j in zip(*np.nonzero(hseg))]
     builder = NetworkBuilder()
     degree = add_road_lanes(builder, len(node_xy), edges, reach + STOP_MARGIN, lw,
                             right_radius=curb + 0.5 * sw + 0.5 * lw)
@@ -158,12 +177,17 @@ def generate_city(cfg: dict[str, Any], traffic: dict[str, Any],
         _fillet(raster, surface, face, curb + 0.5 * sw, res)
     for centre, d, hw in zebras:
         _zebra(surface, centre, d, hw, res)
-    slots = []
+    slots, parked = [], []
     walk_ends = np.array([p for c in crossings for p in c[2:]]).reshape(-1, 2)
-    for face in faces:
-        slots += _parking(surface, face, cfg, rng, res, walk_ends)
-    for box, side in strips:
-        slots += _parking(surface, box, cfg, rng, res, walk_ends, (side,))
+    for f, face in enumerate(faces):
+        rows, ks = _parking(surface, face, cfg, rng, res, walk_ends)
+        slots += rows
+        parked += [(f, k) for k in ks]
+    for b, (box, side) in enumerate(strips):
+        rows, ks = _parking(surface, box, cfg, rng, res, walk_ends, (side,))
+        slots += rows
+        parked += [(len(faces) + b, k) for k in ks]
+    slots = np.concatenate(slots) if slots else np.zeros((0, 6))
     buildings = []
     for face in faces:
         buildings += _buildings(face, cfg, rng)
@@ -172,10 +196,38 @@ def generate_city(cfg: dict[str, Any], traffic: dict[str, Any],
     for b in buildings:
         for r, v in ((raster, MapClass.BUILDING), (surface, Surface.BUILDING)):
             fill_rect(r, b[:, 0].min(), b[:, 0].max(), b[:, 1].min(), b[:, 1].max(), org, res, v)
-    meta = {"kind": "procedural", "surface": surface,
-            "parking_slots": np.array(slots, np.float64).reshape(-1, 3), "faces": faces}
+    # a child stream: heights do not shift the draws of the layout and the traffic
+    heights = _building_heights(len(buildings), cfg, rng.spawn(1)[0])
+    has_parking = _parked_keys(faces, strips, parked)
+    sides = [(*_sides(box)[k], (tuple(box), k) in has_parking)
+             for box, k in [(f, k) for f in faces for k in range(4)] + list(strips)]
+    obstacles = place_clutter(sides, buildings, slots, walk_ends, curb, sw,
+                              clutter or {"density": 0.0}, real)
+    meta = {"kind": "procedural", "surface": surface, "parking_slots": slots, "faces": faces}
+    streets = [e.poly for e in edges]
+    street_lanes = np.array([e.n_fwd + e.n_bwd for e in edges], np.int64)
     return WorldMap(raster=raster, origin=org, resolution=res, buildings=buildings,
-                    lanes=network, meta=meta)
+                    lanes=network, meta=meta, building_heights=heights,
+                    kerb_height=cfg["kerb_height"], obstacles=obstacles, streets=streets,
+                    street_lanes=street_lanes)
+
+
+def _lw(w: float, default: float) -> float | None:
+    return None if w == default else float(w)
+
+
+def _parked_keys(faces, strips, parked) -> set[tuple[tuple[float, ...], int]]:
+    """``(box, side)`` keys of the block sides that have a parking strip."""
+    boxes = list(faces) + [box for box, _ in strips]
+    return {(tuple(boxes[f]), k) for f, k in parked}
+
+
+def _building_heights(n: int, cfg, rng: np.random.Generator) -> np.ndarray:
+    """``(n,) float64`` roof heights [m]: whole storeys of ~3 m between the configured
+    bounds, plus up to 1.5 m of roof."""
+    lo, hi = cfg["building_height_min"], cfg["building_height_max"]
+    storeys = rng.integers(max(int(lo // 3.0), 1), max(int(hi // 3.0), 1) + 1, n)
+    return np.clip(storeys * 3.0 + rng.uniform(0.0, 1.5, n), lo, hi)
 
 
 def _degree(vseg: np.ndarray, hseg: np.ndarray, i: int, j: int) -> int:
@@ -227,32 +279,28 @@ def _sides(face):
 
 
 def _parking(surface, face, cfg, rng, res, avoid: np.ndarray,
-             sides=(0, 1, 2, 3)) -> list[tuple[float, float, float]]:
-    """Parking strips along some block sides, with no slot across a crosswalk (``avoid``:
-    ``(K, 2)`` crosswalk ends); paints the slots and returns them as (x, y, yaw)."""
+             sides=(0, 1, 2, 3)) -> tuple[list[np.ndarray], list[int]]:
+    """Parking strips along some block sides, with no vehicle across a crosswalk
+    (``avoid``: ``(K, 2)`` crosswalk ends); paints them and returns the slots
+    (``(S, 6)`` arrays, see :mod:`dstenv.sim.parking`) and the sides that got a strip."""
     curb, sw = cfg["curb_strip_width"], cfg["sidewalk_width"]
     keep_clear = curb + sw + 10.0  # [m] no parking near junctions (crosswalks, turns)
-    slots = []
-    for start, along, inward, length in [_sides(face)[k] for k in sides]:
-        n = int((length - 2 * keep_clear) // SLOT_LENGTH)
-        if n < 1 or rng.random() >= cfg["parking_prob"]:
+    slots, parked_sides = [], []
+    for k in sides:
+        start, along, inward, length = _sides(face)[k]
+        if int((length - 2 * keep_clear) // SLOT_LENGTH) < 1 or rng.random() >= cfg["parking_prob"]:
             continue
-        s0 = (length - n * SLOT_LENGTH) / 2
-        yaw = float(np.arctan2(-along[1], -along[0]))  # with the adjacent traffic (right-hand)
-        # all slot centres of the side at once (same arithmetic as one slot at a time)
-        centres = (start + along * (s0 + (np.arange(n)[:, None] + 0.5) * SLOT_LENGTH)
-                   + inward * curb / 2)
-        if len(avoid):
-            near = np.hypot(avoid[None, :, 0] - centres[:, None, 0],
-                            avoid[None, :, 1] - centres[:, None, 1]).min(1)
-            centres = centres[near >= SLOT_LENGTH / 2 + curb + sw]
-        for c in centres:
-            a = c - along * SLOT_LENGTH / 2 - inward * curb / 2
-            b = c + along * SLOT_LENGTH / 2 + inward * curb / 2
+        rows = side_slots(start, along, inward, length, cfg, rng, avoid)
+        parked_sides.append(k)
+        for x, y, _, ln, _, _ in rows:
+            c = np.array([x, y])
+            half = (ln or SLOT_LENGTH) / 2
+            a = c - along * half - inward * curb / 2
+            b = c + along * half + inward * curb / 2
             fill_rect(surface, min(a[0], b[0]), max(a[0], b[0]), min(a[1], b[1]),
                       max(a[1], b[1]), (0.0, 0.0), res, Surface.PARKING)
-            slots.append((float(c[0]), float(c[1]), yaw))
-    return slots
+        slots.append(rows)
+    return slots, parked_sides
 
 
 def _buildings(face, cfg, rng, side: int | None = None) -> list[np.ndarray]:

@@ -36,6 +36,17 @@ def draw_world(ax: Any, world: Any, sweep: Any = None, extent: float | None = No
         net = wm.lanes
         segs = [net.polyline(k) for k in range(len(net))]
         ax.add_collection(LineCollection(segs, colors="w", linewidths=0.3, alpha=0.6))
+    from dstenv.sim.types import ObstacleKind
+
+    obs = world.map.obstacles
+    if len(obs):
+        # clutter: ground-standing boxes dark olive, tree crowns translucent green on top
+        crown = obs.kind == ObstacleKind.TREE_CROWN
+        panel = obs.z_min > 1.0
+        ax.add_collection(PolyCollection(obs.corners()[~panel], facecolors="#556b2f",
+                                         edgecolors="none"))
+        ax.add_collection(PolyCollection(obs.corners()[crown], facecolors="#3c8d2f",
+                                         edgecolors="none", alpha=0.25))
     ag = world.agents
     if len(ag):
         moving = ag.speed > 0.1

@@ -10,6 +10,7 @@ from __future__ import annotations
 from typing import Any
 
 from dstenv.config import PROB, Section, at_least, between, one_of
+from dstenv.sim.clutter import default_clutter_config
 
 __all__ = ["default_config", "MAP_KINDS", "SECTION"]
 
@@ -51,12 +52,28 @@ def default_config() -> dict[str, Any]:
             "gap_min": 2.0,  # [m]
             "gap_max": 7.0,  # [m]
             "osm_lane_width": 3.0,  # [m] lane width assumed for OSM ways without a width tag
+            "building_height_min": 6.0,  # [m] roof height of generated buildings, at least
+            "building_height_max": 30.0,  # [m] at most (whole ~3 m storeys + roof)
+            "kerb_height": 0.12,  # [m] sidewalks / verges (INTERMEDIATE cells) above the road
+            # -- variety (0 / "lattice" everywhere: the ideal world of the clean scenario)
+            "lane_width_jitter": 0.45,  # [m] lane width of each street: lane_width +- this (0..0.7)
+            "curb_strip_jitter": 0.5,  # [m] kerb strip width of an episode: +- this (0..1)
+            "sidewalk_jitter": 0.6,  # [m] sidewalk width of an episode: +- this (0..1)
+            "parking_layout": "irregular",  # "irregular" (gaps, jitter, size mix) | "lattice"
+            "parking_gap_min": 0.5,  # [m] gap between two parked vehicles, at least
+            "parking_gap_max": 3.0,  # [m] at most (irregular layout)
+            "parking_lateral_jitter": 0.3,  # [m] offset in the strip: per side +- this, per car /2
+            "parking_heading_jitter": 2.0,  # [deg] std of a parked vehicle's heading error
+            "parking_mix": [0.25, 0.55, 0.15, 0.05],  # weights of small car, car, van, truck
+            "half_on_sidewalk_prob": 0.08,  # [-] share of (small / normal) cars half on the sidewalk
         },
         "traffic": {
             "cars": 24,  # moving cars
             "cyclists": 4,
             "pedestrians": 14,
             "parked_density": 0.5,  # [-] share of parking-strip slots holding a parked car
+            # weights of small car, car, van, truck among moving cars ([]: one car size)
+            "vehicle_mix": [0.15, 0.65, 0.15, 0.05],
             "speed_limit": 13.9,  # [m/s] desired speed of cars (50 km/h), +-20 % per car
             "cyclist_speed": 5.0,  # [m/s]
             "pedestrian_speed": 1.3,  # [m/s]
@@ -69,7 +86,13 @@ def default_config() -> dict[str, Any]:
             "pause_rate": 0.03,  # [1/s] chance per second that a pedestrian stands still
             "pause_duration": 5.0,  # [s] mean pause of a pedestrian (exponential, at most 4x)
             "crossing_prob": 0.4,  # [-] chance a pedestrian takes a crosswalk it reaches
+            "lateral_drift": 0.15,  # [m] std of a vehicle's drift around its lane centre (0..0.5)
+            "drift_time": 3.0,  # [s] correlation time of that drift
+            "lateral_speed": 0.6,  # [m/s] sideways speed of a car pulling out of a space
+            "pull_out_rate": 0.002,  # [1/s] chance per second that a parked car pulls out
+            "delivery_halt_factor": 4.0,  # [-] vans / trucks halt this much longer than cars
         },
+        "clutter": default_clutter_config(),
         "ego": {
             "length": 4.5,  # [m]
             "width": 1.9,  # [m]
@@ -90,6 +113,22 @@ def default_config() -> dict[str, Any]:
 
 _M, _MS, _MS2 = "m", "m/s", "m/s^2"
 
+
+def _mix(key: str, allow_empty: bool) -> tuple[str, Any, str]:
+    """A size-mix check: 4 weights >= 0, not all 0 (or [] where one size is allowed)."""
+    def ok(c: Any) -> bool:
+        section, name = key.split(".")
+        w = c[section][name]
+        return (allow_empty and len(w) == 0) or (len(w) == 4 and min(w) >= 0 and sum(w) > 0)
+    empty = "[] (one car size) or " if allow_empty else ""
+    return (key, ok, f"must be {empty}4 weights >= 0 (small car, car, van, truck), not all 0")
+
+
+def _jitter_ok(c: Any, jitter: str, width: str) -> bool:
+    m = c["map"]
+    return m[jitter] == 0.0 or m[jitter] <= min(1.0, m[width] - 1.0)
+
+
 #: Rules of every ``world`` key: finite ranges with sane upper bounds (a typo such as
 #: ``cars = 1e6`` is an error, not an hour of spawning).
 RULES: dict[str, Any] = {
@@ -105,7 +144,7 @@ RULES: dict[str, Any] = {
         "t_junction_prob": PROB,
         "lanes_min": between(1, 3),
         "lanes_max": between(1, 3),
-        "lane_width": between(2.0, 6.0, _M),
+        "lane_width": between(2.5, 4.5, _M),
         "curb_strip_width": between(0.0, 10.0, _M),
         "sidewalk_width": between(0.0, 15.0, _M),
         "parking_prob": PROB,
@@ -120,12 +159,26 @@ RULES: dict[str, Any] = {
         "gap_min": between(0.0, 100.0, _M),
         "gap_max": between(0.0, 100.0, _M),
         "osm_lane_width": between(2.0, 6.0, _M),
+        "building_height_min": between(2.0, 100.0, _M),
+        "building_height_max": between(2.0, 200.0, _M),
+        "kerb_height": between(0.0, 0.5, _M),
+        "lane_width_jitter": between(0.0, 0.7, _M),
+        "curb_strip_jitter": between(0.0, 1.0, _M),
+        "sidewalk_jitter": between(0.0, 1.0, _M),
+        "parking_layout": one_of("irregular", "lattice"),
+        "parking_gap_min": between(0.0, 20.0, _M),
+        "parking_gap_max": between(0.0, 20.0, _M),
+        "parking_lateral_jitter": between(0.0, 1.0, _M),
+        "parking_heading_jitter": between(0.0, 15.0, "deg"),
+        "parking_mix": between(0.0, 1e3),
+        "half_on_sidewalk_prob": PROB,
     },
     "traffic": {
         "cars": between(0, 500),
         "cyclists": between(0, 500),
         "pedestrians": between(0, 1000),
         "parked_density": PROB,
+        "vehicle_mix": between(0.0, 1e3),
         "speed_limit": between(0.0, 60.0, _MS),
         "cyclist_speed": between(0.0, 20.0, _MS),
         "pedestrian_speed": between(0.0, 5.0, _MS),
@@ -138,6 +191,23 @@ RULES: dict[str, Any] = {
         "pause_rate": between(0.0, 10.0, "1/s"),
         "pause_duration": between(0.0, 600.0, "s"),
         "crossing_prob": PROB,
+        "lateral_drift": between(0.0, 0.5, _M),
+        "drift_time": between(0.2, 60.0, "s"),
+        "lateral_speed": between(0.1, 3.0, _MS),
+        "pull_out_rate": between(0.0, 0.1, "1/s"),
+        "delivery_halt_factor": between(1.0, 20.0),
+    },
+    "clutter": {
+        "density": between(0.0, 5.0),
+        "pole_spacing": between(2.0, 500.0, _M),
+        "tree_spacing": between(2.0, 500.0, _M),
+        "sign_rate": between(0.0, 50.0, "per 100 m"),
+        "bin_rate": between(0.0, 50.0, "per 100 m"),
+        "bicycle_rate": between(0.0, 50.0, "per 100 m"),
+        "tree_side_prob": PROB,
+        "bollard_prob": PROB,
+        "shelter_prob": PROB,
+        "front_prob": PROB,
     },
     "ego": {
         "length": between(1.0, 20.0, _M),
@@ -156,22 +226,29 @@ RULES: dict[str, Any] = {
     },
 }
 
+
+def _le(a: str, b: str) -> tuple[str, Any, str]:
+    """``a <= b`` for two keys of one section (``"map.x"``)."""
+    (sa, ka), (sb, kb) = a.split("."), b.split(".")
+    return (b, lambda c: c[sa][ka] <= c[sb][kb], f"must be >= {a}")
+
+
 #: The ``world`` section: defaults, rules and the checks that relate two keys.
 SECTION = Section(default_config, RULES, (
-    ("map.lanes_max", lambda c: c["map"]["lanes_min"] <= c["map"]["lanes_max"],
-     "must be >= map.lanes_min"),
-    ("map.block_max", lambda c: c["map"]["block_min"] <= c["map"]["block_max"],
-     "must be >= map.block_min"),
-    ("map.setback_max", lambda c: c["map"]["setback_min"] <= c["map"]["setback_max"],
-     "must be >= map.setback_min"),
-    ("map.building_width_max",
-     lambda c: c["map"]["building_width_min"] <= c["map"]["building_width_max"],
-     "must be >= map.building_width_min"),
-    ("map.building_depth_max",
-     lambda c: c["map"]["building_depth_min"] <= c["map"]["building_depth_max"],
-     "must be >= map.building_depth_min"),
-    ("map.gap_max", lambda c: c["map"]["gap_min"] <= c["map"]["gap_max"],
-     "must be >= map.gap_min"),
+    _le("map.lanes_min", "map.lanes_max"),
+    _le("map.block_min", "map.block_max"),
+    _le("map.setback_min", "map.setback_max"),
+    _le("map.building_width_min", "map.building_width_max"),
+    _le("map.building_depth_min", "map.building_depth_max"),
+    _le("map.building_height_min", "map.building_height_max"),
+    _le("map.gap_min", "map.gap_max"),
+    _le("map.parking_gap_min", "map.parking_gap_max"),
+    ("map.curb_strip_jitter", lambda c: _jitter_ok(c, "curb_strip_jitter", "curb_strip_width"),
+     "must be in [0, min(1, curb_strip_width - 1)] m"),
+    ("map.sidewalk_jitter", lambda c: _jitter_ok(c, "sidewalk_jitter", "sidewalk_width"),
+     "must be in [0, min(1, sidewalk_width - 1)] m"),
+    _mix("map.parking_mix", False),
+    _mix("traffic.vehicle_mix", True),
     ("ego.wheelbase", lambda c: c["ego"]["wheelbase"] <= c["ego"]["length"],
      "must be <= ego.length"),
 ))

@@ -3,10 +3,11 @@
 The world state is a dict of structure-of-arrays over B rows, the ego last:
 ``xy (B,2)``, ``yaw``, ``v``, ``hl``/``hw`` (half length / width), ``akind``
 (:class:`AgentKind`), ``mobile``, ``parked``, ``route (B,K)`` lanes ahead,
-``s`` arc length on ``route[:,0]``, ``lat`` lateral offset (left +), junction
+``s`` arc length on ``route[:,0]``, ``lat`` lateral offset (left +) and the
+``lat_goal`` it returns to, junction
 ``grant`` (reserved connector), request time ``req_t``, ``stop_clock``, ``halt``
-timer, ``stuck``, ``still`` (standstill time) and ``idm (B,5)`` (desired speed,
-accel, comfortable decel, headway, jam gap).
+timer, ``stuck``, ``still`` (standstill time), ``idm (B,5)`` (desired speed,
+accel, comfortable decel, headway, jam gap) and ``height`` [m] (body height).
 """
 
 from __future__ import annotations
@@ -18,9 +19,10 @@ import numpy as np
 from dstenv.sim.ego import box_corners, boxes_overlap
 from dstenv.sim.lanes import LaneKind, LaneNetwork, lane_pose
 from dstenv.sim.traffic import choose_successor
-from dstenv.sim.types import AgentKind, WorldMap
+from dstenv.sim.parking import draw_vehicles
+from dstenv.sim.types import AGENT_HEIGHT, AgentKind, WorldMap
 
-__all__ = ["populate", "respawn", "plan_route", "nearest_lane", "add_row", "net_tuple",
+__all__ = ["populate", "respawn", "pull_out", "plan_route", "nearest_lane", "add_row", "net_tuple",
            "state_tuple", "rules_tuple"]
 
 #: kind -> (length range, width range, accel, comfortable decel, headway, jam gap)
@@ -29,8 +31,9 @@ BODY = {
     AgentKind.CYCLIST: ((1.7, 1.9), (0.55, 0.7), 1.0, 2.0, 1.0, 1.5),
     AgentKind.PEDESTRIAN: ((0.45, 0.55), (0.45, 0.55), 0.8, 1.5, 0.6, 0.4),
 }
-_FIELDS = ("xy", "yaw", "v", "hl", "hw", "akind", "mobile", "parked", "route", "s", "lat",
-           "grant", "req_t", "stop_clock", "halt", "stuck", "still", "idm")
+_TRAFFIC_FIELDS = ("xy", "yaw", "v", "hl", "hw", "akind", "mobile", "parked", "route", "s",
+                   "lat", "grant", "req_t", "stop_clock", "halt", "stuck", "still", "lat_goal")
+_FIELDS = (*_TRAFFIC_FIELDS, "idm", "height")
 
 
 def net_tuple(net: LaneNetwork) -> tuple:
@@ -42,14 +45,15 @@ def net_tuple(net: LaneNetwork) -> tuple:
 
 def state_tuple(st: dict[str, np.ndarray]) -> tuple:
     """State arrays in the order :func:`dstenv.sim.traffic.traffic_step` expects."""
-    return tuple(st[k] for k in _FIELDS[:-1])
+    return tuple(st[k] for k in _TRAFFIC_FIELDS)
 
 
 def rules_tuple(tr: dict[str, Any]) -> tuple:
     """Traffic-rule parameters for :func:`dstenv.sim.traffic.traffic_step`."""
     return tuple(float(tr[k]) for k in ("signal_green", "stop_duration", "halt_rate",
                                         "halt_duration", "pause_rate", "pause_duration",
-                                        "crossing_prob"))
+                                        "crossing_prob", "lateral_drift", "drift_time",
+                                        "lateral_speed", "delivery_halt_factor"))
 
 
 def plan_route(net: LaneNetwork, lane: int, rng: np.random.Generator, k: int,
@@ -90,21 +94,26 @@ def _empty(k: int) -> dict[str, np.ndarray]:
             "parked": np.zeros(0, bool), "route": np.zeros((0, k), np.int64), "s": np.zeros(0),
             "lat": np.zeros(0), "grant": np.zeros(0, np.int64), "req_t": np.zeros(0),
             "stop_clock": np.zeros(0), "halt": np.zeros(0), "stuck": np.zeros(0, bool),
-            "still": np.zeros(0), "idm": np.zeros((0, 5))}
+            "still": np.zeros(0), "lat_goal": np.zeros(0), "idm": np.zeros((0, 5)),
+            "height": np.zeros(0)}
 
 
 def add_row(st: dict[str, np.ndarray], kind: AgentKind, xy, yaw: float, length: float,
             width: float, *, speed: float = 0.0, parked: bool = False, route=None, s: float = 0.0,
-            lat: float = 0.0, idm=(0.0, 1.0, 1.0, 1.0, 1.0), at: int | None = None) -> int:
-    """Insert one agent row (before row ``at``; default: append). Returns its index."""
+            lat: float = 0.0, idm=(0.0, 1.0, 1.0, 1.0, 1.0), at: int | None = None,
+            height: float | None = None) -> int:
+    """Insert one agent row (before row ``at``; default: append). Returns its index.
+
+    ``height`` [m] defaults to :data:`AGENT_HEIGHT` of ``kind``."""
     k = st["route"].shape[1]
     row = {"xy": np.asarray(xy, float).reshape(1, 2), "yaw": [yaw], "v": [speed],
            "hl": [length / 2], "hw": [width / 2], "akind": [int(kind)],
            "mobile": [route is not None and not parked], "parked": [parked],
            "route": (np.full((1, k), -1) if route is None else np.asarray(route).reshape(1, k)),
            "s": [s], "lat": [lat], "grant": [-1], "req_t": [np.inf], "stop_clock": [0.0],
-           "halt": [0.0], "stuck": [False], "still": [0.0],
-           "idm": np.asarray(idm, float).reshape(1, 5)}
+           "halt": [0.0], "stuck": [False], "still": [0.0], "lat_goal": [lat],
+           "idm": np.asarray(idm, float).reshape(1, 5),
+           "height": [AGENT_HEIGHT[int(kind)] if height is None else height]}
     at = len(st["v"]) if at is None else at
     for f in _FIELDS:
         st[f] = np.insert(st[f], at, np.asarray(row[f], dtype=st[f].dtype), axis=0)
@@ -112,17 +121,26 @@ def add_row(st: dict[str, np.ndarray], kind: AgentKind, xy, yaw: float, length: 
 
 
 def _add_parked(st: dict[str, np.ndarray], slots: np.ndarray, rng: np.random.Generator) -> None:
-    """Append parked cars at ``slots`` ``(S, 3)`` (x, y, yaw) in one go."""
+    """Append parked vehicles at ``slots`` ``(S, 6)`` (x, y, yaw, length, width, height;
+    a slot of length 0 gets a car size drawn here) in one go."""
     n, k = len(slots), st["route"].shape[1]
     (l_lo, l_hi), (w_lo, w_hi) = BODY[AgentKind.CAR][:2]
-    sizes = np.stack([rng.uniform(l_lo, l_hi, n), rng.uniform(w_lo, w_hi, n)], -1) / 2
+    sized = slots[:, 3] > 0 if slots.shape[1] > 3 else np.zeros(n, bool)
+    if sized.all():
+        sizes = slots[:, 3:5] / 2
+    else:
+        sizes = np.stack([rng.uniform(l_lo, l_hi, n), rng.uniform(w_lo, w_hi, n)], -1) / 2
+        if sized.any():
+            sizes[sized] = slots[sized, 3:5] / 2
+    height = np.where(sized, slots[:, 5], AGENT_HEIGHT[AgentKind.CAR]) if n else np.zeros(0)
     rows = {"xy": slots[:, :2], "yaw": slots[:, 2], "v": np.zeros(n), "hl": sizes[:, 0],
             "hw": sizes[:, 1], "akind": np.full(n, AgentKind.CAR, np.uint8),
             "mobile": np.zeros(n, bool), "parked": np.ones(n, bool),
             "route": np.full((n, k), -1, np.int64), "s": np.zeros(n), "lat": np.zeros(n),
             "grant": np.full(n, -1, np.int64), "req_t": np.full(n, np.inf),
             "stop_clock": np.zeros(n), "halt": np.zeros(n), "stuck": np.zeros(n, bool),
-            "still": np.zeros(n), "idm": np.zeros((n, 5))}
+            "still": np.zeros(n), "lat_goal": np.zeros(n), "idm": np.zeros((n, 5)),
+            "height": height}
     for f in _FIELDS:
         st[f] = np.concatenate([st[f], rows[f].astype(st[f].dtype)])
 
@@ -146,6 +164,12 @@ def _mobile(world_map, st, rng, cfg, kind, lanes, weights, k, *, lane=None, s=No
     net, tr = world_map.lanes, cfg["traffic"]
     (l_lo, l_hi), (w_lo, w_hi), amax, bcomf, headway, jam = BODY[kind]
     length, width = rng.uniform(l_lo, l_hi), rng.uniform(w_lo, w_hi)
+    height = None
+    if kind == AgentKind.CAR and len(tr["vehicle_mix"]):
+        cls, size = draw_vehicles(tr["vehicle_mix"], 1, rng)
+        length, width, height = (float(v) for v in size[0])
+        if cls[0] >= 2:  # vans and trucks: gentler acceleration and braking
+            amax, bcomf = amax * 0.7, bcomf * 0.8
     v0 = {AgentKind.CAR: tr["speed_limit"] * rng.uniform(0.8, 1.2),
           AgentKind.CYCLIST: tr["cyclist_speed"] * rng.uniform(0.8, 1.2),
           AgentKind.PEDESTRIAN: tr["pedestrian_speed"] * rng.uniform(0.75, 1.25)}[kind]
@@ -166,7 +190,7 @@ def _mobile(world_map, st, rng, cfg, kind, lanes, weights, k, *, lane=None, s=No
         route = plan_route(net, ln, rng, k, tr["crossing_prob"], fixed)
         v = min(v0, net.vmax[ln]) * rng.uniform(0.3, 0.8)
         return add_row(st, kind, (x, y), h, length, width, speed=v, route=route, s=pos, lat=lat,
-                       idm=(v0, amax, bcomf, headway, jam), at=at)
+                       idm=(v0, amax, bcomf, headway, jam), at=at, height=height)
     return None
 
 
@@ -175,7 +199,7 @@ def populate(world_map: WorldMap, cfg: dict[str, Any], rng: np.random.Generator,
     """All agents of a new episode: parked cars, ego, task traffic, moving traffic."""
     net, tr, ego = world_map.lanes, cfg["traffic"], cfg["ego"]
     st = _empty(k)
-    slots = world_map.meta.get("parking_slots", np.zeros((0, 3)))
+    slots = world_map.meta.get("parking_slots", np.zeros((0, 6)))
     taken = rng.random(len(slots)) < tr["parked_density"]
     _add_parked(st, slots[taken], rng)
     road = np.flatnonzero((net.kind == LaneKind.ROAD) & (net.length > 12.0))
@@ -235,7 +259,7 @@ def _task(world_map, st, rng, cfg, k, slots, taken) -> None:
         d = np.hypot(slots[:, None, 0] - pts[None, :, 0], slots[:, None, 1] - pts[None, :, 1])
         near = np.flatnonzero((d.min(1) < 6.0) & ~taken)
         for i in rng.permutation(near)[:task["parked_near_route"]]:
-            x, y, yaw = slots[i]
+            x, y, yaw = slots[i, :3]
             if _free(st, (x, y), yaw, 4.5, 1.8, 0.3):
                 add_row(st, AgentKind.CAR, (x, y), yaw, rng.uniform(3.9, 4.9),
                         rng.uniform(1.7, 1.95), parked=True, at=0)
@@ -251,6 +275,39 @@ def _task(world_map, st, rng, cfg, k, slots, taken) -> None:
             if _mobile(world_map, st, rng, cfg, AgentKind.PEDESTRIAN, None, None, k,
                        lane=int(pred[0]), s=s, fixed=(int(c),), at=len(st["v"]) - 1) is not None:
                 placed += 1
+
+
+def pull_out(world_map: WorldMap, st: dict[str, np.ndarray], cfg: dict[str, Any],
+             rng: np.random.Generator, k: int) -> int | None:
+    """A random parked car pulls out: it becomes a mobile agent on the nearest road lane
+    heading its way, starting from its parking position (``lat`` = its offset from the
+    lane centre, ``lat_goal`` = 0), so it moves sideways into the lane as it sets off.
+
+    Returns:
+        The agent's row, or None when the drawn car has no lane next to it.
+    """
+    net, tr = world_map.lanes, cfg["traffic"]
+    rows = np.flatnonzero(st["parked"][:-1] & (st["akind"][:-1] == AgentKind.CAR))
+    if len(rows) == 0:
+        return None
+    i = int(rows[rng.integers(len(rows))])
+    x, y = st["xy"][i]
+    found = nearest_lane(net, x, y, st["yaw"][i], max_dist=5.5)
+    if found is None or net.kind[found[0]] != LaneKind.ROAD:
+        return None
+    lane, s = found
+    s = min(s + 0.5, net.length[lane] - 0.5)
+    lx, ly, h = lane_pose(net.pts, net.hdg, net.start, net.npts, net.ds, lane, s)
+    lat = -np.sin(h) * (x - lx) + np.cos(h) * (y - ly)
+    _, _, amax, bcomf, headway, jam = BODY[AgentKind.CAR]
+    st["parked"][i], st["mobile"][i] = False, True
+    st["route"][i] = plan_route(net, lane, rng, k)
+    st["s"][i], st["lat"][i], st["lat_goal"][i], st["v"][i] = s, lat, 0.0, 0.0
+    st["xy"][i] = lx - lat * np.sin(h), ly + lat * np.cos(h)
+    st["yaw"][i] = h
+    st["idm"][i] = (tr["speed_limit"] * rng.uniform(0.8, 1.2), amax, bcomf, headway, jam)
+    st["grant"][i], st["req_t"][i], st["halt"][i], st["still"][i] = -1, np.inf, 0.0, 0.0
+    return i
 
 
 def respawn(world_map: WorldMap, st: dict[str, np.ndarray], i: int, rng: np.random.Generator,

@@ -14,7 +14,8 @@ lanes planned in ``route[i, 1:]``. One step:
    the lower row heeds only its next obstacle);
 4. agents move along their lanes; the travel is also clamped to the gap, so no
    agent ever drives into a body ahead of it;
-5. a move that would still make two footprints overlap is undone. An agent
+5. a move (along or across the lane) that would still make two footprints overlap
+   is undone. An agent
    standing for a minute (a gridlock from odd OSM junctions) out of the ego's
    sight is flagged ``stuck`` and replaced by the world.
 
@@ -108,11 +109,19 @@ def traffic_step(net, st, idm, rules, t, dt, u, ego_auto):
         net: lane-network arrays ``(pts, hdg, start, npts, ds, length, kind, node,
             turn, group, vmax, succ_ptr, succ, conf_ptr, conf, node_control, node_phase)``.
         st: state arrays over B rows (ego last) ``(xy, yaw, v, hl, hw, akind, mobile,
-            parked, route, s, lat, grant, req_t, stop_clock, halt, stuck, still)``.
+            parked, route, s, lat, grant, req_t, stop_clock, halt, stuck, still,
+            lat_goal)``.
         idm: ``(B, 5)`` desired speed, max accel, comfortable decel, headway, jam gap.
         rules: ``(signal_green, stop_duration, halt_rate, halt_mean, pause_rate,
-            pause_mean, crossing_prob)``.
-        t: time [s]; dt: step [s]; u: ``(B, 3)`` uniform randoms; ego_auto: plan the ego.
+            pause_mean, crossing_prob, drift, drift_time, lateral_speed,
+            delivery_factor)``.
+        t: time [s]; dt: step [s]; u: ``(B, 3)`` uniform randoms, ``(B, 4)`` when
+            ``drift > 0`` (the 4th drives the drift); ego_auto: plan the ego.
+
+    Lateral motion of vehicles: ``lat`` follows ``lat_goal`` at up to
+    ``lateral_speed`` [m/s] (a car pulling out of a parking space), and while a
+    vehicle drives faster than 1 m/s it drifts around the goal (Ornstein-Uhlenbeck,
+    std ``drift`` [m], correlation time ``drift_time`` [s], at most 2 std).
 
     Returns:
         ``(accel, gap)`` of the ego under autopilot: IDM acceleration [m/s^2] and the
@@ -121,8 +130,9 @@ def traffic_step(net, st, idm, rules, t, dt, u, ego_auto):
     (pts, hdg, start, npts, ds, length, lkind, node, turn, group, vmax, succ_ptr, succ,
      conf_ptr, conf, node_control, node_phase) = net
     (xy, yaw, v, hl, hw, akind, mobile, parked, route, s, lat, grant, req_t, stop_clock,
-     halt, stuck, still) = st
-    green, stop_dur, halt_rate, halt_mean, pause_rate, pause_mean, cross_prob = rules
+     halt, stuck, still, lat_goal) = st
+    (green, stop_dur, halt_rate, halt_mean, pause_rate, pause_mean, cross_prob, drift,
+     drift_time, lat_speed, delivery) = rules
     nb_rows = xy.shape[0]
     ego = nb_rows - 1
     n_route = route.shape[1]
@@ -317,6 +327,7 @@ def traffic_step(net, st, idm, rules, t, dt, u, ego_auto):
         acc[i] = min(max(a, -3.0 if akind[i] == PEDESTRIAN else -9.0), amax)
     # 4. motion of the non-ego agents
     old_xy, old_yaw, old_s, old_route = xy.copy(), yaw.copy(), s.copy(), route.copy()
+    old_lat = lat.copy()
     for i in range(nb_rows - 1):
         if not mobile[i]:
             continue
@@ -342,6 +353,16 @@ def traffic_step(net, st, idm, rules, t, dt, u, ego_auto):
             last = route[i, n_route - 2]
             route[i, n_route - 1] = -1 if last < 0 else choose_successor(
                 last, u[i, 0], succ_ptr, succ, lkind, turn, cross_prob)
+        if akind[i] != PEDESTRIAN:
+            off = lat[i] - lat_goal[i]
+            if drift > 0.0 and v[i] > 1.0 and abs(off) < 2.0 * drift:
+                a = dt / drift_time
+                off = off * (1.0 - a) + drift * np.sqrt(2.0 * a) * (u[i, 3] - 0.5) * 3.4641016
+                off = min(max(off, -2.0 * drift), 2.0 * drift)
+            else:  # back to the goal (pulling out of a space, or out of a wide drift)
+                step = lat_speed * dt
+                off = off - min(max(off, -step), step)
+            lat[i] = lat_goal[i] + off
         x, y, h = lane_pose(pts, hdg, start, npts, ds, route[i, 0], s[i])
         xy[i, 0], xy[i, 1], yaw[i] = x - lat[i] * np.sin(h), y + lat[i] * np.cos(h), h
         # a gridlock (rare, from odd junction geometry) is cleared out of the ego's sight
@@ -357,11 +378,14 @@ def traffic_step(net, st, idm, rules, t, dt, u, ego_auto):
                 halt[i] = min(-pause_mean * np.log(max(u[i, 2], 1e-9)), 4.0 * pause_mean)
         elif akind[i] == CAR and lkind[route[i, 0]] == K_ROAD and \
                 length[route[i, 0]] - s[i] > 25.0 and u[i, 1] < halt_rate * dt:
-            halt[i] = min(-halt_mean * np.log(max(u[i, 2], 1e-9)), 4.0 * halt_mean)
+            # vans and trucks (longer than 4.9 m) halt like delivery vans: longer
+            mean = halt_mean * (delivery if hl[i] > 2.45 else 1.0)
+            halt[i] = min(-mean * np.log(max(u[i, 2], 1e-9)), 4.0 * mean)
     # 5. safety net: a move that would make two footprints overlap is undone (the agent
     # stands still for this step); earlier rows are final, later rows still old
     for i in range(nb_rows - 1):
-        if not mobile[i] or (old_s[i] == s[i] and old_route[i, 0] == route[i, 0]):
+        if not mobile[i] or (old_s[i] == s[i] and old_route[i, 0] == route[i, 0]
+                             and old_lat[i] == lat[i]):
             continue
         for j in range(nb_rows):
             if j == i:
@@ -372,5 +396,6 @@ def traffic_step(net, st, idm, rules, t, dt, u, ego_auto):
                 xy[i, 0], xy[i, 1], yaw[i], s[i], v[i] = \
                     old_xy[i, 0], old_xy[i, 1], old_yaw[i], old_s[i], 0.0
                 route[i, :] = old_route[i, :]
+                lat[i] = old_lat[i]
                 break
     return acc[ego], gaps[ego]

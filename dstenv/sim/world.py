@@ -66,8 +66,10 @@ class World:
         self.rng = np.random.default_rng(seed)
         if self._fixed_map is not None:
             self._map = self._fixed_map
+            self._map.kerb_height = self.config["map"]["kerb_height"]
         else:
-            self._map = generate_city(self.config["map"], self.config["traffic"], self.rng)
+            self._map = generate_city(self.config["map"], self.config["traffic"], self.rng,
+                                      self.config["clutter"])
         if not isinstance(self._map.lanes, LaneNetwork):
             raise ValueError("world map has no lane network (WorldMap.lanes)")
         self.time = 0.0
@@ -90,7 +92,7 @@ class World:
         dt = cfg["dt"]
         net = self._map.lanes
         auto = ego_action is None
-        u = self.rng.random((len(st["v"]), 3))
+        u = self.rng.random((len(st["v"]), 4 if cfg["traffic"]["lateral_drift"] > 0 else 3))
         acc, gap = traffic_step(spawn.net_tuple(net), spawn.state_tuple(st), st["idm"],
                                 spawn.rules_tuple(cfg["traffic"]), self.time, dt, u, auto)
         e = len(st["v"]) - 1
@@ -124,6 +126,11 @@ class World:
         self._localise(u[e, 0])
         for i in np.flatnonzero(st["stuck"][:-1]):
             spawn.respawn(self._map, st, int(i), self.rng)
+        rate = cfg["traffic"]["pull_out_rate"]
+        if rate > 0:
+            n = int(st["parked"][:-1].sum())
+            for _ in range(self.rng.poisson(rate * dt * n) if n else 0):
+                spawn.pull_out(self._map, st, self.config, self.rng, ROUTE_LEN)
         self.time = round(self.time + dt, 9)
         self.steps += 1
         self._update_flags()
@@ -212,7 +219,7 @@ class World:
         st = self._state
         return Agents(st["xy"][:-1].copy(), st["yaw"][:-1].copy(), st["v"][:-1].copy(),
                       2 * st["hl"][:-1], 2 * st["hw"][:-1], st["akind"][:-1].copy(),
-                      st["parked"][:-1].copy())
+                      st["parked"][:-1].copy(), st["height"][:-1].copy())
 
     @property
     def agent_lanes(self) -> np.ndarray:
@@ -306,4 +313,3 @@ class World:
             path = next((b / path for b in bases if (b / path).is_file()), bases[0] / path)
         return load_osm(path, resolution=m["resolution"], lane_width=m["osm_lane_width"],
                         margin=m["margin"], traffic=self.config["traffic"])
-

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import pytest
 
-from dstenv.config import ConfigError, merge_config
+from dstenv.config import ConfigError, load_scenario, merge_config
 from dstenv.sensing import default_config
-from dstenv.sensing.config import gis_config, labels_config, lidar_config
+from dstenv.sensing.config import gis_config, gis_is_exact, labels_config, lidar_config
 
 
 def test_defaults_follow_the_paper():
@@ -15,7 +15,9 @@ def test_defaults_follow_the_paper():
     assert cfg["lidar"]["beams"] == 1800 and cfg["lidar"]["fov"] == 360.0
     assert cfg["lidar"]["max_range"] == 80.0
     assert cfg["labels"]["moving_threshold"] == 0.1
-    assert all(v == 0.0 for v in cfg["gis"].values())
+    # the default map is imperfect (issue 12); the clean scenario keeps the exact one
+    assert not gis_is_exact(cfg["gis"])
+    assert gis_is_exact(gis_config(load_scenario("clean")["gis"]))
     # a fresh dict each call
     cfg["lidar"]["beams"] = 1
     assert default_config()["lidar"]["beams"] == 1800
@@ -36,3 +38,16 @@ def test_sections_merge_and_validate():
         gis_config({"missing_building_prob": -0.1})
     with pytest.raises(ConfigError, match="expected a number"):
         gis_config({"offset_std": "big"})
+
+
+def test_gis_and_plane_height_validation():
+    with pytest.raises(ConfigError, match=r"gis\.source: unknown value 'osm'; allowed: map, none"):
+        gis_config({"source": "osm"})
+    with pytest.raises(ConfigError, match=r"gis\.road_width: unknown value"):
+        gis_config({"road_width": "wide"})
+    with pytest.raises(ConfigError, match=r"gis\.nominal_lane_width: must be in \[2, 5\] m"):
+        gis_config({"nominal_lane_width": 9.0})
+    with pytest.raises(ConfigError, match=r"gis\.no_map_prob: must be in \[0, 1\]"):
+        gis_config({"no_map_prob": 2.0})
+    with pytest.raises(ConfigError, match=r"lidar\.plane_height: must be in \[0, 3\] m"):
+        lidar_config({"plane_height": 5.0})

@@ -11,6 +11,7 @@ from dstenv.sim.ego import bicycle_step, box_corners, boxes_overlap
 from dstenv.sim.lanes import LaneKind
 from dstenv.sim.raster import lookup
 from dstenv.sim.types import AgentKind, MapClass
+from .clean import clean_world
 
 SMALL = {"map": {"blocks_x": 3, "blocks_y": 3},
          "traffic": {"cars": 16, "cyclists": 3, "pedestrians": 16, "crossing_prob": 0.8}}
@@ -128,7 +129,7 @@ def test_bicycle_braking_stops_without_reversing():
 
 
 def test_controlled_ego_follows_the_bicycle_model_and_flags_collisions():
-    w = World(SMALL, seed=4)
+    w = World(clean_world(SMALL), seed=4)
     x0, y0, yaw0 = w.ego_pose
     w.step((2.0, 0.0))
     x1, y1, yaw1 = w.ego_pose
@@ -174,7 +175,7 @@ def test_unknown_key_lists_allowed_keys():
 
 def test_default_config_sections():
     cfg = default_config()
-    assert set(cfg) == {"dt", "map", "traffic", "ego", "task"}
+    assert set(cfg) == {"dt", "map", "traffic", "clutter", "ego", "task"}
     assert cfg["dt"] == 0.1
     assert default_config() is not cfg  # a fresh dict each call
 

@@ -1,0 +1,198 @@
+"""Street clutter of the procedural city: poles, signs, trees, hedges, fences, bins,
+bollards, parked bicycles and bus shelters.
+
+Clutter is what a real LIDAR sees on every street and a map (OSM) does not hold:
+static, occupied, neither building nor road user. It is placed per block side,
+measured from the kerb line into the block (see :func:`place_clutter`):
+
+* the kerb line of street furniture: on a side with a parking strip at the road
+  edge of the sidewalk (``curb + 0.25`` m), on a side without one in the middle of
+  the verge (``curb / 2``): poles every ``pole_spacing``, rows of trees on some
+  sides, signs, bins and parked bicycles at random places, bollards at some block
+  corners, bus shelters on some sides without parking;
+* the building front, just behind the sidewalk (``curb + sw + 0.4`` m): hedges and
+  fences along part of the front yards, never into a building.
+
+Nothing stands on a crosswalk or under a parked vehicle; furniture keeps to the kerb
+edge of the sidewalk, clear of the middle where pedestrians walk. All
+randomness comes from the generator passed in (a child stream of the city's).
+The result is an :class:`~dstenv.sim.types.Obstacles` (boxes with heights, see
+:mod:`dstenv.sim.types`).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from dstenv.sim.types import ObstacleKind as K
+from dstenv.sim.types import Obstacles
+
+__all__ = ["default_clutter_config", "place_clutter", "Side"]
+
+#: one block side: ``(start (2,), along (2,), inward (2,), length [m], has parking)``
+Side = tuple[np.ndarray, np.ndarray, np.ndarray, float, bool]
+
+
+def default_clutter_config() -> dict[str, Any]:
+    """The ``world.clutter`` section (units in comments; rates per 100 m of kerb)."""
+    return {
+        "density": 1.0,  # [-] scales every rate and probability below (0: no clutter)
+        "pole_spacing": 28.0,  # [m] street lights / utility poles along every kerb
+        "tree_side_prob": 0.55,  # [-] share of block sides lined with trees
+        "tree_spacing": 9.0,  # [m] between the trees of a row
+        "sign_rate": 3.0,  # [1/100 m] sign posts
+        "bin_rate": 2.5,  # [1/100 m] waste bins
+        "bicycle_rate": 1.5,  # [1/100 m] groups of 2-6 parked bicycles
+        "bollard_prob": 0.3,  # [-] chance of a row of bollards at each end of a side
+        "shelter_prob": 0.15,  # [-] chance of a bus shelter on a side without parking
+        "front_prob": 0.45,  # [-] share of front-yard stretches with a hedge or fence
+    }
+
+
+def _rows() -> dict[str, list]:
+    return {k: [] for k in ("xy", "yaw", "length", "width", "z_min", "z_max", "kind")}
+
+
+def _add(rows, xy, yaw, length, width, z0, z1, kind) -> None:
+    for k, v in zip(rows, (xy, yaw, length, width, z0, z1, int(kind))):
+        rows[k].append(v)
+
+
+def place_clutter(sides: list[Side], buildings: list[np.ndarray], slots: np.ndarray,
+                  avoid: np.ndarray, curb: float, sidewalk: float, cfg: dict[str, Any],
+                  rng: np.random.Generator) -> Obstacles:
+    """Clutter along the block sides of a city.
+
+    Args:
+        sides: the block sides (:data:`Side`), kerb line first.
+        buildings: building footprints (``(4, 2)`` rectangles or any polygons).
+        slots: ``(S, 6)`` parking slots ``x, y, yaw, length, width, height`` (a
+            length of 0 means a standard 6 m slot).
+        avoid: ``(P, 2)`` crosswalk ends (kept clear by 2.5 m).
+        curb, sidewalk: kerb strip and sidewalk width [m].
+        cfg: the ``world.clutter`` section.
+
+    Returns:
+        :class:`Obstacles` (empty when ``density`` is 0).
+    """
+    dens = float(cfg["density"])
+    rows = _rows()
+    if dens <= 0 or not sides:
+        return Obstacles.empty()
+    bbox = np.array([[*np.min(b, 0), *np.max(b, 0)] for b in buildings]).reshape(-1, 4)
+    for start, along, inward, length, parking in sides:
+        keep = curb + sidewalk + 2.0  # clear of the corner's crosswalks and kerb radius
+        if length < 2 * keep + 2.0:
+            continue
+        yaw = float(np.arctan2(along[1], along[0]))
+        line = curb + 0.25 if parking else curb / 2
+        taken: list[tuple[float, float]] = []  # (centre, half length) along the kerb line
+
+        def put(s: float, lat: float, half_len: float, half_wid: float, z0: float, z1: float,
+                kind: int, yaw_off: float = 0.0, check: bool = True) -> bool:
+            if not keep <= s <= length - keep:
+                return False
+            if check and any(abs(s - c) < half_len + h + 0.4 for c, h in taken):
+                return False
+            xy = start + along * s + inward * lat
+            if len(avoid) and np.hypot(*(avoid - xy).T).min() < 2.5 + half_len:
+                return False
+            if _under_vehicle(xy, max(half_len, half_wid), slots):
+                return False
+            if check:
+                taken.append((s, half_len))
+            _add(rows, xy, yaw + yaw_off, 2 * half_len, 2 * half_wid, z0, z1, kind)
+            return True
+
+        # poles, then rows of trees, then the rest at random places
+        spacing = cfg["pole_spacing"] / dens
+        for s in np.arange(keep + rng.uniform(0, spacing), length - keep, spacing):
+            put(s + rng.normal(0, 0.1 * spacing), line, 0.13, 0.13, 0.0,
+                rng.uniform(6.0, 9.0), K.POLE)
+        if rng.random() < min(cfg["tree_side_prob"] * dens, 1.0):
+            sp = cfg["tree_spacing"]
+            for s in np.arange(keep + rng.uniform(0, sp), length - keep, sp):
+                s = s + rng.uniform(-0.2, 0.2) * sp
+                r_trunk = rng.uniform(0.12, 0.25)
+                z_crown = rng.uniform(2.0, 3.0)
+                if put(s, line, r_trunk, r_trunk, 0.0, z_crown + 0.5, K.TREE_TRUNK):
+                    d = rng.uniform(3.0, 6.5)
+                    _add(rows, start + along * s + inward * line, yaw, d, d, z_crown,
+                         z_crown + rng.uniform(3.0, 7.0), K.TREE_CROWN)
+        per_m = dens * length / 100.0
+        for _ in range(rng.poisson(cfg["sign_rate"] * per_m)):
+            s = rng.uniform(keep, length - keep)
+            if put(s, line, 0.05, 0.05, 0.0, 2.3, K.SIGN):
+                _add(rows, start + along * s + inward * line, yaw, 0.65, 0.06, 2.0, 2.8, K.SIGN)
+        for _ in range(rng.poisson(cfg["bin_rate"] * per_m)):
+            big = rng.random() < 0.25  # a container instead of a bin
+            put(rng.uniform(keep, length - keep), line, 0.6 if big else 0.3, 0.45 if big else 0.3,
+                0.0, 1.3 if big else 1.0, K.BIN)
+        for _ in range(rng.poisson(cfg["bicycle_rate"] * per_m)):
+            n = int(rng.integers(2, 7))
+            s0 = rng.uniform(keep, length - keep)
+            if all(abs(s0 + 0.95 * n - c) > 0.95 * n + h + 0.4 for c, h in taken):
+                for b in range(n):  # one behind the other along the kerb, slightly askew
+                    put(s0 + 1.9 * b, line, 0.85, 0.3, 0.0, 1.1, K.BICYCLE,
+                        rng.normal(0.0, 0.1), check=False)
+                taken.append((s0 + 0.95 * n, 0.95 * n))
+        for end in (keep, length - keep - 6.0):
+            if rng.random() < min(cfg["bollard_prob"] * dens, 1.0):
+                for b in range(int(rng.integers(3, 7))):
+                    put(end + 1.2 * b + 0.5, curb + 0.2 if parking else curb - 0.3, 0.1, 0.1,
+                        0.0, 0.9, K.BOLLARD, check=False)
+        if not parking and curb > 1.0 and rng.random() < min(cfg["shelter_prob"] * dens, 1.0):
+            put(rng.uniform(keep, length - keep), curb / 2, 2.0, min(0.75, curb / 2 - 0.1), 0.0,
+                2.5, K.SHELTER)
+        # hedges and fences along the front yards
+        front = curb + sidewalk + 0.4
+        s = keep - 2.0
+        while s < length - keep + 2.0:
+            seg = rng.uniform(6.0, 20.0)
+            if rng.random() < min(cfg["front_prob"] * dens, 1.0):
+                hedge = rng.random() < 0.6
+                wid = rng.uniform(0.5, 0.9) if hedge else 0.08
+                lo, hi = s + 0.3, min(s + seg - 0.3, length - keep + 2.0)
+                if hi - lo > 1.5 and not _hits_building(start, along, inward, lo, hi, front,
+                                                        front + wid, bbox):
+                    _add(rows, start + along * (lo + hi) / 2 + inward * (front + wid / 2), yaw,
+                         hi - lo, wid, 0.0, rng.uniform(0.8, 1.8) if hedge else
+                         rng.uniform(1.0, 1.8), K.HEDGE if hedge else K.FENCE)
+            s += seg
+    if not rows["yaw"]:
+        return Obstacles.empty()
+    f = np.float64
+    return Obstacles(np.array(rows["xy"], f).reshape(-1, 2), np.array(rows["yaw"], f),
+                     np.array(rows["length"], f), np.array(rows["width"], f),
+                     np.array(rows["z_min"], f), np.array(rows["z_max"], f),
+                     np.array(rows["kind"], np.uint8))
+
+
+def _under_vehicle(xy: np.ndarray, radius: float, slots: np.ndarray) -> bool:
+    """``xy`` (with ``radius`` [m]) touches the footprint of a parking slot."""
+    if not len(slots):
+        return False
+    d = xy - slots[:, :2]
+    near = np.hypot(d[:, 0], d[:, 1]) < 5.0
+    if not near.any():
+        return False
+    s = slots[near]
+    c, sn = np.cos(s[:, 2]), np.sin(s[:, 2])
+    lon = d[near, 0] * c + d[near, 1] * sn
+    lat = -d[near, 0] * sn + d[near, 1] * c
+    half_l = np.where(s[:, 3] > 0, s[:, 3] / 2, 3.0)
+    half_w = np.where(s[:, 4] > 0, s[:, 4] / 2, 1.0)
+    return bool(np.any((np.abs(lon) < half_l + radius + 0.2) & (np.abs(lat) < half_w + radius + 0.2)))
+
+
+def _hits_building(start, along, inward, lo, hi, d0, d1, bbox) -> bool:
+    """The band ``[lo, hi]`` along x ``[d0, d1]`` inward overlaps a building box."""
+    if not len(bbox):
+        return False
+    a = start + along * lo + inward * d0
+    b = start + along * hi + inward * d1
+    x0, x1 = min(a[0], b[0]) - 0.2, max(a[0], b[0]) + 0.2
+    y0, y1 = min(a[1], b[1]) - 0.2, max(a[1], b[1]) + 0.2
+    return bool(np.any((bbox[:, 0] < x1) & (bbox[:, 2] > x0) & (bbox[:, 1] < y1) & (bbox[:, 3] > y0)))

@@ -3,14 +3,13 @@
 Flow: :mod:`~dstenv.kitti.readers` (Velodyne, labels, calibration, OXTS) ->
 :mod:`~dstenv.kitti.poses` (devkit Mercator poses) and
 :mod:`~dstenv.kitti.objects` (boxes in the Velodyne frame, moving rules) ->
-:mod:`~dstenv.kitti.ground` (RANSAC plane + polar walk) ->
-:mod:`~dstenv.kitti.grids` (sensor grid by ray casting, label grid) and
+:mod:`dstenv.sensing.cloud` (RANSAC plane + polar walk, sensor grid by ray casting) ->
+:mod:`~dstenv.kitti.grids` (label grid) and
 :mod:`~dstenv.kitti.osm` (GIS grid from an ``.osm`` file) ->
 :mod:`~dstenv.kitti.sequence` (the DST filter, :class:`dstenv.frame.Frame` objects) ->
 ``dstenv kitti convert`` (:mod:`~dstenv.kitti.cli`) writes shards like ``dstenv generate``.
 """
 
-from dstenv.kitti.ground import classify_points, default_ground_config, fit_ground_plane
 from dstenv.kitti.objects import Boxes, boxes_in_velodyne, moving_flags
 from dstenv.kitti.poses import Trajectory, oxts_to_trajectory
 from dstenv.kitti.readers import (
@@ -30,6 +29,5 @@ __all__ = [
     "read_velodyne", "read_labels", "read_calib", "read_oxts",
     "Trajectory", "oxts_to_trajectory",
     "Boxes", "boxes_in_velodyne", "moving_flags",
-    "default_ground_config", "fit_ground_plane", "classify_points",
     "default_config", "kitti_config", "KittiSequence", "convert_sequence",
 ]

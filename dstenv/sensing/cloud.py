@@ -1,5 +1,14 @@
-"""Ground removal: a seeded, vectorised RANSAC plane fit refined by least squares.
+"""One road from a 3-D point cloud to the sensor grid, for KITTI scans and simulated ones.
 
+``points (P, 4) float32`` (Velodyne frame: x forward, y left, z up; the KITTI
+``.bin`` layout) -> :func:`fit_ground_plane` -> :func:`classify_points` (ground,
+obstacle, neither) -> :func:`scan_sensor_grid` (one ray per used point) ->
+``(H, W) uint8`` sensor grid. :func:`cloud_sensor_grid` chains them with the
+settings of :func:`default_ground_config` and :func:`default_ray_config`;
+``dstenv kitti convert`` and the simulated ``hdl64`` LIDAR both call it.
+
+Ground removal
+--------------
 Road returns must count as free space, not obstacles (as in the paper). The fit:
 
 1. candidates: points within ``fit_range`` metres horizontally and below
@@ -19,6 +28,16 @@ drop limits) since the last ground bin; other bins keep the last ground height.
 Every point then gets a height above that local ground; :func:`classify_points`
 splits the scan into ground (free-space rays), obstacles (a height band) and
 the rest (ignored: overhanging branches, the car's own body, curbs).
+
+Rays
+----
+See :func:`scan_sensor_grid`: every ray stops at the nearest blocking obstacle
+within ``block_window_deg`` of its azimuth. On the real KITTI sample, ~10 % of the
+0.2 deg azimuth bins across a car's side hold no return at all (dark paint, glass);
+with a per-bin first hit, the ground behind and under the car seen through those
+holes cleared the car's own cells (near cars beside the ego: 37-51 % of the seen
+footprint cells free). A 1.2 deg blocking window closes such holes (tests/sensing/
+test_cloud.py checks the real sample).
 """
 
 from __future__ import annotations
@@ -26,11 +45,21 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+from scipy.ndimage import minimum_filter1d
 
 from dstenv.config import merge_config
-from dstenv.kitti.readers import KittiError
+from dstenv.dst import SensorState
+from dstenv.grid import GridSpec
+from dstenv.sensing.raycast import sensor_grid
 
-__all__ = ["default_ground_config", "fit_ground_plane", "ground_heights", "classify_points"]
+__all__ = [
+    "CloudError", "default_ground_config", "default_ray_config", "fit_ground_plane",
+    "ground_heights", "classify_points", "scan_sensor_grid", "cloud_sensor_grid",
+]
+
+
+class CloudError(ValueError):
+    """A scan the ground fit cannot use (too few points near the road, no level plane)."""
 
 
 def default_ground_config() -> dict[str, Any]:
@@ -61,6 +90,21 @@ def default_ground_config() -> dict[str, Any]:
     }
 
 
+def default_ray_config() -> dict[str, Any]:
+    """Parameters of the rays from classified points into the sensor grid (units in comments)."""
+    return {
+        "max_range": 60.0,  # [m] horizontal range used for ray casting
+        "azimuth_bin_deg": 0.2,  # [deg] azimuth bins of the first-obstacle search
+        # [deg] a ray stops at the nearest blocking obstacle within +-window/2 of its
+        # azimuth: closes the return-less holes (dark paint, glass) of car bodies
+        "block_window_deg": 1.2,
+        "occluded_hits": True,  # obstacle points behind a first hit still occupy their cell
+        # [m] obstacles at least this tall stop rays (0: all; 1.0 keeps ground seen over
+        # guard rails free but lets rays clear the cells under cars)
+        "block_height": 0.0,
+    }
+
+
 def fit_ground_plane(points: np.ndarray, config: dict[str, Any] | None = None) -> np.ndarray:
     """Fit the ground plane of one scan.
 
@@ -73,7 +117,7 @@ def fit_ground_plane(points: np.ndarray, config: dict[str, Any] | None = None) -
         ``c > 0``; the height of a point above the ground is ``a x + b y + c z + d``.
 
     Raises:
-        KittiError: if fewer than 3 candidate points or no acceptable plane exist.
+        CloudError: if fewer than 3 candidate points or no acceptable plane exist.
     """
     cfg = merge_config(default_ground_config(), config, "ground")
     xyz = np.asarray(points, dtype=np.float64)[:, :3]
@@ -81,7 +125,7 @@ def fit_ground_plane(points: np.ndarray, config: dict[str, Any] | None = None) -
     near = (r < cfg["fit_range"]) & (r > cfg["ego_radius"])
     cand = xyz[near & (xyz[:, 2] < cfg["max_candidate_z"])]
     if len(cand) < 3:
-        raise KittiError(f"ground fit: only {len(cand)} candidate points near the road")
+        raise CloudError(f"ground fit: only {len(cand)} candidate points near the road")
     rng = np.random.default_rng(cfg["seed"])
     if len(cand) > cfg["sample"]:
         cand = cand[rng.choice(len(cand), cfg["sample"], replace=False)]
@@ -93,7 +137,7 @@ def fit_ground_plane(points: np.ndarray, config: dict[str, Any] | None = None) -
     normal *= np.where(normal[:, 2:3] < 0, -1.0, 1.0)  # point up
     ok &= normal[:, 2] >= np.cos(np.deg2rad(cfg["max_tilt_deg"]))
     if not ok.any():
-        raise KittiError("ground fit: no near-horizontal plane among the RANSAC hypotheses")
+        raise CloudError("ground fit: no near-horizontal plane among the RANSAC hypotheses")
     d = -np.einsum("ij,ij->i", normal, tri[:, 0])
     dist = np.abs(normal @ cand.T + d[:, None])  # (I, S)
     score = np.where(ok, (dist < cfg["inlier_distance"]).sum(axis=1), -1)
@@ -188,3 +232,86 @@ def classify_points(
         away & (height >= cfg["min_obstacle_height"]) & (height <= cfg["max_obstacle_height"])
     )
     return ground, obstacle, height
+
+
+def scan_sensor_grid(
+    points: np.ndarray, ground: np.ndarray, obstacle: np.ndarray, spec: GridSpec,
+    max_range: float, azimuth_bin_deg: float = 0.2, occluded_hits: bool = True,
+    blocking: np.ndarray | None = None, block_window_deg: float = 0.0,
+) -> np.ndarray:
+    """Sensor grid of one scan: one ray per ground or obstacle point.
+
+    A 3-D scanner sees the road far beyond a car over its roof, but the cells
+    under and right behind the car are not observed at ground level. So every ray
+    is clipped at the nearest *blocking* obstacle of its azimuth bin and of the bins
+    within ``block_window_deg / 2`` (the 2-D first hit, made robust to holes in an
+    object's returns); ground rays clear up to that point, obstacle points there
+    are occupied. Obstacle points behind it still mark their own cell occupied when
+    ``occluded_hits`` (a wall seen over a car), without clearing the cells in front.
+
+    Args:
+        points: ``(P, 3+) float`` Velodyne points.
+        ground, obstacle: ``(P,) bool`` masks from :func:`classify_points`.
+        spec: grid geometry (the sensor at the ego cell).
+        max_range: rays are clipped to this horizontal range [m].
+        azimuth_bin_deg: width of the first-hit bins [deg].
+        occluded_hits: mark obstacle points behind a first hit occupied.
+        blocking: ``(P,) bool`` obstacle points that stop rays (default: all).
+        block_window_deg: full width of the azimuth window of blocking obstacles [deg]
+            (0: the ray's own bin only).
+
+    Returns:
+        ``(H, W) uint8``: 0 unknown, 1 free, 2 occupied.
+    """
+    used = ground | obstacle
+    xy = np.asarray(points, dtype=np.float64)[used, :2]
+    hit = np.asarray(obstacle, dtype=bool)[used]
+    block = hit if blocking is None else np.asarray(blocking, dtype=bool)[used] & hit
+    angle = np.arctan2(xy[:, 1], xy[:, 0])
+    rng = np.hypot(xy[:, 0], xy[:, 1])
+    n_bins = max(int(round(360.0 / azimuth_bin_deg)), 1)
+    b = np.minimum(((angle + np.pi) / (2 * np.pi) * n_bins).astype(np.int64), n_bins - 1)
+    nearest = np.full(n_bins, np.inf)
+    np.minimum.at(nearest, b[block], rng[block])
+    half = int(round(0.5 * block_window_deg / azimuth_bin_deg))
+    if half > 0:
+        nearest = minimum_filter1d(nearest, 2 * half + 1, mode="wrap")
+    first = hit & (rng <= nearest[b])
+    grid = sensor_grid(angle, np.minimum(rng, nearest[b]), first, spec, max_range)
+    if occluded_hits:
+        behind = hit & ~first & (rng <= max_range)
+        i, j = spec.to_cell(xy[behind, 0], xy[behind, 1])
+        keep = spec.inside(i, j)
+        grid[i[keep], j[keep]] = SensorState.OCCUPIED
+    return grid
+
+
+def cloud_sensor_grid(
+    points: np.ndarray, spec: GridSpec, ground_cfg: dict[str, Any] | None = None,
+    ray_cfg: dict[str, Any] | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The whole road: ground fit, classification, rays.
+
+    Args:
+        points: ``(P, 3+) float`` Velodyne points (KITTI ``.bin`` rows).
+        spec: grid geometry.
+        ground_cfg: overrides of :func:`default_ground_config`.
+        ray_cfg: overrides of :func:`default_ray_config`.
+
+    Returns:
+        ``(sensor, plane, ground, obstacle, height)``: ``(H, W) uint8`` sensor grid,
+        ``(4,)`` plane, ``(P,) bool`` masks and ``(P,) float64`` heights above ground.
+
+    Raises:
+        CloudError: the scan has no usable ground (see :func:`fit_ground_plane`).
+    """
+    gcfg = merge_config(default_ground_config(), ground_cfg, "ground")
+    rcfg = merge_config(default_ray_config(), ray_cfg, "rays")
+    plane = fit_ground_plane(points, gcfg)
+    ground, obstacle, height = classify_points(points, plane, gcfg)
+    sensor = scan_sensor_grid(
+        points, ground, obstacle, spec, rcfg["max_range"], rcfg["azimuth_bin_deg"],
+        rcfg["occluded_hits"], blocking=obstacle & (height >= rcfg["block_height"]),
+        block_window_deg=rcfg["block_window_deg"],
+    )
+    return sensor, plane, ground, obstacle, height

@@ -34,6 +34,10 @@ def default_lidar_config() -> dict[str, Any]:
         "dropout": 0.0,  # probability that a beam yields no measurement at all [-]
         "mount_x": 0.0,  # sensor position ahead of the ego centre [m]
         "mount_y": 0.0,  # sensor position left of the ego centre [m]
+        # height of the horizontal scan plane above the road [m]: street clutter
+        # (WorldMap.obstacles) occludes only where z_min <= plane_height <= z_max, so
+        # tree crowns and sign panels above it do not; agents and buildings always do
+        "plane_height": 0.5,
         # building occlusion geometry: "polygons" (exact, WorldMap.buildings),
         # "raster" (exact DDA over BUILDING cells of WorldMap.raster) or "auto"
         # (polygons when the map has any, else the raster)
@@ -95,6 +99,10 @@ def lidar_config(
         raise ConfigError(f"{where}.max_range: must be > 0 m, got {cfg['max_range']!r}")
     _nonneg(cfg, "range_noise", where)
     _prob(cfg, "dropout", where)
+    if not 0.0 <= cfg["plane_height"] <= 3.0:
+        raise ConfigError(
+            f"{where}.plane_height: must lie in [0, 3] m, got {cfg['plane_height']!r}"
+        )
     allowed = ("auto", "polygons", "raster")
     if cfg["buildings"] not in allowed:
         raise ConfigError(

@@ -172,10 +172,21 @@ def generate_city(cfg: dict[str, Any], traffic: dict[str, Any],
     for b in buildings:
         for r, v in ((raster, MapClass.BUILDING), (surface, Surface.BUILDING)):
             fill_rect(r, b[:, 0].min(), b[:, 0].max(), b[:, 1].min(), b[:, 1].max(), org, res, v)
+    # a child stream: heights do not shift the draws of the layout and the traffic
+    heights = _building_heights(len(buildings), cfg, rng.spawn(1)[0])
     meta = {"kind": "procedural", "surface": surface,
             "parking_slots": np.array(slots, np.float64).reshape(-1, 3), "faces": faces}
     return WorldMap(raster=raster, origin=org, resolution=res, buildings=buildings,
-                    lanes=network, meta=meta)
+                    lanes=network, meta=meta, building_heights=heights,
+                    kerb_height=cfg["kerb_height"])
+
+
+def _building_heights(n: int, cfg, rng: np.random.Generator) -> np.ndarray:
+    """``(n,) float64`` roof heights [m]: whole storeys of ~3 m between the configured
+    bounds, plus up to 1.5 m of roof."""
+    lo, hi = cfg["building_height_min"], cfg["building_height_max"]
+    storeys = rng.integers(max(int(lo // 3.0), 1), max(int(hi // 3.0), 1) + 1, n)
+    return np.clip(storeys * 3.0 + rng.uniform(0.0, 1.5, n), lo, hi)
 
 
 def _degree(vseg: np.ndarray, hseg: np.ndarray, i: int, j: int) -> int:

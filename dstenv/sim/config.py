@@ -49,6 +49,9 @@ def default_config() -> dict[str, Any]:
             "gap_min": 2.0,  # [m]
             "gap_max": 7.0,  # [m]
             "osm_lane_width": 3.0,  # [m] lane width assumed for OSM ways without a width tag
+            "building_height_min": 6.0,  # [m] roof height of generated buildings, at least
+            "building_height_max": 30.0,  # [m] at most (whole ~3 m storeys + roof)
+            "kerb_height": 0.12,  # [m] sidewalks / verges (INTERMEDIATE cells) above the road
         },
         "traffic": {
             "cars": 24,  # moving cars

@@ -29,7 +29,7 @@ from shapely.geometry import LineString, Polygon
 from dstenv.sim.lanes import Control, LaneKind, NetworkBuilder, cut_polyline, offset_polyline
 from dstenv.sim.raster import Surface, fill_polygon
 from dstenv.sim.roads import RoadEdge, add_road_lanes, turning_circle
-from dstenv.sim.types import MapClass, WorldMap
+from dstenv.sim.types import DEFAULT_BUILDING_HEIGHT, MapClass, WorldMap
 
 __all__ = ["load_osm", "latlon_to_mercator", "EARTH_RADIUS"]
 
@@ -42,6 +42,7 @@ FOOT_TYPES = {"footway", "path", "pedestrian", "steps", "cycleway", "bridleway",
 FOOT_WIDTH = 2.0  # [m]
 WALK_OFFSET = 0.6  # [m] half distance between the two walking lines of a footway
 KERB_RADIUS = 4.0  # [m] rounding of the kerb at junctions
+STOREY_HEIGHT = 3.0  # [m] per ``building:levels`` level
 
 
 def latlon_to_mercator(lat, lon, scale: float) -> tuple[np.ndarray, np.ndarray]:
@@ -54,7 +55,7 @@ def latlon_to_mercator(lat, lon, scale: float) -> tuple[np.ndarray, np.ndarray]:
 
 def _parse(path: Path) -> tuple[dict, list, list, tuple | None]:
     """Stream the XML: nodes ``{id: (lat, lon)}``, ways ``[(refs, tags)]``, building
-    relations ``[(outer way ids, inner way ids)]``, bounds."""
+    relations ``[([(way id, role)], tags)]``, bounds."""
     nodes: dict[int, tuple[float, float]] = {}
     ways, rels, bounds = [], [], None
     opener = bz2.open if path.suffix == ".bz2" else open
@@ -74,7 +75,7 @@ def _parse(path: Path) -> tuple[dict, list, list, tuple | None]:
                     if "building" in tags and tags.get("type") == "multipolygon":
                         members = [(int(m.get("ref")), m.get("role")) for m in el.iter("member")
                                    if m.get("type") == "way"]
-                        rels.append(members)
+                        rels.append((members, tags))
                 elif tag == "bounds":
                     bounds = tuple(float(el.get(k))
                                    for k in ("minlat", "minlon", "maxlat", "maxlon"))
@@ -110,6 +111,20 @@ def _width(tags: dict[str, str], lane_width: float) -> tuple[float, int, int]:
     except (KeyError, ValueError):
         width = (fwd + bwd) * lane_width
     return max(width, 2.0), fwd, bwd
+
+
+def building_height(tags: dict[str, str]) -> float:
+    """Roof height of an OSM building [m]: its ``height`` tag, else ``building:levels``
+    x :data:`STOREY_HEIGHT` (+ ``roof:levels``), else :data:`DEFAULT_BUILDING_HEIGHT`."""
+    try:
+        return max(float(tags["height"].replace("m", "").strip()), 2.0)
+    except (KeyError, ValueError):
+        pass
+    try:
+        levels = float(tags["building:levels"]) + float(tags.get("roof:levels", 0))
+        return max(levels * STOREY_HEIGHT, 2.0)
+    except (KeyError, ValueError):
+        return DEFAULT_BUILDING_HEIGHT
 
 
 def _int(text: str | None, default: int) -> int:
@@ -167,6 +182,7 @@ def load_osm(path: str | Path, *, resolution: float = 0.2, lane_width: float = 3
     clipped = dropped = 0
     by_id: dict[int, list[int]] = {}
     roads, foot, buildings = [], [], []
+    heights: list[float] = []
     for wid, refs, tags in ways:
         kept = [r for r in refs if r in nodes]
         kept = [r for i, r in enumerate(kept) if i == 0 or r != kept[i - 1]]
@@ -175,6 +191,7 @@ def load_osm(path: str | Path, *, resolution: float = 0.2, lane_width: float = 3
         if "building" in tags and tags["building"] != "no":
             if len(kept) >= 3:
                 buildings.append(Polygon(project(kept)))
+                heights.append(building_height(tags))
             else:
                 dropped += 1
         elif "highway" in tags:
@@ -190,10 +207,11 @@ def load_osm(path: str | Path, *, resolution: float = 0.2, lane_width: float = 3
                 line = LineString(project(kept)).intersection(box)
                 foot += [np.asarray(g.coords) for g in getattr(line, "geoms", [line])
                          if isinstance(g, LineString) and not g.is_empty]
-    for members in rels:
+    for members, rel_tags in rels:
         for ref, role in members:
             if role == "outer" and len(by_id.get(ref, [])) >= 3:
                 buildings.append(Polygon(project(by_id[ref])))
+                heights.append(building_height(rel_tags))
     buildings = [(b.buffer(0) if not b.is_valid else b).intersection(box) for b in buildings]
 
     # street graph: split vehicle ways at shared nodes and at their ends
@@ -256,18 +274,20 @@ def load_osm(path: str | Path, *, resolution: float = 0.2, lane_width: float = 3
     road_union = shapely.union_all(road_polys) if road_polys else Polygon()
     # rounded kerbs at junctions (a morphological closing), so turning cars stay on road
     road_union = road_union.buffer(KERB_RADIUS).buffer(-KERB_RADIUS)
-    polys = []
-    for b in buildings:
+    polys, poly_heights = [], []
+    for b, bh in zip(buildings, heights):
         if b.intersects(road_union):
             b = b.difference(road_union)
         for part in getattr(b, "geoms", [b]):
             if isinstance(part, Polygon) and part.area > 1.0:
                 polys.append(np.asarray(part.exterior.coords)[:-1])
+                poly_heights.append(bh)
                 _paint(raster, part, origin, resolution, MapClass.BUILDING)
                 _paint(surface, part, origin, resolution, Surface.BUILDING)
     _paint(raster, road_union, origin, resolution, MapClass.ROAD)
     _paint(surface, road_union, origin, resolution, Surface.ROAD)
-    wm = WorldMap(raster=raster, origin=origin, resolution=resolution, buildings=polys)
+    wm = WorldMap(raster=raster, origin=origin, resolution=resolution, buildings=polys,
+                  building_heights=np.array(poly_heights, np.float64))
     _add_walks(builder, wm, edges, edge_half, trims, foot)
     wm.lanes = builder.build(node_xy, control, phase, lane_width)
     wm.meta = {"kind": "osm", "osm_file": str(path), "latlon_origin": (lat0, lon0),

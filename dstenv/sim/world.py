@@ -68,6 +68,7 @@ class World:
         self.rng = np.random.default_rng(seed)
         if self._fixed_map is not None:
             self._map = self._fixed_map
+            self._map.kerb_height = self.config["map"]["kerb_height"]
         else:
             self._map = generate_city(self.config["map"], self.config["traffic"], self.rng)
         if not isinstance(self._map.lanes, LaneNetwork):
@@ -322,6 +323,11 @@ def _validate(cfg: dict[str, Any]) -> None:
         ("map.block_min", m["block_min"] >= 30.0, "must be >= 30 m"),
         ("map.resolution", 0.01 < m["resolution"] <= 2.0, "must be in (0.01, 2] m"),
         ("ego.wheelbase", 0 < ego["wheelbase"] <= ego["length"], "must be in (0, ego.length]"),
+        ("map.building_height_min", 2.0 <= m["building_height_min"] <= 100.0,
+         "must be in [2, 100] m"),
+        ("map.building_height_max", m["building_height_min"] <= m["building_height_max"] <= 200.0,
+         "must be in [building_height_min, 200] m"),
+        ("map.kerb_height", 0.0 <= m["kerb_height"] <= 0.5, "must be in [0, 0.5] m"),
     ]
     for key in ("t_junction_prob", "parking_prob", "building_coverage", "gap_prob"):
         checks.append((f"map.{key}", 0.0 <= m[key] <= 1.0, "must be in [0, 1]"))

@@ -14,6 +14,8 @@ from typing import Any
 from dstenv.config import ConfigError, merge_config
 
 __all__ = [
+    "LIDAR_MODELS",
+    "default_hdl64_config",
     "default_config",
     "default_lidar_config",
     "default_gis_config",
@@ -24,9 +26,39 @@ __all__ = [
 ]
 
 
-def default_lidar_config() -> dict[str, Any]:
-    """The ``lidar`` section: a 2-D scanning LIDAR (a Velodyne sliced to the ground plane)."""
+#: ``lidar.model`` values: the fast 2-D scanner or the 3-D Velodyne HDL-64E-like one.
+LIDAR_MODELS: tuple[str, ...] = ("2d", "hdl64")
+
+
+def default_hdl64_config() -> dict[str, Any]:
+    """The ``lidar.hdl64`` section: a spinning 64-channel LIDAR like KITTI's HDL-64E."""
+    from dstenv.sensing.cloud import default_ground_config, default_ray_config
+
     return {
+        "channels": 64,  # elevation channels [-], spread evenly from top to bottom
+        "elevation_top": 2.0,  # [deg] highest channel (HDL-64E: +2.0)
+        "elevation_bottom": -24.9,  # [deg] lowest channel (HDL-64E: -24.9)
+        "azimuth_step": 0.17578125,  # [deg] between firings of a channel (2048 per turn)
+        "mount_height": 1.73,  # [m] sensor above the road (KITTI's Velodyne)
+        "max_range": 120.0,  # [m] slant range of a return
+        "min_range": 2.0,  # [m] near blind zone: closer returns are discarded
+        "range_noise": 0.02,  # [m] std of Gaussian range noise
+        "dropout": 0.05,  # probability that a return is lost [-]
+        "intensity_noise": 0.03,  # std of additive reflectance noise [-]
+        "spin_rate": 10.0,  # [Hz] one turn per LIDAR period; 0: no within-sweep skew
+        "channel_seed": 64,  # seed of the fixed per-channel gain (a calibration table)
+        # the point cloud -> grid road shared with KITTI (dstenv.sensing.cloud)
+        "ground": default_ground_config(),
+        "rays": default_ray_config(),
+    }
+
+
+def default_lidar_config() -> dict[str, Any]:
+    """The ``lidar`` section: a 2-D scanning LIDAR (a Velodyne sliced to the ground plane),
+    or with ``model = "hdl64"`` the 3-D LIDAR of the ``hdl64`` sub-section."""
+    return {
+        "model": "2d",  # "2d" (fast, beams in the scan plane) or "hdl64" (3-D point cloud)
+        "hdl64": default_hdl64_config(),
         "beams": 1800,  # number of beams per sweep [-] (0.2 deg spacing over 360 deg)
         "fov": 360.0,  # horizontal field of view [deg], centred on ego-forward
         "max_range": 80.0,  # [m]; beyond it a beam has no return
@@ -103,6 +135,20 @@ def lidar_config(
         raise ConfigError(
             f"{where}.plane_height: must lie in [0, 3] m, got {cfg['plane_height']!r}"
         )
+    if cfg["model"] not in LIDAR_MODELS:
+        raise ConfigError(f"{where}.model: unknown value {cfg['model']!r}; "
+                          f"allowed: {', '.join(LIDAR_MODELS)}")
+    h = cfg["hdl64"]
+    if h["channels"] < 1 or not h["elevation_top"] > h["elevation_bottom"]:
+        raise ConfigError(f"{where}.hdl64: need channels >= 1 and elevation_top > "
+                          f"elevation_bottom, got {h['channels']}, {h['elevation_top']}, "
+                          f"{h['elevation_bottom']}")
+    for key in ("azimuth_step", "mount_height", "max_range"):
+        if not h[key] > 0:
+            raise ConfigError(f"{where}.hdl64.{key}: must be > 0, got {h[key]!r}")
+    for key in ("min_range", "range_noise", "intensity_noise", "spin_rate"):
+        _nonneg(h, key, f"{where}.hdl64")
+    _prob(h, "dropout", f"{where}.hdl64")
     allowed = ("auto", "polygons", "raster")
     if cfg["buildings"] not in allowed:
         raise ConfigError(

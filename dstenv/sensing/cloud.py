@@ -42,8 +42,10 @@ test_cloud.py checks the real sample).
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
+import numba
 import numpy as np
 from scipy.ndimage import minimum_filter1d
 
@@ -139,8 +141,7 @@ def fit_ground_plane(points: np.ndarray, config: dict[str, Any] | None = None) -
     if not ok.any():
         raise CloudError("ground fit: no near-horizontal plane among the RANSAC hypotheses")
     d = -np.einsum("ij,ij->i", normal, tri[:, 0])
-    dist = np.abs(normal @ cand.T + d[:, None])  # (I, S)
-    score = np.where(ok, (dist < cfg["inlier_distance"]).sum(axis=1), -1)
+    score = np.where(ok, _inlier_counts(normal, d, cand, cfg["inlier_distance"]), -1)
     plane = np.append(normal[np.argmax(score)], d[np.argmax(score)])
     for _ in range(2):  # least-squares refit on the inliers
         inl = cand[np.abs(cand @ plane[:3] + plane[3]) < cfg["inlier_distance"]]
@@ -175,35 +176,12 @@ def ground_heights(
     h = xyz @ plane[:3] + plane[3]
     if not cfg["local"] or len(h) == 0:
         return h
-    n_sec = max(int(round(360.0 / cfg["sector_deg"])), 1)
-    r = np.hypot(xyz[:, 0], xyz[:, 1])
-    sec = ((np.arctan2(xyz[:, 1], xyz[:, 0]) + np.pi) / (2 * np.pi) * n_sec).astype(np.int64)
-    sec = np.minimum(sec, n_sec - 1)
-    n_bin = int(np.ceil(r.max() / cfg["bin_size"])) + 1
-    rbin = (r / cfg["bin_size"]).astype(np.int64)
-    lowest = np.full((n_sec, n_bin), np.inf)
-    np.minimum.at(lowest, (sec, rbin), h)
-    highest = np.full((n_sec, n_bin), -np.inf)
-    np.maximum.at(highest, (sec, rbin), h)
-    # a bin holding a vertical surface (a car's side) spans its height: never ground
-    lowest[highest - lowest > cfg["flat_spread"]] = np.inf
-    ground = np.zeros((n_sec, n_bin))
-    g = np.zeros(n_sec)  # the plane is the ground next to the car
-    last_r = np.full(n_sec, cfg["ego_radius"])
-    first = int(cfg["ego_radius"] / cfg["bin_size"])
-    for b in range(first, n_bin):
-        rc = (b + 0.5) * cfg["bin_size"]
-        cand = lowest[:, b]
-        dr = rc - last_r
-        ok = (
-            np.isfinite(cand)
-            & (cand - g <= cfg["step_tolerance"] + cfg["max_slope"] * dr)
-            & (g - cand <= cfg["drop_tolerance"] + cfg["max_drop_slope"] * dr)
-        )  # a lower outlier (a reflection) must not drag the ground down
-        g = np.where(ok, cand, g)
-        last_r = np.where(ok, rc, last_r)
-        ground[:, b] = g
-    return h - ground[sec, rbin]
+    n_sec = max(round(360.0 / cfg["sector_deg"]), 1)
+    return _local_ground(
+        np.ascontiguousarray(xyz[:, 0]), np.ascontiguousarray(xyz[:, 1]), h, n_sec,
+        float(cfg["bin_size"]), float(cfg["ego_radius"]), float(cfg["max_slope"]),
+        float(cfg["step_tolerance"]), float(cfg["flat_spread"]), float(cfg["max_drop_slope"]),
+        float(cfg["drop_tolerance"]))
 
 
 def classify_points(
@@ -242,12 +220,17 @@ def scan_sensor_grid(
     """Sensor grid of one scan: one ray per ground or obstacle point.
 
     A 3-D scanner sees the road far beyond a car over its roof, but the cells
-    under and right behind the car are not observed at ground level. So every ray
-    is clipped at the nearest *blocking* obstacle of its azimuth bin and of the bins
-    within ``block_window_deg / 2`` (the 2-D first hit, made robust to holes in an
-    object's returns); ground rays clear up to that point, obstacle points there
-    are occupied. Obstacle points behind it still mark their own cell occupied when
-    ``occluded_hits`` (a wall seen over a car), without clearing the cells in front.
+    under and right behind the car are not observed at ground level. So the free
+    space of an azimuth bin is clipped at the nearest *blocking* obstacle of the bin
+    and of the bins within ``block_window_deg / 2`` (the 2-D first hit, made robust
+    to holes in an object's returns). One ray per bin, along its centre, clears the
+    cells up to its farthest ground return (or first obstacle) before that clip;
+    the own cells of those ground returns are free too, and obstacle returns
+    occupy theirs (precedence occupied > free > unknown). Obstacle points behind
+    the clip still mark their own cell occupied when ``occluded_hits`` (a wall seen
+    over a car), without clearing the cells in front. With 0.2 deg bins a bin is
+    narrower than a 0.33 m cell out to 95 m, so one ray per bin crosses the same
+    cells as one ray per point.
 
     Args:
         points: ``(P, 3+) float`` Velodyne points.
@@ -263,27 +246,127 @@ def scan_sensor_grid(
     Returns:
         ``(H, W) uint8``: 0 unknown, 1 free, 2 occupied.
     """
-    used = ground | obstacle
-    xy = np.asarray(points, dtype=np.float64)[used, :2]
-    hit = np.asarray(obstacle, dtype=bool)[used]
-    block = hit if blocking is None else np.asarray(blocking, dtype=bool)[used] & hit
-    angle = np.arctan2(xy[:, 1], xy[:, 0])
-    rng = np.hypot(xy[:, 0], xy[:, 1])
-    n_bins = max(int(round(360.0 / azimuth_bin_deg)), 1)
-    b = np.minimum(((angle + np.pi) / (2 * np.pi) * n_bins).astype(np.int64), n_bins - 1)
-    nearest = np.full(n_bins, np.inf)
-    np.minimum.at(nearest, b[block], rng[block])
-    half = int(round(0.5 * block_window_deg / azimuth_bin_deg))
+    xyz = np.asarray(points, dtype=np.float64)
+    ground = np.asarray(ground, dtype=bool)
+    obstacle = np.asarray(obstacle, dtype=bool)
+    block = obstacle if blocking is None else np.asarray(blocking, dtype=bool) & obstacle
+    n_bins = max(round(360.0 / azimuth_bin_deg), 1)
+    x, y = np.ascontiguousarray(xyz[:, 0]), np.ascontiguousarray(xyz[:, 1])
+    b, rng, nearest = _azimuth_bins(x, y, block, n_bins)
+    half = round(0.5 * block_window_deg / azimuth_bin_deg)
     if half > 0:
         nearest = minimum_filter1d(nearest, 2 * half + 1, mode="wrap")
-    first = hit & (rng <= nearest[b])
-    grid = sensor_grid(angle, np.minimum(rng, nearest[b]), first, spec, max_range)
-    if occluded_hits:
-        behind = hit & ~first & (rng <= max_range)
-        i, j = spec.to_cell(xy[behind, 0], xy[behind, 1])
-        keep = spec.inside(i, j)
-        grid[i[keep], j[keep]] = SensorState.OCCUPIED
+    extent = _free_extent(b, rng, ground, obstacle, nearest, n_bins)
+    angles = -np.pi + (np.arange(n_bins) + 0.5) * (2 * np.pi / n_bins)
+    grid = sensor_grid(angles, extent, np.zeros(n_bins, bool), spec, max_range)
+    i0, j0 = spec.ego_cell
+    _mark_points(grid, x, y, b, rng, ground, obstacle, nearest, occluded_hits, max_range,
+                 float(spec.cell_size), i0, j0)
     return grid
+
+
+@numba.njit(cache=True)
+def _inlier_counts(normal, d, cand, dist):  # pragma: no cover - numba
+    """``(I,) int64`` candidates within ``dist`` of each plane hypothesis."""
+    out = np.zeros(normal.shape[0], np.int64)
+    for k in range(normal.shape[0]):
+        a, b, c, e = normal[k, 0], normal[k, 1], normal[k, 2], d[k]
+        n = 0
+        for p in range(cand.shape[0]):
+            if abs(a * cand[p, 0] + b * cand[p, 1] + c * cand[p, 2] + e) < dist:
+                n += 1
+        out[k] = n
+    return out
+
+
+@numba.njit(cache=True)
+def _local_ground(x, y, h, n_sec, bin_size, ego_radius, max_slope, step_tol, flat_spread,
+                  max_drop_slope, drop_tol):  # pragma: no cover - numba
+    """Heights above the local ground of the polar walk (see :func:`ground_heights`)."""
+    n = x.shape[0]
+    sec = np.empty(n, np.int64)
+    rbin = np.empty(n, np.int64)
+    rmax = 0.0
+    for p in range(n):
+        r = math.sqrt(x[p] * x[p] + y[p] * y[p])
+        rmax = max(rmax, r)
+        s = int((math.atan2(y[p], x[p]) + math.pi) / (2 * math.pi) * n_sec)
+        sec[p] = min(s, n_sec - 1)
+        rbin[p] = int(r / bin_size)
+    n_bin = int(math.ceil(rmax / bin_size)) + 1
+    lowest = np.full((n_sec, n_bin), np.inf)
+    highest = np.full((n_sec, n_bin), -np.inf)
+    for p in range(n):
+        lowest[sec[p], rbin[p]] = min(lowest[sec[p], rbin[p]], h[p])
+        highest[sec[p], rbin[p]] = max(highest[sec[p], rbin[p]], h[p])
+    ground = np.zeros((n_sec, n_bin))
+    first = int(ego_radius / bin_size)
+    for s in range(n_sec):
+        g = 0.0  # the plane is the ground next to the car
+        last_r = ego_radius
+        for b in range(first, n_bin):
+            rc = (b + 0.5) * bin_size
+            cand = lowest[s, b]
+            # a bin holding a vertical surface (a car's side) spans its height: never ground
+            if highest[s, b] - cand <= flat_spread and math.isfinite(cand):
+                dr = rc - last_r
+                # a lower outlier (a reflection) must not drag the ground down
+                if cand - g <= step_tol + max_slope * dr and g - cand <= drop_tol + max_drop_slope * dr:
+                    g = cand
+                    last_r = rc
+            ground[s, b] = g
+    out = np.empty(n)
+    for p in range(n):
+        out[p] = h[p] - ground[sec[p], rbin[p]]
+    return out
+
+
+@numba.njit(cache=True)
+def _azimuth_bins(x, y, block, n_bins):  # pragma: no cover - numba
+    """Bin and horizontal range of every point, nearest blocking range per bin."""
+    n = x.shape[0]
+    b = np.empty(n, np.int64)
+    rng = np.empty(n)
+    nearest = np.full(n_bins, np.inf)
+    for p in range(n):
+        rng[p] = math.sqrt(x[p] * x[p] + y[p] * y[p])
+        k = int((math.atan2(y[p], x[p]) + math.pi) / (2 * math.pi) * n_bins)
+        b[p] = min(k, n_bins - 1)
+        if block[p] and rng[p] < nearest[b[p]]:
+            nearest[b[p]] = rng[p]
+    return b, rng, nearest
+
+
+@numba.njit(cache=True)
+def _free_extent(b, rng, ground, obstacle, nearest, n_bins):  # pragma: no cover - numba
+    """How far each bin's ray clears: the farthest used point, clipped at the blocker."""
+    ext = np.zeros(n_bins)
+    for p in range(b.shape[0]):
+        if ground[p] or (obstacle[p] and rng[p] <= nearest[b[p]]):
+            ext[b[p]] = max(ext[b[p]], min(rng[p], nearest[b[p]]))
+    return ext
+
+
+@numba.njit(cache=True)
+def _mark_points(grid, x, y, b, rng, ground, obstacle, nearest, occluded_hits, max_range,
+                 cell, i0, j0):  # pragma: no cover - numba
+    """Own cells: ground returns before the blocker free, obstacle returns occupied."""
+    h, w = grid.shape
+    occ = np.uint8(SensorState.OCCUPIED)
+    free = np.uint8(SensorState.FREE)
+    for p in range(x.shape[0]):
+        if rng[p] > max_range:
+            continue
+        first = rng[p] <= nearest[b[p]]
+        if not ((ground[p] and first) or (obstacle[p] and (first or occluded_hits))):
+            continue
+        i = int(math.floor(i0 - x[p] / cell + 0.5))
+        j = int(math.floor(j0 - y[p] / cell + 0.5))
+        if 0 <= i < h and 0 <= j < w:
+            if obstacle[p]:
+                grid[i, j] = occ
+            elif grid[i, j] != occ:
+                grid[i, j] = free
 
 
 def cloud_sensor_grid(

@@ -123,6 +123,7 @@ class Hdl64:
         self.slope = np.tan(self.elevation)
         self.columns = int(round(360.0 / c["azimuth_step"]))
         self.azimuth = math.pi - np.deg2rad(c["azimuth_step"]) * np.arange(self.columns)
+        self._cos_az, self._sin_az = np.cos(self.azimuth), np.sin(self.azimuth)
         gain_rng = np.random.default_rng(int(c["channel_seed"]))
         self.gain = gain_rng.uniform(0.75, 1.25, n)  # per-channel intensity calibration
         self._map: WorldMap | None = None
@@ -190,25 +191,45 @@ class Hdl64:
                  rng: np.random.Generator) -> Cloud:
         c = self.config
         cos_el = np.cos(self.elevation)
-        slant = best / cos_el[None, :]
-        slant = slant + rng.normal(0.0, c["range_noise"], slant.shape) if c["range_noise"] else slant
-        keep = np.isfinite(slant) & (slant <= c["max_range"]) & (slant >= c["min_range"])
-        if c["dropout"] > 0:
-            keep &= rng.random(slant.shape) >= c["dropout"]
-        col, ch = np.nonzero(keep)
-        r = slant[col, ch]
-        az, el = self.azimuth[col], self.elevation[ch]
-        s = surf[col, ch].astype(np.uint8)
-        refl = REFLECTANCE[s] * self.gain[ch] * (1.0 - 0.25 * np.minimum(r / 100.0, 1.0))
-        if c["intensity_noise"] > 0:
-            refl = refl + rng.normal(0.0, c["intensity_noise"], len(r))
-        pts = np.empty((len(r), 4), np.float32)
-        pts[:, 0] = r * np.cos(el) * np.cos(az)
-        pts[:, 1] = r * np.cos(el) * np.sin(az)
-        pts[:, 2] = r * np.sin(el)
-        pts[:, 3] = np.clip(refl, 0.0, 1.0)
-        return Cloud(pts, ch.astype(np.int16), col.astype(np.int32), s,
-                     idx[col, ch], self.mount.copy(), c, best.shape)
+        col, ch = np.nonzero(np.isfinite(best))  # returns before noise, column-major
+        n = len(col)
+        noise = rng.normal(0.0, c["range_noise"], n) if c["range_noise"] > 0 else np.zeros(n)
+        keep = rng.random(n) >= c["dropout"] if c["dropout"] > 0 else np.ones(n, bool)
+        inoise = (rng.normal(0.0, c["intensity_noise"], n) if c["intensity_noise"] > 0
+                  else np.zeros(n))
+        pts = np.empty((n, 4), np.float32)
+        out_s = np.empty(n, np.uint8)
+        out_i = np.empty(n, np.int32)
+        m = _points(best, col, ch, noise, keep, inoise, surf, idx, self._cos_az, self._sin_az,
+                    cos_el, np.sin(self.elevation), self.gain, REFLECTANCE,
+                    float(c["min_range"]), float(c["max_range"]), pts, out_s, out_i)
+        return Cloud(pts[:m], ch[:m].astype(np.int16), col[:m].astype(np.int32), out_s[:m],
+                     out_i[:m], self.mount.copy(), c, best.shape)
+
+
+@numba.njit(cache=True)
+def _points(best, col, ch, noise, keep, inoise, surf, idx, cos_az, sin_az, cos_el, sin_el,
+            gain, refl, min_range, max_range, pts, out_s, out_i):  # pragma: no cover - numba
+    """Noisy slant ranges -> Velodyne points and reflectance, compacted in place
+    (``col``, ``ch`` too); returns how many returns are kept."""
+    m = 0
+    for k in range(col.shape[0]):
+        j, c = col[k], ch[k]
+        r = best[j, c] / cos_el[c] + noise[k]
+        if not keep[k] or r > max_range or r < min_range:
+            continue
+        ce = cos_el[c] * r
+        pts[m, 0] = ce * cos_az[j]
+        pts[m, 1] = ce * sin_az[j]
+        pts[m, 2] = r * sin_el[c]
+        v = refl[surf[j, c]] * gain[c] * (1.0 - 0.25 * min(r / 100.0, 1.0)) + inoise[k]
+        pts[m, 3] = min(max(v, 0.0), 1.0)
+        out_s[m] = surf[j, c]
+        out_i[m] = idx[j, c]
+        col[m] = j
+        ch[m] = c
+        m += 1
+    return m
 
 
 def _box_table(agents: Agents, world_map: WorldMap) -> np.ndarray:

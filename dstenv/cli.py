@@ -32,6 +32,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "train": ("dstenv.segment.cli", "train a segmentation network on shards or a stream"),
     "benchmark": ("dstenv.segment.cli", "compare DST and FCN-DST segmenters on held-out maps"),
     "kitti": ("dstenv.kitti.cli", "KITTI tracking -> perception-grid shards"),
+    "export-kitti": ("dstenv.kitti.cli", "simulate a drive with the 3-D LIDAR, write it in "
+                     "KITTI's tracking layout"),
     "render": ("dstenv.sim.cli", "draw a simulated scene to PNG"),
     "bench": ("dstenv.bench", "run a speed benchmark"),
 }

@@ -197,6 +197,7 @@ SECTIONS: dict[str, str] = {
     "labels": "dstenv.sensing.config:LABELS",
     "grid": "dstenv.grid:SECTION",
     "dst": "dstenv.dst.params:SECTION",
+    "protocol": "dstenv.pipeline:PROTOCOL_SECTION",
     "frame": "dstenv.pipeline:FRAME_SECTION",
     "observation": "dstenv.envs.observation:SECTION",
     "action": "dstenv.envs.actions:SECTION",

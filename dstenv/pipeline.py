@@ -3,11 +3,23 @@
 One :class:`Pipeline` step is one LIDAR period (0.1 s):
 
 1. the world source advances (ego action or autopilot);
-2. the LIDAR sweeps from the ego pose (occluded by buildings and agents);
+2. the LIDAR sweeps from the ego pose (occluded by buildings and agents): the fast
+   2-D scanner (``lidar.model = "2d"``) or the 3-D HDL-64E-like one (``"hdl64"``,
+   :mod:`dstenv.sensing.lidar3d`), whose point cloud takes KITTI's road to the grid
+   (:mod:`dstenv.sensing.cloud`: ground removal, one ray per point);
 3. the sweep is ray-cast into the sensor grid, the map is cut into the GIS grid;
-4. the :class:`~dstenv.dst.PerceptionGridFilter` fuses both, with the ego motion
-   :func:`~dstenv.grid.relative_pose` of the previous and current poses;
+4. on fused steps (every ``protocol.update_every``-th) the
+   :class:`~dstenv.dst.tracker.GridTracker` fuses both, with the ego motion since
+   the previous fused step; other steps carry the last fused BetP;
 5. ground-truth labels and the ``visible`` mask complete the :class:`~dstenv.frame.Frame`.
+
+The ``protocol`` section holds the paper's evaluation protocol as options: the fusion
+rate (``update_every``: 10 fuses at 1 Hz, t-1 is the previous fused frame), labels
+restricted to a front camera's field of view (``camera_fov``, the rest
+:data:`~dstenv.frame.IGNORE_INDEX` as on KITTI) and KITTI's moving rule
+(``moving_rule = "displacement"``: moving when it moved more than
+10 cm between fused frames, i.e. a speed above
+``0.1 m / fused period``).
 
 The world source is pluggable (:data:`WORLD_SOURCES`): ``"city"`` is dstenv's own
 :class:`dstenv.sim.World`, ``"highway"`` a highway-env scene
@@ -25,17 +37,24 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from dstenv.config import Section, Validated, build_config, one_of
-from dstenv.dst import DSTParams, PerceptionGridFilter
-from dstenv.frame import Frame
-from dstenv.grid import GridSpec, relative_pose
+from dstenv.config import Section, Validated, between, build_config, one_of
+from dstenv.dst import DSTParams
+from dstenv.dst.tracker import GridTracker
+from dstenv.frame import IGNORE_INDEX, Frame
+from dstenv.grid import GridSpec
 from dstenv.sensing.config import gis_is_exact
 from dstenv.sensing.gis import MapError, gis_grid
 from dstenv.sensing.labels import label_grid, visible_mask
 from dstenv.sim.types import Agents, WorldMap
 
-__all__ = ["WORLD_SOURCES", "WorldSource", "default_config", "Pipeline", "SOURCE_SECTION",
-           "FRAME_SECTION"]
+__all__ = ["WORLD_SOURCES", "MOVING_RULES", "WorldSource", "default_config", "camera_mask",
+           "Pipeline", "SOURCE_SECTION", "FRAME_SECTION", "PROTOCOL_SECTION"]
+
+#: ``protocol.moving_rule`` values: the agent's speed against ``labels.moving_threshold``,
+#: or KITTI's 10 cm displacement between fused frames.
+MOVING_RULES: tuple[str, ...] = ("speed", "displacement")
+#: KITTI's moving rule: displacement between two fused frames [m].
+KITTI_DISPLACEMENT: float = 0.10
 
 
 class WorldSource(Protocol):
@@ -98,7 +117,20 @@ def default_config() -> dict[str, Any]:
         "gis": sensing["gis"],
         "labels": sensing["labels"],
         "dst": DSTParams.default().to_dict(),  # see dstenv.dst.DSTParams
+        "protocol": _protocol_defaults(),
         "frame": _frame_defaults(),
+    }
+
+
+def _protocol_defaults() -> dict[str, Any]:
+    return {  # the paper's evaluation protocol (defaults: fuse every step, all cells)
+        # fuse every k-th step (paper: 10 -> 1 Hz, 20 -> 0.5 Hz); t-1 = the previous
+        # fused frame; steps in between carry the last fused BetP [steps]
+        "update_every": 1,
+        # [deg] > 0: label only the cells inside a front camera's horizontal field of
+        # view (KITTI's left colour camera: 81), the rest ignored (255); 0: all cells
+        "camera_fov": 0.0,
+        "moving_rule": "speed",  # "speed" (labels.moving_threshold) or "displacement"
     }
 
 
@@ -118,6 +150,12 @@ def _SOURCE_RULE() -> Any:  # noqa: N802 - read at validation time: WORLD_SOURCE
 SOURCE_SECTION = Section(lambda: {"source": "city"}, {}, (
     ("source", lambda c: _SOURCE_RULE().check(c["source"], "source") is None,
      "must be a WORLD_SOURCES key"),))
+#: The ``protocol`` section: fusion rate, camera field of view, moving rule.
+PROTOCOL_SECTION = Section(_protocol_defaults, {
+    "update_every": between(1, 1000, "steps"),
+    "camera_fov": between(0.0, 180.0, "deg", hi_open=True),
+    "moving_rule": one_of(*MOVING_RULES),
+})
 #: The ``frame`` section: optional outputs of every :class:`Frame`.
 FRAME_SECTION = Section(_frame_defaults, {})
 
@@ -148,16 +186,31 @@ class Pipeline:
         cfg = self.config
         self.spec = GridSpec(**cfg["grid"])
         params = DSTParams.from_dict(cfg["dst"])
-        self.lidar = Lidar(cfg["lidar"])
-        self.filter = PerceptionGridFilter(self.spec.shape, params, self.spec.cell_size)
+        prot = cfg["protocol"]
+        self._3d = cfg["lidar"]["model"] == "hdl64"
+        if self._3d:
+            from dstenv.sensing.lidar3d import Hdl64
+
+            self.lidar: Any = Hdl64(cfg["lidar"])
+        else:
+            self.lidar = Lidar(cfg["lidar"])
+        self.tracker = GridTracker(self.spec.shape, params, self.spec.cell_size)
+        self.camera = (camera_mask(self.spec, prot["camera_fov"]) if prot["camera_fov"] > 0
+                       else None)
         self._world = world
         self.seed = 0
         self.step_index = 0
         self._rng = np.random.default_rng(0)
         self._map_error: MapError | None = None
-        self._prev_betp: np.ndarray | None = None
-        self._prev_pose: np.ndarray | None = None
+        self._betp: np.ndarray | None = None
+        self._betp_prev: np.ndarray | None = None
+        self._last: tuple[np.ndarray, float] | None = None  # pose and time of the last step
         self.sweep: Any = None
+
+    @property
+    def filter(self) -> Any:
+        """The :class:`~dstenv.dst.PerceptionGridFilter` inside :attr:`tracker`."""
+        return self.tracker.filter
 
     @property
     def world(self) -> WorldSource:
@@ -182,10 +235,10 @@ class Pipeline:
         # one map / localisation error per episode: a persistently wrong map
         self._map_error = (None if gis_is_exact(gis)
                            else MapError.sample(self._world.map, gis, self._rng))
-        self.filter.reset()
+        self.tracker.reset()
         self.step_index = 0
-        self._prev_pose = None
-        self._prev_betp = None
+        self._last = None
+        self._betp = self._betp_prev = None
         return self._observe()
 
     def step(self, action: Any = None) -> Frame:
@@ -196,7 +249,7 @@ class Pipeline:
                 what the world source accepts (``(accel [m/s^2], steer [rad])``,
                 or a meta-action name for highway-env scenes).
         """
-        if self._prev_pose is None:
+        if self._last is None:
             raise RuntimeError("Pipeline.step: call reset(seed) first")
         self.world.step(action)
         self.step_index += 1
@@ -209,40 +262,55 @@ class Pipeline:
         the frames of later steps are identical; data generation calls this for the
         steps between kept frames.
         """
-        if self._prev_pose is None:
+        if self._last is None:
             raise RuntimeError("Pipeline.step: call reset(seed) first")
         self.world.step(action)
         self.step_index += 1
-        pose, _, _, _, _ = self._sense(False)
-        self._prev_pose = pose
-        self._prev_betp = self.filter.pignistic()
+        self._sense(False)
 
     def _sense(self, want_masses: bool) -> tuple[np.ndarray, Agents, np.ndarray, np.ndarray,
                                                  np.ndarray]:
-        """Sweep, grids and filter update: ``(pose, agents, sensor, gis, masses)``."""
+        """Sweep, grids and (on fused steps) the tracker: ``(pose, agents, sensor, gis,
+        masses)``; ``masses`` is the last fused grid."""
         w, spec = self.world, self.spec
         pose = np.array(w.ego_pose, dtype=np.float64)
         agents = w.agents
-        self.sweep = self.lidar.sweep(w.map, agents, pose, self._rng)
+        if not self._3d:
+            self.sweep = self.lidar.sweep(w.map, agents, pose, self._rng)
+        else:  # the 3-D LIDAR skews with the ego's motion within the turn
+            yaw_rate = 0.0
+            if self._last is not None and float(w.time) > self._last[1]:
+                dyaw = (pose[2] - self._last[0][2] + np.pi) % (2 * np.pi) - np.pi
+                yaw_rate = float(dyaw) / (float(w.time) - self._last[1])
+            self.sweep = self.lidar.sweep(w.map, agents, pose, self._rng, float(w.ego_speed),
+                                          yaw_rate)
+        self._last = (pose, float(w.time))
         sensor = self.sweep.sensor_grid(spec)
         gis = gis_grid(w.map, pose, spec, self._map_error)
-        motion = None if self._prev_pose is None else relative_pose(self._prev_pose, pose)
-        masses = self.filter.update(sensor, gis, motion, copy=want_masses)
-        return pose, agents, sensor, gis, masses
+        if self.step_index % self.config["protocol"]["update_every"] == 0:
+            out = self.tracker.step(sensor, gis, pose)
+            self._betp, self._betp_prev = out.betp, out.betp_prev
+        masses = self.tracker.filter.masses
+        return pose, agents, sensor, gis, masses.copy() if want_masses else masses
 
     def _observe(self) -> Frame:
         w, cfg, spec = self.world, self.config, self.spec
         want_masses = cfg["frame"]["masses"]
         pose, agents, sensor, gis, masses = self._sense(want_masses)
-        betp = self.filter.pignistic()
-        labels = label_grid(w.map, agents, pose, spec, cfg["labels"]["moving_threshold"])
+        labels = label_grid(w.map, agents, pose, spec, self.moving_threshold)
+        if self.camera is not None:
+            labels[~self.camera] = IGNORE_INDEX
         extras: dict[str, np.ndarray] = {}
         if cfg["frame"]["lidar_points"]:
-            # fixed (B, 2) shape, NaN rows for beams without return: stacks across envs
-            extras["lidar_points"] = self.sweep.points.astype(np.float32)
+            # fixed shape, NaN rows for beams without return: stacks across envs
+            # ((B, 2) ego frame for the 2-D model, (B, 4) Velodyne rows for hdl64)
+            extras["lidar_points"] = (self.sweep.points.astype(np.float32)
+                                      if not self._3d else self.sweep.dense())
+        if self._betp is None or self._betp_prev is None:  # step 0 is always fused
+            raise RuntimeError("Pipeline: no fused frame yet")
         frame = Frame(
-            pignistic=betp,
-            pignistic_prev=betp if self._prev_betp is None else self._prev_betp,
+            pignistic=self._betp,
+            pignistic_prev=self._betp_prev,
             labels=labels,
             visible=visible_mask(sensor),
             sensor=sensor,
@@ -254,6 +322,27 @@ class Pipeline:
             masses=masses if want_masses else None,
             extras=extras,
         )
-        self._prev_pose = pose
-        self._prev_betp = betp
         return frame
+
+    @property
+    def moving_threshold(self) -> float:
+        """Speed above which an agent is labelled moving [m/s] (see ``protocol.moving_rule``)."""
+        cfg = self.config
+        if cfg["protocol"]["moving_rule"] == "speed":
+            return float(cfg["labels"]["moving_threshold"])
+        dt = float(cfg["world"]["dt"]) if cfg["source"] == "city" else 0.1
+        return KITTI_DISPLACEMENT / (dt * cfg["protocol"]["update_every"])
+
+
+def camera_mask(spec: GridSpec, fov_deg: float) -> np.ndarray:
+    """Cells inside a forward camera's horizontal field of view.
+
+    Args:
+        spec: grid geometry (the camera at the ego cell, looking along +x).
+        fov_deg: full horizontal field of view [deg], in (0, 180).
+
+    Returns:
+        ``(H, W) bool``: cell centres ahead of the ego within ``fov_deg / 2`` of +x.
+    """
+    x, y = spec.cell_centers()
+    return (x > 0) & (np.abs(np.arctan2(y, x)) <= np.deg2rad(fov_deg) / 2)

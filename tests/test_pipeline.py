@@ -96,3 +96,49 @@ def test_core_modules_do_not_import_gymnasium():
     for rel in ("pipeline.py", "sim/highway.py"):
         src = (root / rel).read_text()
         assert not re.search(r"^\s*(import|from)\s+gymnasium", src, re.M), rel
+
+
+def test_protocol_fuses_every_kth_step_with_the_previous_fused_frame():
+    p = Pipeline({**CITY, "protocol": {"update_every": 3}})
+    frames = [p.reset(seed=2)] + [p.step() for _ in range(6)]
+    for k in (1, 2):  # between fused steps: the last fused BetP, fresh sensor grid
+        assert np.array_equal(frames[k].pignistic, frames[0].pignistic)
+    assert np.array_equal(frames[3].pignistic_prev, frames[0].pignistic)
+    assert np.array_equal(frames[6].pignistic_prev, frames[3].pignistic)
+    assert not np.array_equal(frames[3].pignistic, frames[0].pignistic)
+    # the fused frames equal a pipeline fed only those sensor / GIS grids and poses
+    from dstenv.dst.tracker import GridTracker
+
+    tr = GridTracker((48, 40), cell_size=1.0)
+    for k in (0, 3, 6):
+        out = tr.step(frames[k].sensor, frames[k].gis, frames[k].ego_pose)
+    np.testing.assert_array_equal(out.betp, frames[6].pignistic)
+
+
+def test_protocol_camera_fov_and_kitti_moving_rule():
+    p = Pipeline({**CITY, "protocol": {"camera_fov": 81.0, "moving_rule": "displacement",
+                                       "update_every": 10}})
+    f = p.reset(seed=5)
+    x, y = p.spec.cell_centers()
+    inside = (x > 0) & (np.abs(np.arctan2(y, x)) <= np.deg2rad(40.5))
+    assert np.all(f.labels[~inside] == 255) and np.all(f.labels[inside] != 255)
+    assert p.moving_threshold == pytest.approx(0.1)  # 10 cm per 1 s between fused frames
+    assert Pipeline({**CITY, "protocol": {"moving_rule": "displacement"}}).moving_threshold == \
+        pytest.approx(1.0)
+    with pytest.raises(ConfigError, match="protocol.moving_rule"):
+        Pipeline({**CITY, "protocol": {"moving_rule": "smoothed"}})
+    with pytest.raises(ConfigError, match="protocol.update_every"):
+        Pipeline({**CITY, "protocol": {"update_every": 0}})
+
+
+def test_hdl64_pipeline_is_deterministic_and_sees_through_kittis_road():
+    cfg = {"grid": {"height": 96, "width": 96, "cell_size": 0.33},
+           "lidar": {"model": "hdl64", "hdl64": {"azimuth_step": 0.7}},
+           "frame": {"lidar_points": True}}
+    a, b = Pipeline(cfg), Pipeline(cfg)
+    fa, fb = a.reset(seed=3), b.reset(seed=3)
+    fa, fb = a.step(), b.step()
+    assert np.array_equal(fa.sensor, fb.sensor) and np.array_equal(fa.pignistic, fb.pignistic)
+    assert fa.extras["lidar_points"].shape == (64 * 514, 4)
+    shares = np.bincount(fa.sensor.ravel(), minlength=3) / fa.sensor.size
+    assert shares[1] > 0.2 and shares[2] > 0.0

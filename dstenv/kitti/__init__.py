@@ -3,15 +3,14 @@
 Flow: :mod:`~dstenv.kitti.readers` (Velodyne, labels, calibration, OXTS) ->
 :mod:`~dstenv.kitti.poses` (devkit Mercator poses) and
 :mod:`~dstenv.kitti.objects` (boxes in the Velodyne frame, moving rules) ->
-:mod:`~dstenv.kitti.ground` (RANSAC plane + polar walk) ->
-:mod:`~dstenv.kitti.grids` (sensor grid by ray casting, label grid) and
+:mod:`dstenv.sensing.cloud` (RANSAC plane + polar walk, sensor grid by ray casting) ->
+:mod:`~dstenv.kitti.grids` (label grid) and
 :mod:`~dstenv.kitti.osm` (GIS grid from an ``.osm`` file) ->
 :mod:`~dstenv.kitti.sequence` (the DST filter, :class:`dstenv.frame.Frame` objects) ->
 ``dstenv kitti convert`` (:mod:`~dstenv.kitti.cli`) writes shards like ``dstenv generate``.
 
 Names are imported lazily, so ``import dstenv.kitti`` imports neither scipy nor numba.
 """
-
 
 from dstenv._lazy import lazy_attributes
 
@@ -21,8 +20,6 @@ _WHERE = {
     "read_calib": "readers", "read_oxts": "readers",
     "Trajectory": "poses", "oxts_to_trajectory": "poses",
     "Boxes": "objects", "boxes_in_velodyne": "objects", "moving_flags": "objects",
-    "default_ground_config": "ground", "fit_ground_plane": "ground",
-    "classify_points": "ground",
     "default_config": "sequence", "kitti_config": "sequence", "KittiSequence": "sequence",
     "convert_sequence": "sequence",
 }

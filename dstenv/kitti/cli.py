@@ -206,8 +206,33 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--dst-preset", choices=("default", "paper"), help="DST parameters")
 
 
+def _export(args: argparse.Namespace) -> int:
+    from dstenv.cli import CLIError
+    from dstenv.data.sampling import scenario_config
+    from dstenv.kitti.export import export_drive
+
+    if args.frames < 1:
+        raise CLIError(f"--frames must be >= 1, got {args.frames}")
+    split = export_drive(scenario_config(args.scenario), args.seed, args.frames, args.out,
+                         args.sequence)
+    print(f"wrote {args.frames} frames of sequence {args.sequence:04d} under {split}; "
+          f"read it back with: dstenv kitti convert --root {args.out} "
+          f"--sequences {args.sequence:04d} --out DIR")
+    return 0
+
+
 def register(sub: argparse._SubParsersAction) -> None:
-    """Add ``dstenv kitti convert|render|evaluate`` to the CLI."""
+    """Add ``dstenv kitti convert|render|evaluate`` and ``dstenv export-kitti`` to the CLI."""
+    x = sub.add_parser("export-kitti", help="simulate a drive with the 3-D LIDAR, write it "
+                       "in KITTI tracking format", description=(
+                           "Simulated drive -> velodyne/SSSS/*.bin, label_02, oxts, calib "
+                           "(dstenv.kitti.export)"))
+    x.add_argument("--scenario", metavar="NAME|FILE", help="scenario (default: the defaults)")
+    x.add_argument("--frames", type=int, required=True, help="frames to simulate (10 Hz)")
+    x.add_argument("--seed", type=int, default=0, help="episode seed (default 0)")
+    x.add_argument("--sequence", type=int, default=0, help="sequence number SSSS (default 0)")
+    x.add_argument("--out", required=True, metavar="DIR", help="dataset folder (gets training/)")
+    x.set_defaults(func=_export)
     k = sub.add_parser("kitti", help="KITTI tracking -> perception-grid shards",
                        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ksub = k.add_subparsers(dest="kitti_command", metavar="ACTION", required=True)

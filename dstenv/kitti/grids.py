@@ -1,12 +1,8 @@
-"""Ego-centred sensor and label grids of one KITTI frame (axes of :mod:`dstenv.grid`).
+"""Ego-centred label grids of one KITTI frame (axes of :mod:`dstenv.grid`).
 
 Sensor grid
-    One ray per used LIDAR point, cast with :func:`dstenv.sensing.raycast.sensor_grid`
-    in the horizontal plane (angle ``atan2(y, x)``, range ``hypot(x, y)``):
-    obstacle points end in an occupied cell, ground points clear their ray up to
-    and including their own cell (road returns are free space, as in the paper);
-    every ray stops at the first obstacle of its azimuth bin (see
-    :func:`scan_sensor_grid`).
+    Made by :func:`dstenv.sensing.cloud.cloud_sensor_grid`, the road shared with
+    the simulated 3-D LIDAR (ground removal, one ray per used point).
 
 Label grid (KITTI has 3-D boxes but no road or building labels)
     Class indices follow :data:`dstenv.dst.CLASSES`; cells nobody can label are
@@ -43,12 +39,10 @@ from dstenv.grid import GridSpec
 from dstenv.kitti.objects import Boxes
 from dstenv.kitti.readers import Calibration
 from dstenv.sensing.labels import MAP_TO_CLASS
-from dstenv.sensing.raycast import sensor_grid
 from dstenv.sim.types import MapClass
 
 __all__ = [
     "FREE_LABELS",
-    "scan_sensor_grid",
     "project_to_image",
     "camera_fov",
     "box_mask",
@@ -58,54 +52,6 @@ __all__ = [
 
 FREE_LABELS: tuple[str, ...] = ("navigable", "ignore")
 _NAV, _STATIC, _MOVING = (CLASSES.index(c) for c in ("navigable", "static", "moving"))
-
-
-def scan_sensor_grid(
-    points: np.ndarray, ground: np.ndarray, obstacle: np.ndarray, spec: GridSpec,
-    max_range: float, azimuth_bin_deg: float = 0.2, occluded_hits: bool = True,
-    blocking: np.ndarray | None = None,
-) -> np.ndarray:
-    """Sensor grid of one scan.
-
-    A 3-D scanner sees the road far beyond a car over its roof, but the cells
-    under and right behind the car are not observed at ground level. So every ray
-    is clipped at the nearest *blocking* obstacle of its azimuth bin (the 2-D
-    first hit, as the simulator's LIDAR; the converter can exempt low obstacles
-    so that ground seen over a guard rail stays free); obstacle points behind
-    it still mark their own cell occupied when ``occluded_hits`` (a wall seen
-    over a car), without clearing the cells in front of them.
-
-    Args:
-        points: ``(P, 3+) float`` Velodyne points.
-        ground, obstacle: ``(P,) bool`` masks from
-            :func:`dstenv.kitti.ground.classify_points`.
-        spec: grid geometry.
-        max_range: rays are clipped to this horizontal range [m].
-        azimuth_bin_deg: width of the first-hit bins [deg].
-        occluded_hits: mark obstacle points behind a first hit occupied.
-        blocking: ``(P,) bool`` obstacle points that stop rays (default: all).
-
-    Returns:
-        ``(H, W) uint8``: 0 unknown, 1 free, 2 occupied.
-    """
-    used = ground | obstacle
-    xy = np.asarray(points, dtype=np.float64)[used, :2]
-    hit = np.asarray(obstacle, dtype=bool)[used]
-    block = hit if blocking is None else np.asarray(blocking, dtype=bool)[used] & hit
-    angle = np.arctan2(xy[:, 1], xy[:, 0])
-    rng = np.hypot(xy[:, 0], xy[:, 1])
-    n_bins = max(int(round(360.0 / azimuth_bin_deg)), 1)
-    b = np.minimum(((angle + np.pi) / (2 * np.pi) * n_bins).astype(np.int64), n_bins - 1)
-    nearest = np.full(n_bins, np.inf)
-    np.minimum.at(nearest, b[block], rng[block])
-    first = hit & (rng <= nearest[b])
-    grid = sensor_grid(angle, np.minimum(rng, nearest[b]), first, spec, max_range)
-    if occluded_hits:
-        behind = hit & ~first & (rng <= max_range)
-        i, j = spec.to_cell(xy[behind, 0], xy[behind, 1])
-        keep = spec.inside(i, j)
-        grid[i[keep], j[keep]] = SensorState.OCCUPIED
-    return grid
 
 
 def project_to_image(xyz: np.ndarray, calib: Calibration) -> tuple[np.ndarray, np.ndarray]:

@@ -1,9 +1,9 @@
 """One KITTI tracking sequence -> labelled :class:`dstenv.frame.Frame` objects.
 
 Flow per filtered scan (every ``update_every``-th, default all: 10 Hz): Velodyne
-scan -> ground plane (RANSAC + polar walk) -> sensor grid (ray casting) + GIS grid
-(OSM map cut at the OXTS pose, or vacuous) -> :class:`dstenv.dst.PerceptionGridFilter`
-with the relative pose since the previous filtered scan as ego motion -> BetP. One
+scan -> :func:`dstenv.sensing.cloud.cloud_sensor_grid` (ground removal, rays: the
+road the simulated 3-D LIDAR takes too) + GIS grid (OSM map cut at the OXTS pose,
+or vacuous) -> :class:`dstenv.dst.tracker.GridTracker` -> BetP. One
 frame every ``stride`` scans from ``warmup`` on is kept, with labels from the boxes
 of that frame (as ``dstenv generate --stride --warmup`` keeps simulator steps).
 
@@ -22,11 +22,11 @@ from typing import Any
 import numpy as np
 
 from dstenv.config import ConfigError, merge_config
-from dstenv.dst import DSTParams, PerceptionGridFilter
+from dstenv.dst import DSTParams
+from dstenv.dst.tracker import GridTracker
 from dstenv.frame import Frame
-from dstenv.grid import GridSpec, relative_pose
-from dstenv.kitti.grids import FREE_LABELS, camera_fov, dontcare_cells, label_grid, scan_sensor_grid
-from dstenv.kitti.ground import classify_points, default_ground_config, fit_ground_plane
+from dstenv.grid import GridSpec
+from dstenv.kitti.grids import FREE_LABELS, camera_fov, dontcare_cells, label_grid
 from dstenv.kitti.objects import MOVING_RULES, boxes_in_velodyne, moving_flags, world_centres
 from dstenv.kitti.poses import oxts_to_trajectory
 from dstenv.kitti.readers import (
@@ -39,9 +39,15 @@ from dstenv.kitti.readers import (
     velodyne_path,
 )
 from dstenv.sensing import visible_mask
+from dstenv.sensing.cloud import (
+    CloudError,
+    cloud_sensor_grid,
+    default_ground_config,
+    default_ray_config,
+)
 
 __all__ = [
-    "FRAME_RATE", "default_config", "kitti_config", "kept_frames", "sensor_from_scan",
+    "FRAME_RATE", "default_config", "kitti_config", "kept_frames",
     "KittiSequence", "convert_sequence",
 ]
 
@@ -62,15 +68,8 @@ def default_config() -> dict[str, Any]:
         "update_every": 1,  # [frames]
         "stride": 5,  # [frames]
         "warmup": 5,  # [frames] first kept frame (the filter has seen frames before it)
-        "sensor": {
-            "max_range": 60.0,  # [m] horizontal LIDAR range used for ray casting
-            "azimuth_bin_deg": 0.2,  # [deg] rays stop at the first obstacle of their bin
-            "occluded_hits": True,  # obstacle points behind a first hit still occupy their cell
-            # [m] obstacles at least this tall stop the rays of their bin (0: all, as the
-            # simulator; 1.0 keeps ground seen over guard rails free but lets rays
-            # clear the cells under cars: 42% of car footprint cells free vs 8%)
-            "block_height": 0.0,
-        },
+        # rays into the sensor grid: dstenv.sensing.cloud.default_ray_config
+        "sensor": default_ray_config(),
         "ground": default_ground_config(),
         "labels": {
             "rule": "smoothed",  # "paper" (10 cm frame to frame) or "smoothed" (line fit)
@@ -111,23 +110,15 @@ def kitti_config(config: Mapping[str, Any] | None = None) -> dict[str, Any]:
     for key in ("max_range", "azimuth_bin_deg"):
         if not cfg["sensor"][key] > 0:
             raise ConfigError(f"kitti.sensor.{key}: must be > 0, got {cfg['sensor'][key]}")
+    if not cfg["sensor"]["block_window_deg"] >= 0:
+        raise ConfigError("kitti.sensor.block_window_deg: must be >= 0, got "
+                          f"{cfg['sensor']['block_window_deg']}")
     try:
         DSTParams.from_dict(cfg["dst"])
         GridSpec(**cfg["grid"])
     except (ValueError, TypeError) as exc:
         raise ConfigError(f"kitti: {exc}") from None
     return cfg
-
-
-def sensor_from_scan(
-    points: np.ndarray, ground: np.ndarray, obstacle: np.ndarray, height: np.ndarray,
-    spec: GridSpec, sensor_cfg: Mapping[str, Any],
-) -> np.ndarray:
-    """``(H, W) uint8`` sensor grid with the ``sensor`` settings of :func:`default_config`."""
-    return scan_sensor_grid(
-        points, ground, obstacle, spec, sensor_cfg["max_range"], sensor_cfg["azimuth_bin_deg"],
-        sensor_cfg["occluded_hits"], blocking=obstacle & (height >= sensor_cfg["block_height"]),
-    )
 
 
 def kept_frames(n_frames: int, config: Mapping[str, Any]) -> list[int]:
@@ -213,30 +204,25 @@ def convert_sequence(
     cfg = kitti_config(config)
     spec = GridSpec(**cfg["grid"])
     lab = cfg["labels"]
-    dst = PerceptionGridFilter(spec.shape, DSTParams.from_dict(cfg["dst"]), spec.cell_size)
+    tracker = GridTracker(spec.shape, DSTParams.from_dict(cfg["dst"]), spec.cell_size)
     moving = seq.moving(lab["rule"], lab["threshold"], lab["window"])
     fov = camera_fov(seq.calib, spec, lab["image_width"])
     dontcare_boxes = seq.labels.select(seq.labels.is_dontcare)
     keep = set(kept_frames(seq.n_frames, cfg))
-    prev_pose: np.ndarray | None = None
-    prev_betp: np.ndarray | None = None
     for f in range(0, seq.n_frames, cfg["update_every"]):
         try:
             points = seq.scan(f)
-            plane = fit_ground_plane(points, cfg["ground"])
-        except KittiError as exc:
+            sensor, plane, _, obstacle, _ = cloud_sensor_grid(
+                points, spec, cfg["ground"], cfg["sensor"])
+        except (KittiError, CloudError) as exc:
             msg = f"sequence {seq.name} frame {f}: skipped: {exc}"
             log.warning(msg)
             if skipped is not None:
                 skipped.append(msg)
             continue
-        ground, obstacle, height = classify_points(points, plane, cfg["ground"])
-        sensor = sensor_from_scan(points, ground, obstacle, height, spec, cfg["sensor"])
         pose = seq.trajectory.poses[f]
         gis = np.zeros(spec.shape, np.uint8) if gis_fn is None else gis_fn(pose, spec)
-        motion = None if prev_pose is None else relative_pose(prev_pose, pose)
-        masses = dst.update(sensor, gis, motion)
-        betp = dst.pignistic()
+        out = tracker.step(sensor, gis, pose, masses=f in keep)
         if f in keep:
             sel = seq.boxes.frame == f
             dc = dontcare_cells(
@@ -248,8 +234,8 @@ def convert_sequence(
                 gis if gis_fn is not None else None, lab["free_label"],
             )
             yield Frame(
-                pignistic=betp,
-                pignistic_prev=betp.copy() if prev_betp is None else prev_betp,
+                pignistic=out.betp,
+                pignistic_prev=out.betp_prev,
                 labels=labels,
                 visible=visible_mask(sensor),
                 sensor=sensor,
@@ -258,7 +244,6 @@ def convert_sequence(
                 time=f / FRAME_RATE,
                 seed=int(seq.name),
                 step=f,
-                masses=masses,
+                masses=out.masses,
                 extras={"plane": plane},
             )
-        prev_pose, prev_betp = pose, betp

@@ -11,7 +11,7 @@ honestly in two stages:
    shard, so the same world, LIDAR sweeps and labels) and keeps only the raw
    inputs of every step -- sensor grid, GIS grid, ego pose -- plus labels and
    ``visible`` at the scored steps: an :class:`Episode`.
-2. :func:`filter_episode` runs a fresh :class:`dstenv.dst.PerceptionGridFilter`
+2. :func:`filter_episode` runs a fresh :class:`dstenv.dst.tracker.GridTracker`
    with any :class:`~dstenv.dst.DSTParams` over those inputs, which costs only the
    filter, not the simulation, per parameter set.
 
@@ -39,7 +39,6 @@ import numpy as np
 
 from dstenv.dst.frame import CLASSES
 from dstenv.dst.params import DSTParams
-from dstenv.grid import relative_pose
 
 __all__ = [
     "Episode",
@@ -103,23 +102,18 @@ def filter_episode(episode: Episode, params: DSTParams) -> np.ndarray:
         ``(K, 10, H, W) float32``: BetP at each scored step t and at t-1 (BetP at t
         again on step 0), the layout of :meth:`dstenv.frame.Frame.fcn_input`.
     """
-    from dstenv.dst import PerceptionGridFilter
+    from dstenv.dst.tracker import GridTracker
 
     h, w = episode.sensor.shape[1:]
-    filt = PerceptionGridFilter((h, w), params, cell_size=episode.cell_size)
-    filt.reset()
+    tracker = GridTracker((h, w), params, cell_size=episode.cell_size)
     out = np.empty((len(episode.steps), 10, h, w), dtype=np.float32)
     wanted = {int(s): k for k, s in enumerate(episode.steps)}
     last = int(episode.steps[-1]) if len(episode.steps) else -1
-    prev = None
     for t in range(last + 1):
-        motion = None if t == 0 else relative_pose(episode.poses[t - 1], episode.poses[t])
-        filt.update(episode.sensor[t], episode.gis[t], motion, copy=False)
-        betp = np.array(filt.pignistic(), dtype=np.float32, copy=True)
+        step = tracker.step(episode.sensor[t], episode.gis[t], episode.poses[t])
         if t in wanted:
-            out[wanted[t], :5] = betp
-            out[wanted[t], 5:] = betp if prev is None else prev
-        prev = betp
+            out[wanted[t], :5] = step.betp
+            out[wanted[t], 5:] = step.betp_prev
     return out
 
 
@@ -143,6 +137,12 @@ def record_episodes(
 
     from dstenv.pipeline import Pipeline
 
+    if filter_period(config) != 1:
+        raise ValueError(
+            f"record_episodes: the shards fused every {filter_period(config)} steps "
+            "(protocol.update_every); replay re-fuses every step, so it cannot reproduce "
+            "them: generate with protocol.update_every = 1 to tune or re-score DST variants"
+        )
     pipe = Pipeline(dict(config))
     episodes = []
     for seed in tqdm(sorted(targets), desc="replay episodes", disable=not progress, leave=False):
@@ -275,10 +275,11 @@ def stored_inputs(
 def filter_period(config: Mapping[str, Any]) -> int:
     """Steps between two DST updates of a shard's producer.
 
-    ``update_every`` of a KITTI conversion (:func:`dstenv.kitti.sequence.default_config`);
-    the simulator updates the filter on every step (1).
+    ``update_every`` of a KITTI conversion (:func:`dstenv.kitti.sequence.default_config`)
+    or ``protocol.update_every`` of the simulator (default 1: every step).
     """
-    return int(config.get("update_every", 1))
+    protocol = config.get("protocol", {})  # simulated shards: protocol.update_every
+    return int(config.get("update_every", protocol.get("update_every", 1)))
 
 
 def stored_episodes(

@@ -15,6 +15,8 @@ from typing import Any
 from dstenv.config import PROB, Section, between, one_of, section
 
 __all__ = [
+    "LIDAR_MODELS",
+    "default_hdl64_config",
     "default_config",
     "default_lidar_config",
     "default_gis_config",
@@ -29,9 +31,39 @@ __all__ = [
 ]
 
 
-def default_lidar_config() -> dict[str, Any]:
-    """The ``lidar`` section: a 2-D scanning LIDAR (a Velodyne sliced to the ground plane)."""
+#: ``lidar.model`` values: the fast 2-D scanner or the 3-D Velodyne HDL-64E-like one.
+LIDAR_MODELS: tuple[str, ...] = ("2d", "hdl64")
+
+
+def default_hdl64_config() -> dict[str, Any]:
+    """The ``lidar.hdl64`` section: a spinning 64-channel LIDAR like KITTI's HDL-64E."""
+    from dstenv.sensing.cloud import default_ground_config, default_ray_config
+
     return {
+        "channels": 64,  # elevation channels [-], spread evenly from top to bottom
+        "elevation_top": 2.0,  # [deg] highest channel (HDL-64E: +2.0)
+        "elevation_bottom": -24.9,  # [deg] lowest channel (HDL-64E: -24.9)
+        "azimuth_step": 0.17578125,  # [deg] between firings of a channel (2048 per turn)
+        "mount_height": 1.73,  # [m] sensor above the road (KITTI's Velodyne)
+        "max_range": 120.0,  # [m] slant range of a return
+        "min_range": 2.0,  # [m] near blind zone: closer returns are discarded
+        "range_noise": 0.02,  # [m] std of Gaussian range noise
+        "dropout": 0.05,  # probability that a return is lost [-]
+        "intensity_noise": 0.03,  # std of additive reflectance noise [-]
+        "spin_rate": 10.0,  # [Hz] one turn per LIDAR period; 0: no within-sweep skew
+        "channel_seed": 64,  # seed of the fixed per-channel gain (a calibration table)
+        # the point cloud -> grid road shared with KITTI (dstenv.sensing.cloud)
+        "ground": default_ground_config(),
+        "rays": default_ray_config(),
+    }
+
+
+def default_lidar_config() -> dict[str, Any]:
+    """The ``lidar`` section: a 2-D scanning LIDAR (a Velodyne sliced to the ground plane),
+    or with ``model = "hdl64"`` the 3-D LIDAR of the ``hdl64`` sub-section."""
+    return {
+        "model": "2d",  # "2d" (fast, beams in the scan plane) or "hdl64" (3-D point cloud)
+        "hdl64": default_hdl64_config(),
         "beams": 1800,  # number of beams per sweep [-] (0.2 deg spacing over 360 deg)
         "fov": 360.0,  # horizontal field of view [deg], centred on ego-forward
         "max_range": 80.0,  # [m]; beyond it a beam has no return
@@ -98,7 +130,52 @@ def default_config() -> dict[str, dict[str, Any]]:
 _M = "m"
 
 #: The ``lidar`` section.
+_GROUND = {
+    "iterations": between(1, 10_000),
+    "sample": between(10, 1_000_000),
+    "fit_range": between(1.0, 200.0, _M),
+    "max_candidate_z": between(-10.0, 10.0, _M),
+    "inlier_distance": between(0.0, 2.0, _M, lo_open=True),
+    "max_tilt_deg": between(0.0, 45.0, "deg"),
+    "ground_height": between(0.0, 2.0, _M),
+    "min_obstacle_height": between(0.0, 5.0, _M),
+    "max_obstacle_height": between(0.0, 50.0, _M),
+    "ego_radius": between(0.0, 10.0, _M),
+    "sector_deg": between(0.05, 45.0, "deg"),
+    "bin_size": between(0.05, 20.0, _M),
+    "max_slope": between(0.0, 2.0, "m/m"),
+    "step_tolerance": between(0.0, 2.0, _M),
+    "flat_spread": between(0.0, 5.0, _M),
+    "max_drop_slope": between(0.0, 2.0, "m/m"),
+    "drop_tolerance": between(0.0, 5.0, _M),
+    "seed": between(0, 2**31 - 1),
+}
+_RAYS = {
+    "max_range": between(1.0, 500.0, _M),
+    "azimuth_bin_deg": between(0.01, 10.0, "deg"),
+    "block_window_deg": between(0.0, 20.0, "deg"),
+    "block_height": between(0.0, 10.0, _M),
+}
+
+#: The ``lidar`` section (beams and points per sweep bounded: a sweep's memory).
 LIDAR = Section(default_lidar_config, {
+    "model": one_of(*LIDAR_MODELS),
+    "hdl64": {
+        "channels": between(1, 512),
+        "elevation_top": between(-90.0, 90.0, "deg"),
+        "elevation_bottom": between(-90.0, 90.0, "deg"),
+        "azimuth_step": between(0.01, 10.0, "deg"),
+        "mount_height": between(0.1, 10.0, _M),
+        "max_range": between(0.0, 500.0, _M, lo_open=True),
+        "min_range": between(0.0, 50.0, _M),
+        "range_noise": between(0.0, 5.0, _M),
+        "dropout": PROB,
+        "intensity_noise": between(0.0, 1.0),
+        "spin_rate": between(0.0, 100.0, "Hz"),
+        "channel_seed": between(0, 2**31 - 1),
+        "ground": _GROUND,
+        "rays": _RAYS,
+    },
     "beams": between(1, 200_000),
     "fov": between(0.0, 360.0, "deg", lo_open=True),
     "max_range": between(0.0, 500.0, _M, lo_open=True),
@@ -108,7 +185,16 @@ LIDAR = Section(default_lidar_config, {
     "mount_y": between(-10.0, 10.0, _M),
     "plane_height": between(0.0, 3.0, _M),
     "buildings": one_of("auto", "polygons", "raster"),
-})
+}, (("hdl64.elevation_top", lambda c: c["hdl64"]["elevation_top"] > c["hdl64"]["elevation_bottom"],
+     "must be above hdl64.elevation_bottom"),
+    ("hdl64.ground.max_obstacle_height",
+     lambda c: c["hdl64"]["ground"]["min_obstacle_height"]
+     < c["hdl64"]["ground"]["max_obstacle_height"],
+     "must be above hdl64.ground.min_obstacle_height"),
+    # the points of one sweep: channels x 360 / azimuth_step, bounded so a sweep fits
+    ("hdl64.azimuth_step", lambda c: c["hdl64"]["channels"] * 360.0
+     / c["hdl64"]["azimuth_step"] <= 5_000_000, "gives more than 5 million beams per sweep"),
+))
 
 #: The ``gis`` section.
 GIS = Section(default_gis_config, {

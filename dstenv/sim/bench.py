@@ -5,6 +5,8 @@ GIS grid + label grid + visible mask, in a generated city with about 40 agents.
 Each part is timed alone and the chain as a whole; every figure is also given as
 a ratio to a reference computation (``np.sin`` over 256 x 256 floats) run in the
 same process, so the numbers compare across machines. Goal: chain <= 2 ms.
+Beside it the 3-D LIDAR (``lidar.model = "hdl64"``, 64 x 2048 beams): its sweep and
+the point-cloud road to the grid (ground removal, rays); goal <= 10 ms together.
 """
 
 from __future__ import annotations
@@ -66,6 +68,19 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             "GIS grid": lambda: gis_grid(world.map, world.ego_pose, spec),
             "label grid": lambda: label_grid(world.map, world.agents, world.ego_pose, spec),
             "step + sweep + grids + labels": chain,
+        })
+        from dstenv.sensing.lidar3d import Hdl64
+
+        hdl = Hdl64({"model": "hdl64"})  # 64 x 2048 beams
+
+        def sweep3d():
+            return hdl.sweep(world.map, world.agents, world.ego_pose, rng, world.ego_speed)
+
+        cloud = sweep3d()
+        cases.update({
+            "hdl64 sweep (64 x 2048 beams)": sweep3d,
+            "hdl64 ground removal + sensor grid": lambda: cloud.sensor_grid(spec),
+            "hdl64 sweep + sensor grid (goal 10)": lambda: sweep3d().sensor_grid(spec),
         })
     print(f"world: {len(world.agents)} agents ({int((~world.agents.parked).sum())} mobile), "
           f"{len(world.map.lanes)} lanes, map {world.map.raster.shape[1]}x"

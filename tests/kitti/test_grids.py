@@ -9,10 +9,11 @@ from scipy.ndimage import binary_dilation
 from dstenv.dst import CLASSES, SensorState
 from dstenv.frame import IGNORE_INDEX
 from dstenv.grid import GridSpec
-from dstenv.kitti.grids import box_mask, camera_fov, dontcare_cells, label_grid, scan_sensor_grid
+from dstenv.kitti.grids import box_mask, camera_fov, dontcare_cells, label_grid
 from dstenv.kitti.objects import Boxes
 from dstenv.kitti.readers import read_calib
 from dstenv.kitti.sequence import KittiSequence, convert_sequence
+from dstenv.sensing.cloud import scan_sensor_grid
 from dstenv.sim.types import MapClass
 
 from .conftest import FIXTURES

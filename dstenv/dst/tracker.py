@@ -1,0 +1,98 @@
+"""The DST filter over time: the one loop behind the simulator, KITTI and replay.
+
+A :class:`GridTracker` owns a :class:`~dstenv.dst.PerceptionGridFilter`, the pose of
+the previous *fused* frame and the BetP it produced. Each :meth:`GridTracker.step`
+takes ``(sensor grid, GIS grid, ego pose)``, moves the filter by the relative pose
+since the previous fused frame (:func:`dstenv.grid.relative_pose`) and returns BetP
+at t and at t-1, where t-1 is the previous fused frame (the paper fused at 1 Hz or
+0.5 Hz: t-1 is then 1 s or 2 s earlier, not one LIDAR period). The first step after
+:meth:`GridTracker.reset` has no past: its t-1 is BetP at t.
+
+Callers decide *which* frames are fused (``dst.update_every`` in the pipeline,
+``update_every`` in KITTI conversion); frames in between are not seen here.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from dstenv.dst.filter import PerceptionGridFilter
+from dstenv.dst.params import DSTParams
+from dstenv.grid import relative_pose
+
+__all__ = ["GridTracker", "TrackerStep"]
+
+
+@dataclass
+class TrackerStep:
+    """The result of one fused frame.
+
+    Attributes:
+        betp: ``(5, H, W) float32`` BetP at t (a fresh array).
+        betp_prev: ``(5, H, W) float32`` BetP of the previous fused frame (``betp``
+            itself on the first step).
+        masses: ``(32, H, W) float32`` perception grid at t: a copy when asked for
+            with ``masses=True``, else the filter's read-only view, valid until the
+            next step.
+    """
+
+    betp: np.ndarray
+    betp_prev: np.ndarray
+    masses: np.ndarray
+
+
+class GridTracker:
+    """A perception-grid filter stepped with ego poses.
+
+    Args:
+        shape: ``(H, W)`` grid shape [cells].
+        params: DST parameters (default: :meth:`DSTParams.default`).
+        cell_size: [m].
+        threads: filter threads (see :class:`PerceptionGridFilter`).
+
+    Attributes:
+        filter: the underlying :class:`PerceptionGridFilter`.
+        prev_pose: ``(3,) float64`` pose of the last fused frame, or ``None``.
+        prev_betp: ``(5, H, W) float32`` BetP of the last fused frame, or ``None``.
+        steps: fused frames since the last reset.
+    """
+
+    def __init__(self, shape: tuple[int, int], params: DSTParams | None = None,
+                 cell_size: float = 0.33, *, threads: int = 1) -> None:
+        self.filter = PerceptionGridFilter(shape, params, cell_size, threads=threads)
+        self.prev_pose: np.ndarray | None = None
+        self.prev_betp: np.ndarray | None = None
+        self.steps = 0
+
+    def reset(self) -> None:
+        """Back to total ignorance, with no previous frame."""
+        self.filter.reset()
+        self.prev_pose = None
+        self.prev_betp = None
+        self.steps = 0
+
+    def step(self, sensor: np.ndarray, gis: np.ndarray, pose: np.ndarray, *,
+             masses: bool = False) -> TrackerStep:
+        """Fuse one frame.
+
+        Args:
+            sensor: ``(H, W) uint8`` sensor grid (0 unknown, 1 free, 2 occupied).
+            gis: ``(H, W) uint8`` GIS grid (:class:`dstenv.sim.types.MapClass` codes).
+            pose: ``(3,) float`` ego world pose ``(x [m], y [m], yaw [rad])``.
+            masses: return a copy of the masses (else the read-only view).
+
+        Returns:
+            A :class:`TrackerStep`.
+        """
+        pose = np.asarray(pose, dtype=np.float64)
+        if pose.shape != (3,) or not np.isfinite(pose).all():
+            raise ValueError(f"GridTracker.step: pose must be a finite (3,) array, got {pose!r}")
+        motion = None if self.prev_pose is None else relative_pose(self.prev_pose, pose)
+        m = self.filter.update(sensor, gis, motion, copy=masses)
+        betp = self.filter.pignistic()
+        prev = betp if self.prev_betp is None else self.prev_betp
+        self.prev_pose, self.prev_betp = pose.copy(), betp
+        self.steps += 1
+        return TrackerStep(betp=betp, betp_prev=prev, masses=m)

@@ -1,0 +1,404 @@
+"""A spinning 64-channel 3-D LIDAR (like KITTI's Velodyne HDL-64E) for the 2-D world.
+
+Geometry. The sensor sits ``mount_height`` above the road at the ego's ``mount_x,
+mount_y``; channel ``c`` of ``C`` has the elevation ``top - c (top - bottom) / (C-1)``
+and fires every ``azimuth_step``; column ``j`` looks at the azimuth
+``pi - j step`` (clockwise, as a Velodyne spins, starting behind the car). Everything
+is a vertical prism over the world's footprints, heights from the occluder contract
+of :mod:`dstenv.sim.types`: buildings ``[0, building_heights]``, agents
+``[0, height]``, clutter ``[z_min, z_max]``, the road ``z = 0`` and
+:attr:`MapClass.INTERMEDIATE` ground raised by ``kerb_height`` (its kerb is a
+vertical face).
+
+Exact ray casting. With ``t`` the horizontal distance along a column, a channel's
+beam is at height ``z(t) = H + t tan(elevation)``. A box is hit at the first ``t``
+of its slab interval ``[t_in, t_out]`` where ``z(t)`` lies in its height range (side
+face, roof or underside); a building wall where an edge is crossed with ``z`` in
+``[0, h]``; the ground where ``z`` reaches the kerb top over a raised cell (walked
+with an exact grid traversal between the heights ``kerb`` and 0) or 0 on the road.
+
+Measurement. Slant range ``t / cos(elevation)`` with Gaussian noise, returns beyond
+``max_range`` or closer than ``min_range`` (the blind zone) discarded, dropout, and
+a reflectance from the surface material times a fixed per-channel gain (a
+calibration table seeded by ``channel_seed``) with noise.
+
+Motion skew. The turn takes ``1 / spin_rate``; column ``j`` fires at
+``tau = -azimuth / (2 pi spin_rate)`` relative to the sweep's reference time (the
+front, where KITTI triggers its camera), from where the ego is then (constant speed
+and yaw rate), and its point is expressed in the sensor frame of that instant, as
+raw Velodyne data are. The rest of the world is frozen during the turn.
+
+Output: ``(N, 4) float32`` rows ``(x, y, z, reflectance)`` in the Velodyne frame
+(x forward, y left, z up from the sensor): the KITTI ``.bin`` layout. All randomness
+comes from the generator passed to :meth:`Hdl64.sweep`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numba
+import numpy as np
+
+from dstenv.grid import GridSpec
+from dstenv.sensing.cloud import cloud_sensor_grid
+from dstenv.sensing.config import lidar_config
+from dstenv.sim.types import Agents, MapClass, WorldMap
+
+__all__ = ["Hdl64", "Cloud", "SURFACES", "REFLECTANCE"]
+
+#: Surface codes of :attr:`Cloud.surface`.
+SURFACES: tuple[str, ...] = ("road", "kerb", "building", "agent", "clutter")
+#: Mean reflectance per surface code (KITTI's median return is ~0.28).
+REFLECTANCE: np.ndarray = np.array([0.22, 0.30, 0.35, 0.40, 0.25])
+_ROAD, _KERB, _BUILDING, _AGENT, _CLUTTER = range(5)
+
+
+@dataclass
+class Cloud:
+    """One sweep of the 3-D LIDAR.
+
+    Attributes:
+        points: ``(N, 4) float32`` x, y, z [m] in the Velodyne frame and reflectance
+            in [0, 1] (KITTI ``.bin`` rows).
+        channel: ``(N,) int16`` channel of each point (0 = highest).
+        column: ``(N,) int32`` azimuth column of each point.
+        surface: ``(N,) uint8`` index into :data:`SURFACES`.
+        index: ``(N,) int32`` agent / clutter / building index (-1 for the ground).
+        mount: ``(2,) float64`` sensor position in the ego frame [m].
+        config: the ``lidar.hdl64`` section used.
+        shape: ``(columns, channels)`` beams of the sweep.
+    """
+
+    points: np.ndarray
+    channel: np.ndarray
+    column: np.ndarray
+    surface: np.ndarray
+    index: np.ndarray
+    mount: np.ndarray
+    config: dict[str, Any]
+    shape: tuple[int, int]
+
+    def __len__(self) -> int:
+        return int(self.points.shape[0])
+
+    def dense(self) -> np.ndarray:
+        """``(columns * channels, 4) float32`` one row per beam (column-major), NaN where
+        there is no return: a fixed shape that stacks across sweeps."""
+        out = np.full((self.shape[0] * self.shape[1], 4), np.nan, np.float32)
+        out[self.column.astype(np.int64) * self.shape[1] + self.channel] = self.points
+        return out
+
+    def sensor_grid(self, spec: GridSpec) -> np.ndarray:
+        """``(H, W) uint8`` sensor grid by :func:`dstenv.sensing.cloud.cloud_sensor_grid`
+        (ground removal, one ray per point), the road KITTI scans take; the points are
+        shifted by the mount so the grid stays ego-centred."""
+        pts = self.points.astype(np.float64)
+        pts[:, 0] += self.mount[0]
+        pts[:, 1] += self.mount[1]
+        return cloud_sensor_grid(pts, spec, self.config["ground"], self.config["rays"])[0]
+
+
+class Hdl64:
+    """A simulated HDL-64E-like LIDAR.
+
+    Args:
+        config: overrides of the ``lidar`` section
+            (:func:`dstenv.sensing.config.default_lidar_config`); its ``hdl64``
+            sub-section and ``mount_x`` / ``mount_y`` are used.
+
+    Raises:
+        dstenv.config.ConfigError: an unknown key or a bad value.
+    """
+
+    def __init__(self, config: Mapping[str, Any] | None = None) -> None:
+        full = lidar_config(config)
+        c = self.config = full["hdl64"]
+        self.mount = np.array([full["mount_x"], full["mount_y"]], dtype=np.float64)
+        n = int(c["channels"])
+        self.elevation = np.deg2rad(np.linspace(c["elevation_top"], c["elevation_bottom"], n))
+        self.slope = np.tan(self.elevation)
+        self.columns = int(round(360.0 / c["azimuth_step"]))
+        self.azimuth = math.pi - np.deg2rad(c["azimuth_step"]) * np.arange(self.columns)
+        self._cos_az, self._sin_az = np.cos(self.azimuth), np.sin(self.azimuth)
+        gain_rng = np.random.default_rng(int(c["channel_seed"]))
+        self.gain = gain_rng.uniform(0.75, 1.25, n)  # per-channel intensity calibration
+        self._map: WorldMap | None = None
+        self._walls: tuple[np.ndarray, ...] = ()
+        self._raster = np.zeros((0, 0), np.uint8)
+
+    @property
+    def beams(self) -> int:
+        """Beams per sweep (channels x columns)."""
+        return len(self.elevation) * self.columns
+
+    def sweep(self, world_map: WorldMap, agents: Agents, pose: np.ndarray,
+              rng: np.random.Generator, speed: float = 0.0, yaw_rate: float = 0.0) -> Cloud:
+        """One turn from the ego at ``pose``.
+
+        Args:
+            world_map: buildings (with heights), clutter, ground raster and kerb.
+            agents: other road users (footprints and heights).
+            pose: ``(3,)`` ego world pose at the sweep's reference time.
+            rng: source of noise, dropout and reflectance noise.
+            speed: ego speed [m/s] and ``yaw_rate`` [rad/s] for the motion skew.
+
+        Returns:
+            A :class:`Cloud`.
+        """
+        c = self.config
+        pose = np.asarray(pose, dtype=np.float64)
+        if pose.shape != (3,) or not np.isfinite(pose).all():
+            raise ValueError(f"Hdl64.sweep: pose must be a finite (3,) array, got {pose!r}")
+        tau = (-self.azimuth / (2 * math.pi * c["spin_rate"]) if c["spin_rate"] > 0
+               else np.zeros(self.columns))
+        # sensor pose per column (constant speed and yaw rate; arc integrated exactly)
+        yaw = pose[2] + yaw_rate * tau
+        if abs(yaw_rate) > 1e-9:
+            ex = (np.sin(yaw) - math.sin(pose[2])) / yaw_rate
+            ey = (math.cos(pose[2]) - np.cos(yaw)) / yaw_rate
+        else:
+            ex, ey = math.cos(pose[2]) * tau, math.sin(pose[2]) * tau
+        cy, sy = np.cos(yaw), np.sin(yaw)
+        ox = pose[0] + speed * ex + cy * self.mount[0] - sy * self.mount[1]
+        oy = pose[1] + speed * ey + sy * self.mount[0] + cy * self.mount[1]
+        world_az = yaw + self.azimuth
+        ux, uy = np.cos(world_az), np.sin(world_az)
+
+        boxes = _box_table(agents, world_map)
+        if self._map is not world_map:  # static geometry, flattened once per map
+            self._walls = _building_table(world_map)
+            self._raster = np.ascontiguousarray(world_map.raster, dtype=np.uint8)
+            self._map = world_map
+        edges, starts, circles, heights = self._walls
+        n = len(self.slope)
+        best = np.full((self.columns, n), np.inf)
+        surf = np.full((self.columns, n), -1, np.int16)
+        idx = np.full((self.columns, n), -1, np.int32)
+        h_max = c["max_range"]  # a slant range bounds the horizontal one
+        _cast_boxes(boxes, ox, oy, ux, uy, self.slope, c["mount_height"], h_max, best, surf, idx)
+        _cast_walls(edges, starts, circles, heights, ox, oy, ux, uy, self.slope,
+                    c["mount_height"], h_max, best, surf, idx)
+        _cast_ground(self._raster, np.uint8(MapClass.INTERMEDIATE), float(world_map.origin[0]), float(world_map.origin[1]),
+                     float(world_map.resolution), float(world_map.kerb_height), ox, oy, ux, uy,
+                     self.slope, c["mount_height"], h_max, best, surf, idx)
+        return self._measure(best, surf, idx, rng)
+
+    def _measure(self, best: np.ndarray, surf: np.ndarray, idx: np.ndarray,
+                 rng: np.random.Generator) -> Cloud:
+        c = self.config
+        cos_el = np.cos(self.elevation)
+        col, ch = np.nonzero(np.isfinite(best))  # returns before noise, column-major
+        n = len(col)
+        noise = rng.normal(0.0, c["range_noise"], n) if c["range_noise"] > 0 else np.zeros(n)
+        keep = rng.random(n) >= c["dropout"] if c["dropout"] > 0 else np.ones(n, bool)
+        inoise = (rng.normal(0.0, c["intensity_noise"], n) if c["intensity_noise"] > 0
+                  else np.zeros(n))
+        pts = np.empty((n, 4), np.float32)
+        out_s = np.empty(n, np.uint8)
+        out_i = np.empty(n, np.int32)
+        m = _points(best, col, ch, noise, keep, inoise, surf, idx, self._cos_az, self._sin_az,
+                    cos_el, np.sin(self.elevation), self.gain, REFLECTANCE,
+                    float(c["min_range"]), float(c["max_range"]), pts, out_s, out_i)
+        return Cloud(pts[:m], ch[:m].astype(np.int16), col[:m].astype(np.int32), out_s[:m],
+                     out_i[:m], self.mount.copy(), c, best.shape)
+
+
+@numba.njit(cache=True)
+def _points(best, col, ch, noise, keep, inoise, surf, idx, cos_az, sin_az, cos_el, sin_el,
+            gain, refl, min_range, max_range, pts, out_s, out_i):  # pragma: no cover - numba
+    """Noisy slant ranges -> Velodyne points and reflectance, compacted in place
+    (``col``, ``ch`` too); returns how many returns are kept."""
+    m = 0
+    for k in range(col.shape[0]):
+        j, c = col[k], ch[k]
+        r = best[j, c] / cos_el[c] + noise[k]
+        if not keep[k] or r > max_range or r < min_range:
+            continue
+        ce = cos_el[c] * r
+        pts[m, 0] = ce * cos_az[j]
+        pts[m, 1] = ce * sin_az[j]
+        pts[m, 2] = r * sin_el[c]
+        v = refl[surf[j, c]] * gain[c] * (1.0 - 0.25 * min(r / 100.0, 1.0)) + inoise[k]
+        pts[m, 3] = min(max(v, 0.0), 1.0)
+        out_s[m] = surf[j, c]
+        out_i[m] = idx[j, c]
+        col[m] = j
+        ch[m] = c
+        m += 1
+    return m
+
+
+def _box_table(agents: Agents, world_map: WorldMap) -> np.ndarray:
+    """``(K, 11)`` rows ``cx, cy, cos, sin, half_l, half_w, z_lo, z_hi, surface, index, r``."""
+    rows = []
+    if len(agents):
+        n = len(agents)
+        rows.append(np.column_stack([
+            agents.xy, np.cos(agents.yaw), np.sin(agents.yaw), agents.length / 2,
+            agents.width / 2, np.zeros(n), agents.height, np.full(n, _AGENT), np.arange(n),
+            np.hypot(agents.length, agents.width) / 2]))
+    obs = world_map.obstacles
+    if obs is not None and len(obs):
+        n = len(obs)
+        rows.append(np.column_stack([
+            obs.xy, np.cos(obs.yaw), np.sin(obs.yaw), obs.length / 2, obs.width / 2,
+            obs.z_min, obs.z_max, np.full(n, _CLUTTER), np.arange(n),
+            np.hypot(obs.length, obs.width) / 2]))
+    return np.ascontiguousarray(np.concatenate(rows)) if rows else np.zeros((0, 11))
+
+
+def _building_table(world_map: WorldMap) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Edges ``(E, 4)``, per-building ``starts (B+1,)``, circles ``(B, 3)`` and heights."""
+    edges, starts, circles = [], [0], []
+    for poly in world_map.buildings:
+        poly = np.asarray(poly, dtype=np.float64)
+        e = np.concatenate([poly, np.roll(poly, -1, axis=0)], axis=1)
+        e = e[np.any(e[:, :2] != e[:, 2:], axis=1)]
+        edges.append(e)
+        starts.append(starts[-1] + len(e))
+        centre = poly.mean(axis=0)
+        circles.append([*centre, np.hypot(*(poly - centre).T).max()])
+    return (np.ascontiguousarray(np.concatenate(edges)) if edges else np.zeros((0, 4)),
+            np.asarray(starts, np.int64), np.asarray(circles, np.float64).reshape(-1, 3),
+            np.asarray(world_map.building_heights, np.float64))
+
+
+@numba.njit(cache=True)
+def _visible(cx, cy, radius, ox, oy, ux, uy, h_max):  # pragma: no cover - numba
+    """Can the column (origin o, direction u) pass within ``radius`` of (cx, cy)?"""
+    dx = cx - ox
+    dy = cy - oy
+    along = dx * ux + dy * uy
+    if along < -radius or along > h_max + radius:
+        return False
+    across = -dx * uy + dy * ux
+    return abs(across) <= radius
+
+
+@numba.njit(cache=True, inline="always")
+def _slab(p, d, half, t0, t1):  # pragma: no cover - numba
+    """Clip ``[t0, t1]`` to the slab ``|p + t d| <= half``; ok = not empty."""
+    if abs(d) < 1e-12:
+        return t0, t1, abs(p) <= half
+    a = (-half - p) / d
+    b = (half - p) / d
+    return max(t0, min(a, b)), min(t1, max(a, b)), True
+
+
+@numba.njit(cache=True)
+def _cast_boxes(boxes, ox, oy, ux, uy, slope, mount, h_max, best, surf, idx):  # pragma: no cover
+    """Extruded oriented boxes: the first t of the slab interval with z in [z_lo, z_hi]."""
+    for j in range(ux.shape[0]):
+        for k in range(boxes.shape[0]):
+            cx, cy, ca, sa = boxes[k, 0], boxes[k, 1], boxes[k, 2], boxes[k, 3]
+            hl, hw, zlo, zhi = boxes[k, 4], boxes[k, 5], boxes[k, 6], boxes[k, 7]
+            s, ind, rad = boxes[k, 8], boxes[k, 9], boxes[k, 10]
+            if not _visible(cx, cy, rad, ox[j], oy[j], ux[j], uy[j], h_max):
+                continue
+            px = ca * (ox[j] - cx) + sa * (oy[j] - cy)  # origin in the box frame
+            py = -sa * (ox[j] - cx) + ca * (oy[j] - cy)
+            dx = ca * ux[j] + sa * uy[j]
+            dy = -sa * ux[j] + ca * uy[j]
+            t0, t1, ok = _slab(px, dx, hl, -np.inf, np.inf)
+            t0, t1, ok2 = _slab(py, dy, hw, t0, t1)
+            if not (ok and ok2) or t1 < t0 or t0 < 0.0:
+                continue  # missed, or the sensor is inside the box
+            for c in range(slope.shape[0]):
+                if t0 >= best[j, c]:
+                    continue
+                z0 = mount + slope[c] * t0
+                if zlo <= z0 <= zhi:
+                    t = t0  # side face
+                elif z0 > zhi and slope[c] < 0:
+                    t = (zhi - mount) / slope[c]  # roof
+                elif z0 < zlo and slope[c] > 0:
+                    t = (zlo - mount) / slope[c]  # underside (a tree crown)
+                else:
+                    continue
+                if t <= t1 and t < best[j, c]:
+                    best[j, c] = t
+                    surf[j, c] = int(s)
+                    idx[j, c] = int(ind)
+
+
+@numba.njit(cache=True)
+def _cast_walls(edges, starts, circles, heights, ox, oy, ux, uy, slope, mount, h_max,
+                best, surf, idx):  # pragma: no cover - numba
+    """Building walls: an edge crossed at t with z(t) in [0, height]."""
+    for j in range(ux.shape[0]):
+        for b in range(circles.shape[0]):
+            if not _visible(circles[b, 0], circles[b, 1], circles[b, 2], ox[j], oy[j], ux[j],
+                            uy[j], h_max):
+                continue
+            for e in range(starts[b], starts[b + 1]):
+                ax = edges[e, 0] - ox[j]
+                ay = edges[e, 1] - oy[j]
+                ex = edges[e, 2] - edges[e, 0]
+                ey = edges[e, 3] - edges[e, 1]
+                den = ux[j] * ey - uy[j] * ex
+                if den == 0.0:
+                    continue
+                t = (ax * ey - ay * ex) / den
+                sp = (ax * uy[j] - ay * ux[j]) / den
+                if t < 0.0 or sp < 0.0 or sp > 1.0:
+                    continue
+                for c in range(slope.shape[0]):
+                    z = mount + slope[c] * t
+                    if t < best[j, c] and 0.0 <= z <= heights[b]:
+                        best[j, c] = t
+                        surf[j, c] = 2
+                        idx[j, c] = b
+
+
+@numba.njit(cache=True)
+def _cast_ground(raster, raised, x0, y0, res, kerb, ox, oy, ux, uy, slope, mount, h_max,
+                 best, surf, idx):  # pragma: no cover - numba
+    """The road (z = 0) and kerb-raised cells (``raised`` raster code, as
+    :meth:`WorldMap.ground_height`): walk the raster where 0 <= z <= kerb."""
+    hm, wm = raster.shape
+    for j in range(ux.shape[0]):
+        for c in range(slope.shape[0]):
+            if slope[c] >= 0.0:
+                continue
+            t_top = (kerb - mount) / slope[c]  # the beam sinks below the kerb top here
+            t_road = -mount / slope[c]
+            if t_top >= best[j, c] or t_top > h_max:
+                continue
+            hit = min(t_road, best[j, c])
+            kind = 0
+            if kerb > 0.0:
+                # exact traversal of the raster cells over [t_top, t_road]
+                u = (ox[j] + ux[j] * t_top - x0) / res
+                v = (oy[j] + uy[j] * t_top - y0) / res
+                col = int(math.floor(u))
+                row = int(math.floor(v))
+                sc = 1 if ux[j] > 0 else -1
+                sr = 1 if uy[j] > 0 else -1
+                tdc = res / abs(ux[j]) if ux[j] != 0.0 else np.inf
+                tdr = res / abs(uy[j]) if uy[j] != 0.0 else np.inf
+                tmc = t_top + (((col + 1 - u) if ux[j] > 0 else (u - col)) * tdc
+                               if ux[j] != 0.0 else np.inf)
+                tmr = t_top + (((row + 1 - v) if uy[j] > 0 else (v - row)) * tdr
+                               if uy[j] != 0.0 else np.inf)
+                t = t_top
+                while t < hit:
+                    if 0 <= row < hm and 0 <= col < wm and raster[row, col] == raised:
+                        hit = t  # the kerb top (t = t_top) or its vertical face
+                        kind = 1
+                        break
+                    if tmc < tmr:
+                        t = tmc
+                        tmc += tdc
+                        col += sc
+                    else:
+                        t = tmr
+                        tmr += tdr
+                        row += sr
+            if hit < best[j, c]:
+                best[j, c] = hit
+                surf[j, c] = kind
+                idx[j, c] = -1

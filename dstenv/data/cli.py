@@ -90,7 +90,7 @@ def _generate(args: argparse.Namespace) -> int:
     return 0
 
 
-def summarize(root: Path, manifest: dict[str, Any] | None = None, verify: str = "size"
+def summarize(root: Path, manifest: dict[str, Any] | None = None, verify: str = "attrs"
               ) -> dict[str, Any]:
     """Facts about a dataset directory (or one shard file) for ``dstenv info``."""
     from dstenv.data.manifest import MANIFEST_NAME, build_manifest, load_manifest, shard_entry
@@ -216,7 +216,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                        description="Frames, shards, class distribution and disk use of a "
                                    "dataset directory or shard file.")
     q.add_argument("path", metavar="DIR|FILE")
-    q.add_argument("--verify", default="size", choices=["none", "size", "frames", "hash"],
+    q.add_argument("--verify", default="attrs", choices=["none", "size", "attrs", "frames", "hash"],
                    help="how far to check the manifest against the shards (default size)")
     q.add_argument("--json", action="store_true", help="print JSON")
     q.set_defaults(func=_info)

@@ -21,6 +21,7 @@ import os
 import queue as queue_mod
 import sys
 from collections.abc import Callable, Mapping
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
 from itertools import islice
 from pathlib import Path
@@ -190,13 +191,21 @@ def _worker_task(task: ShardTask, out: str) -> dict[str, Any]:
 
 
 def _existing(out: Path, task: ShardTask) -> dict[str, Any] | None:
-    """Manifest entry of a finished shard for ``task``, or None if it must be (re)made."""
+    """Manifest entry of a finished shard for ``task``, or None if it must be (re)made.
+
+    A kept shard is read in full first (every chunk's checksum): a shard with a
+    corrupt chunk is set aside as ``NAME.corrupt`` and made again, never listed in the
+    manifest with the hash of its corrupt bytes.
+    """
     path = out / task.file
     if not path.exists():
         return None
     try:
         with ShardReader(path) as r:
             old_task, old_config = r.attrs.get("task"), r.attrs.get("config")
+            same = old_config == _pipeline_config(task.spec) and old_task == task.describe()
+            if same:
+                r.verify()
     except ShardError as exc:
         keep = path.with_name(path.name + ".corrupt")
         path.replace(keep)
@@ -299,7 +308,7 @@ def _generate(spec: GenerateSpec, out: Path, workers: int, ray_address: str | No
                 results = _run_pool(todo, out, workers, bar.update)
     except GenerateError:
         raise
-    except cf.process.BrokenProcessPool:
+    except BrokenProcessPool:
         n = len(scan_shards(out))
         raise GenerateError(f"a worker process died (killed by the system: out of memory?); "
                             f"{n} finished shards kept in {out}; rerun the same command to "

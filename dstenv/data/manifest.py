@@ -65,6 +65,17 @@ def file_sha256(path: str | Path) -> str:
     return h.hexdigest()
 
 
+def attrs_sha256(attrs: Mapping[str, Any]) -> str:
+    """SHA-256 of a shard's attributes (task, seeds, config...) as canonical JSON.
+
+    Stored in the manifest and compared when a dataset is opened: a same-size shard of
+    another seed or configuration differs here, at the cost of reading the attributes
+    only (the whole-file ``sha256`` is the slower, complete check).
+    """
+    text = json.dumps(attrs, sort_keys=True, separators=(",", ":"), default=str)
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
 def shard_entry(root: str | Path, path: str | Path, sha256: str | None = None) -> dict[str, Any]:
     """The manifest entry of one shard (opens and validates it).
 
@@ -80,6 +91,7 @@ def shard_entry(root: str | Path, path: str | Path, sha256: str | None = None) -
             "frames": len(r),
             "bytes": path.stat().st_size,
             "sha256": sha256 or file_sha256(path),
+            "attrs_sha256": attrs_sha256(r.attrs),
             "class_counts": [int(c) for c in counts],
             "grid_shape": list(r.grid_shape),
             "cell_size": r.cell_size,
@@ -146,21 +158,24 @@ def write_manifest(root: str | Path, entries: Iterable[Mapping[str, Any]] | None
     return manifest
 
 
-def load_manifest(root: str | Path, verify: str = "size") -> dict[str, Any]:
+def load_manifest(root: str | Path, verify: str = "attrs") -> dict[str, Any]:
     """Read ``root/manifest.json`` and check it against the shard files.
 
     Args:
         root: the dataset directory.
-        verify: ``"none"`` (parse only), ``"size"`` (every listed file exists with
-            the listed byte size, no unlisted shard), ``"frames"`` (also open each
-            shard and compare frame counts) or ``"hash"`` (also compare SHA-256).
+        verify: ``"none"`` (parse only), ``"size"`` (every listed file exists inside
+            ``root`` with the listed byte size, no unlisted shard), ``"attrs"`` (the
+            default: also open each shard and compare its frame count and the hash of
+            its attributes, which names its seeds, task and configuration; cheap) or
+            ``"hash"`` (also the SHA-256 of every byte). ``"frames"`` is an alias of
+            ``"attrs"`` kept for old scripts.
 
     Raises:
         ManifestError: one line naming the manifest and the first mismatch.
     """
     root = Path(root)
     path = root / MANIFEST_NAME
-    levels = ("none", "size", "frames", "hash")
+    levels = ("none", "size", "attrs", "frames", "hash")
     if verify not in levels:
         raise ValueError(f"verify must be one of {', '.join(levels)}, got {verify!r}")
     try:
@@ -176,10 +191,17 @@ def load_manifest(root: str | Path, verify: str = "size") -> dict[str, Any]:
                             f"not supported (this dstenv reads {MANIFEST_VERSION})")
     if verify == "none":
         return manifest
-    hint = "the files changed after the manifest was written; rerun the command that made them"
+    hint = ("the files changed after the manifest was written; regenerate them (a new --out, "
+            "or delete the changed shards and rerun the command that made them)")
     listed = set()
+    inside = root.resolve()
     for e in manifest.get("shards", []):
+        if not isinstance(e, dict) or not isinstance(e.get("file"), str):
+            raise ManifestError(f"{path}: malformed shard entry {e!r}")
         f = root / e["file"]
+        if inside not in f.resolve().parents:
+            raise ManifestError(f"{path}: shard entry {e['file']!r} points outside {root}; "
+                                "a manifest lists only files inside its dataset folder")
         listed.add(f.resolve())
         if not f.is_file():
             raise ManifestError(f"{path}: lists {e['file']} but that file is missing ({hint})")
@@ -187,11 +209,14 @@ def load_manifest(root: str | Path, verify: str = "size") -> dict[str, Any]:
         if size != e["bytes"]:
             raise ManifestError(f"{path}: {e['file']} is {size} bytes on disk, the manifest says "
                                 f"{e['bytes']} ({hint})")
-        if verify in ("frames", "hash"):
+        if verify in ("attrs", "frames", "hash"):
             with ShardReader(f) as r:
                 if len(r) != e["frames"]:
                     raise ManifestError(f"{path}: {e['file']} holds {len(r)} frames, the "
                                         f"manifest says {e['frames']} ({hint})")
+                if "attrs_sha256" in e and attrs_sha256(r.attrs) != e["attrs_sha256"]:
+                    raise ManifestError(f"{path}: {e['file']} was made with other settings or "
+                                        f"seeds than the manifest lists ({hint})")
         if verify == "hash" and file_sha256(f) != e["sha256"]:
             raise ManifestError(f"{path}: {e['file']} content differs from its SHA-256 ({hint})")
     for f in scan_shards(root):

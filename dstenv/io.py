@@ -67,6 +67,11 @@ def atomic_path(path: str | Path, fsync: bool = True) -> Iterator[Path]:
         if fsync:
             fsync_file(tmp)
         os.replace(tmp, path)
+    except OSError as exc:
+        tmp.unlink(missing_ok=True)
+        if exc.filename is None and exc.errno is not None:  # name the file (disk full...)
+            raise OSError(exc.errno, exc.strerror or str(exc), str(path)) from None
+        raise
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise

@@ -1,0 +1,47 @@
+"""The one atomic writer: all or nothing, named errors, readable permissions."""
+
+from __future__ import annotations
+
+import errno
+import os
+import stat
+
+import pytest
+
+from dstenv.io import atomic_path, atomic_write_text, partial_path
+
+
+def test_write_replaces_whole_and_leaves_no_partial(tmp_path):
+    target = tmp_path / "sub" / "a.json"
+    atomic_write_text(target, "one")
+    atomic_write_text(target, "two")
+    assert target.read_text() == "two"
+    assert sorted(p.name for p in target.parent.iterdir()) == ["a.json"]
+    # created with the umask like any file (a PNG for a user, not 0600)
+    mode = stat.S_IMODE(target.stat().st_mode)
+    assert mode == 0o666 & ~_umask()
+
+
+def test_error_keeps_the_old_file_and_names_it(tmp_path):
+    target = tmp_path / "a.txt"
+    target.write_text("old")
+    with pytest.raises(OSError) as info:
+        with atomic_path(target) as tmp:
+            tmp.write_text("half")
+            raise OSError(errno.ENOSPC, "No space left on device")
+    assert info.value.filename == str(target) and info.value.errno == errno.ENOSPC
+    assert target.read_text() == "old" and not partial_path(target).exists()
+
+
+def test_other_errors_clean_up_too(tmp_path):
+    with pytest.raises(KeyError):
+        with atomic_path(tmp_path / "b.txt") as tmp:
+            tmp.write_text("x")
+            raise KeyError("boom")
+    assert list(tmp_path.iterdir()) == []
+
+
+def _umask() -> int:
+    old = os.umask(0)
+    os.umask(old)
+    return old

@@ -198,3 +198,12 @@ def test_failed_reset_config_leaves_the_env_working():
     assert space.contains(obs)
     env.close()
 
+
+
+def test_deeply_nested_toml_is_a_named_error(tmp_path):
+    from dstenv.config import load_scenario
+
+    path = tmp_path / "deep.toml"
+    path.write_text("x = " + "[" * 5000 + "]" * 5000 + "\n")
+    with pytest.raises(ConfigError, match=r"deep\.toml: invalid TOML: nested too deeply"):
+        load_scenario(path)

@@ -93,12 +93,12 @@ def default_gis_config() -> dict[str, Any]:
         # MapClass.NONE, a vacuous map input, as KITTI without an OSM file)
         "source": "map",
         "no_map_prob": 0.0,  # [-] chance per episode of "none" anyway (randomise map quality)
-        "offset_std": 0.5,  # std of the localisation offset along ego x and ego y [m]
-        "rotation_std": 0.013,  # std of the heading error [rad] (0.013 rad = 0.75 deg)
-        "missing_building_prob": 0.1,  # [-] chance that a building is absent from the map
-        "extra_building_rate": 0.05,  # [-] buildings in the map that do not exist, per true one
-        "outline_shift_std": 0.5,  # std of the shift of a building outline [m]
-        "outline_scale_std": 0.05,  # std of the relative scale error of an outline [-]
+        "offset_std": 0.6,  # std of the localisation offset along ego x and ego y [m]
+        "rotation_std": 0.015,  # std of the heading error [rad] (0.015 rad = 0.86 deg)
+        "missing_building_prob": 0.12,  # [-] chance that a building is absent from the map
+        "extra_building_rate": 0.08,  # [-] buildings in the map that do not exist, per true one
+        "outline_shift_std": 0.7,  # std of the shift of a building outline [m]
+        "outline_scale_std": 0.08,  # std of the relative scale error of an outline [-]
         # road surface in the map: "lanes" (street centre-line +- lanes x nominal
         # width / 2, as OSM) or "true" (the world's road raster)
         "road_width": "lanes",

@@ -40,7 +40,7 @@ def default_config() -> dict[str, Any]:
             "lane_width": 3.25,  # [m]
             "curb_strip_width": 2.2,  # [m] parking strip / verge between road and sidewalk
             "sidewalk_width": 2.5,  # [m]
-            "parking_prob": 0.6,  # [-] chance that a block side has a parking strip
+            "parking_prob": 0.45,  # [-] chance that a block side has a parking strip
             "building_coverage": 0.85,  # [-] share of building slots that hold a building
             "setback_min": 0.0,  # [m] building setback behind the sidewalk, at least
             "setback_max": 4.0,  # [m] at most
@@ -68,10 +68,10 @@ def default_config() -> dict[str, Any]:
             "half_on_sidewalk_prob": 0.08,  # [-] share of (small / normal) cars half on the sidewalk
         },
         "traffic": {
-            "cars": 24,  # moving cars
-            "cyclists": 4,
-            "pedestrians": 14,
-            "parked_density": 0.5,  # [-] share of parking-strip slots holding a parked car
+            "cars": 90,  # moving cars (KITTI-like class mix: moving >= static)
+            "cyclists": 16,
+            "pedestrians": 50,
+            "parked_density": 0.12,  # [-] share of parking-strip slots holding a parked car
             # weights of small car, car, van, truck among moving cars ([]: one car size)
             "vehicle_mix": [0.15, 0.65, 0.15, 0.05],
             "speed_limit": 13.9,  # [m/s] desired speed of cars (50 km/h), +-20 % per car
@@ -83,7 +83,7 @@ def default_config() -> dict[str, Any]:
             "stop_duration": 1.5,  # [s] standstill required at a stop sign
             "halt_rate": 0.01,  # [1/s] chance per second that a car halts in its lane
             "halt_duration": 6.0,  # [s] mean duration of such a halt (exponential, at most 4x)
-            "pause_rate": 0.03,  # [1/s] chance per second that a pedestrian stands still
+            "pause_rate": 0.05,  # [1/s] chance per second that a pedestrian stands still
             "pause_duration": 5.0,  # [s] mean pause of a pedestrian (exponential, at most 4x)
             "crossing_prob": 0.4,  # [-] chance a pedestrian takes a crosswalk it reaches
             "lateral_drift": 0.15,  # [m] std of a vehicle's drift around its lane centre (0..0.5)

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from dstenv.sim.ego import box_corners, boxes_overlap
-from dstenv.sim.lanes import LaneKind, LaneNetwork, lane_pose
+from dstenv.sim.lanes import LaneKind, LaneNetwork, lane_pose, project_on_lane
 from dstenv.sim.traffic import choose_successor
 from dstenv.sim.parking import draw_vehicles
 from dstenv.sim.types import AGENT_HEIGHT, AgentKind, WorldMap
@@ -296,14 +296,17 @@ def pull_out(world_map: WorldMap, st: dict[str, np.ndarray], cfg: dict[str, Any]
     if found is None or net.kind[found[0]] != LaneKind.ROAD:
         return None
     lane, s = found
-    s = min(s + 0.5, net.length[lane] - 0.5)
+    s, lat, _ = project_on_lane(net.pts, net.start, net.npts, net.ds, lane, x, y, s, 3.0)
     lx, ly, h = lane_pose(net.pts, net.hdg, net.start, net.npts, net.ds, lane, s)
-    lat = -np.sin(h) * (x - lx) + np.cos(h) * (y - ly)
+    nx, ny = lx - lat * np.sin(h), ly + lat * np.cos(h)
+    others = {f: np.delete(st[f], i, axis=0) for f in ("xy", "yaw", "hl", "hw", "v")}
+    if not _free(others, (nx, ny), h, 2 * st["hl"][i], 2 * st["hw"][i] - 0.3, 0.05):
+        return None  # turning to the lane heading would touch a neighbour: not now
     _, _, amax, bcomf, headway, jam = BODY[AgentKind.CAR]
     st["parked"][i], st["mobile"][i] = False, True
     st["route"][i] = plan_route(net, lane, rng, k)
     st["s"][i], st["lat"][i], st["lat_goal"][i], st["v"][i] = s, lat, 0.0, 0.0
-    st["xy"][i] = lx - lat * np.sin(h), ly + lat * np.cos(h)
+    st["xy"][i] = nx, ny
     st["yaw"][i] = h
     st["idm"][i] = (tr["speed_limit"] * rng.uniform(0.8, 1.2), amax, bcomf, headway, jam)
     st["grant"][i], st["req_t"][i], st["halt"][i], st["still"][i] = -1, np.inf, 0.0, 0.0

@@ -1,0 +1,74 @@
+"""The imperfect map behind the GIS grid (dstenv.sensing.mapmodel, MapError.sample)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from dstenv.grid import GridSpec
+from dstenv.sensing import MapError, gis_grid, label_grid
+from dstenv.sensing.config import gis_config
+from dstenv.sensing.mapmodel import draw_known_map
+from dstenv.sim.types import MapClass
+
+from .worlds import agents, rect_map
+
+EXACT = {"offset_std": 0.0, "rotation_std": 0.0, "missing_building_prob": 0.0,
+         "extra_building_rate": 0.0, "outline_shift_std": 0.0, "outline_scale_std": 0.0,
+         "road_width": "true", "background": "intermediate"}
+
+
+def _street_map():
+    """A 10 m wide road along x (y in -5..5, 2 lanes of 5 m), a building north of it."""
+    m = rect_map([(-10.0, 10.0, 8.0, 18.0)], extent=(-20.0, 20.0, -20.0, 20.0), resolution=0.5,
+                 fill=MapClass.INTERMEDIATE)
+    m.raster[30:50, :] = MapClass.ROAD  # rows 30..49: y in [-5, 5)
+    m.streets = [np.array([[-30.0, 0.0], [30.0, 0.0]])]
+    m.street_lanes = np.array([2])
+    return m
+
+
+def test_roads_are_drawn_from_lane_count_times_nominal_width():
+    m = _street_map()
+    cfg = gis_config({**EXACT, "road_width": "lanes", "nominal_lane_width": 3.0})
+    known = draw_known_map(m, cfg, np.random.default_rng(0), np.zeros(0, np.int64))
+    rows = np.flatnonzero((known == MapClass.ROAD).all(1))
+    # 2 lanes x 3 m: the band |y| <= 3 m, cell centres y = -2.75 .. 2.75 -> rows 34..45
+    assert rows.min() == 34 and rows.max() == 45
+    assert (known[m.raster == MapClass.BUILDING] == MapClass.BUILDING).all()  # no outline error
+    assert (m.raster[30:50] == MapClass.ROAD).all()  # the world is untouched
+
+
+def test_background_none_and_vacuous_source():
+    m = _street_map()
+    known = draw_known_map(m, gis_config({**EXACT, "background": "none"}),
+                           np.random.default_rng(0), np.zeros(0, np.int64))
+    assert set(np.unique(known)) == {MapClass.NONE, MapClass.BUILDING, MapClass.ROAD}
+    err = MapError.sample(m, {**EXACT, "source": "none"}, np.random.default_rng(0))
+    assert err.vacuous
+    spec = GridSpec(16, 16, 1.0)
+    assert (gis_grid(m, np.zeros(3), spec, err) == MapClass.NONE).all()
+    # the labels still come from the world
+    assert (label_grid(m, agents(), np.zeros(3), spec) != 255).all()
+
+
+def test_outline_errors_move_buildings_and_extra_ones_stand_on_open_ground():
+    m = _street_map()
+    cfg = gis_config({**EXACT, "outline_shift_std": 1.0, "extra_building_rate": 1.0})
+    known = draw_known_map(m, cfg, np.random.default_rng(3), np.zeros(0, np.int64))
+    truth_b = m.raster == MapClass.BUILDING
+    known_b = known == MapClass.BUILDING
+    assert not np.array_equal(truth_b, known_b)
+    # extra buildings never cover the true road; roads win over shifted outlines
+    assert (known[m.raster == MapClass.ROAD] == MapClass.ROAD).all()
+    # a dropped building leaves no trace
+    gone = draw_known_map(m, gis_config(EXACT), np.random.default_rng(0), np.array([0]))
+    assert not (gone == MapClass.BUILDING).any()
+
+
+def test_default_error_is_drawn_once_per_episode_and_is_deterministic():
+    m = _street_map()
+    a = MapError.sample(m, None, np.random.default_rng(5))
+    b = MapError.sample(m, None, np.random.default_rng(5))
+    assert np.array_equal(a.offset, b.offset) and a.rotation == b.rotation
+    assert np.array_equal(a.raster, b.raster) and a.raster is not None
+    assert 0 < np.hypot(*a.offset) < 5.0 and abs(a.rotation) < 0.1

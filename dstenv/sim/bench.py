@@ -1,7 +1,10 @@
 """``dstenv bench world``: one simulation step of the whole chain at 256 x 256 cells.
 
 world step (traffic + ego autopilot) + LIDAR sweep (1800 beams) + sensor grid +
-GIS grid + label grid + visible mask, in a generated city with about 40 agents.
+GIS grid + label grid + visible mask, in a generated city with about 40 agents and
+its street clutter (the default, realistic world). The same chain in the ``clean``
+world (no clutter, ideal parking) is timed in the same process, and the ratio of the
+two is the cost of realism on this machine.
 Each part is timed alone and the chain as a whole; every figure is also given as
 a ratio to a reference computation (``np.sin`` over 256 x 256 floats) run in the
 same process, so the numbers compare across machines. Goal: chain <= 2 ms.
@@ -61,6 +64,23 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             label_grid(world.map, agents, pose, spec)
             visible_mask(sensor)
 
+        from dstenv.config import load_scenario, merge_config
+        from dstenv.sim.config import default_config
+
+        clean_cfg = merge_config(default_config(), load_scenario("clean")["world"], "clean")
+        clean = World(merge_config(clean_cfg, BENCH_CONFIG, "bench"), seed=0)
+        for _ in range(20):
+            clean.step()
+
+        def clean_chain():
+            clean.step()
+            agents, pose = clean.agents, clean.ego_pose
+            s = lidar.sweep(clean.map, agents, pose, rng)
+            sensor = s.sensor_grid(spec)
+            gis_grid(clean.map, pose, spec)
+            label_grid(clean.map, agents, pose, spec)
+            visible_mask(sensor)
+
         last = sweep()
         cases.update({
             "LIDAR sweep (1800 beams)": sweep,
@@ -68,6 +88,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             "GIS grid": lambda: gis_grid(world.map, world.ego_pose, spec),
             "label grid": lambda: label_grid(world.map, world.agents, world.ego_pose, spec),
             "step + sweep + grids + labels": chain,
+            "the same, clean world": clean_chain,
         })
         from dstenv.sensing.lidar3d import Hdl64
 
@@ -83,6 +104,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             "hdl64 sweep + sensor grid (goal 10)": lambda: sweep3d().sensor_grid(spec),
         })
     print(f"world: {len(world.agents)} agents ({int((~world.agents.parked).sum())} mobile), "
+          f"{len(world.map.obstacles)} clutter boxes, "
           f"{len(world.map.lanes)} lanes, map {world.map.raster.shape[1]}x"
           f"{world.map.raster.shape[0]} cells; grid {spec.height}x{spec.width}")
     results: dict[str, Any] = {"agents": len(world.agents)}
@@ -94,6 +116,11 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         print(f"{name:34s} {ms:8.3f} ms  {ms / ref_ms:7.2f} x ref")
     if Lidar is None:
         print("dstenv.sensing not available: world step only")
+    else:
+        ratio = results["step + sweep + grids + labels"]["ms"] / \
+            results["the same, clean world"]["ms"]
+        results["realistic / clean"] = ratio
+        print(f"{'realistic / clean chain':34s} {ratio:8.2f}")
     return results
 
 

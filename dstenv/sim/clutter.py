@@ -88,6 +88,12 @@ def place_clutter(sides: list[Side], buildings: list[np.ndarray], slots: np.ndar
             continue
         yaw = float(np.arctan2(along[1], along[0]))
         line = curb + 0.25 if parking else curb / 2
+        # the crosswalk ends and parking slots near this side (checked for every item)
+        lo = np.minimum(start, start + along * length) - 8.0
+        hi = np.maximum(start, start + along * length) + 8.0 + np.abs(inward) * (curb + sidewalk)
+        near_avoid = avoid[np.all((avoid >= lo) & (avoid <= hi), 1)] if len(avoid) else avoid
+        near_slots = slots[np.all((slots[:, :2] >= lo) & (slots[:, :2] <= hi), 1)] \
+            if len(slots) else slots
         taken: list[tuple[float, float]] = []  # (centre, half length) along the kerb line
 
         def put(s: float, lat: float, half_len: float, half_wid: float, z0: float, z1: float,
@@ -97,9 +103,9 @@ def place_clutter(sides: list[Side], buildings: list[np.ndarray], slots: np.ndar
             if check and any(abs(s - c) < half_len + h + 0.4 for c, h in taken):
                 return False
             xy = start + along * s + inward * lat
-            if len(avoid) and np.hypot(*(avoid - xy).T).min() < 2.5 + half_len:
+            if len(near_avoid) and np.hypot(*(near_avoid - xy).T).min() < 2.5 + half_len:
                 return False
-            if _under_vehicle(xy, max(half_len, half_wid), slots):
+            if _under_vehicle(xy, max(half_len, half_wid), near_slots):
                 return False
             if check:
                 taken.append((s, half_len))

@@ -68,10 +68,10 @@ def default_config() -> dict[str, Any]:
             "half_on_sidewalk_prob": 0.08,  # [-] share of (small / normal) cars half on the sidewalk
         },
         "traffic": {
-            "cars": 90,  # moving cars (KITTI-like class mix: moving >= static)
-            "cyclists": 16,
-            "pedestrians": 50,
-            "parked_density": 0.12,  # [-] share of parking-strip slots holding a parked car
+            "cars": 70,  # moving cars (KITTI-like class mix: moving >= static)
+            "cyclists": 14,
+            "pedestrians": 45,
+            "parked_density": 0.08,  # [-] share of parking-strip slots holding a parked car
             # weights of small car, car, van, truck among moving cars ([]: one car size)
             "vehicle_mix": [0.15, 0.65, 0.15, 0.05],
             "speed_limit": 13.9,  # [m/s] desired speed of cars (50 km/h), +-20 % per car

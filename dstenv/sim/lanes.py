@@ -58,10 +58,32 @@ def resample(poly: np.ndarray, spacing: float = SPACING) -> np.ndarray:
     poly, seg = poly[keep], seg[seg > 1e-9]
     if len(poly) < 2:
         raise ValueError("lane polyline needs two distinct points")
-    cum = np.concatenate([[0.0], np.cumsum(seg)])
+    return _resample(np.ascontiguousarray(poly), float(spacing))
+
+
+@nb.njit(cache=True)
+def _resample(poly, spacing):  # pragma: no cover - numba
+    """:func:`resample` of a polyline without repeated points (one pass, no temporaries
+    beyond the output: generating a city resamples thousands of lanes)."""
+    k = poly.shape[0]
+    cum = np.empty(k)
+    cum[0] = 0.0
+    for i in range(1, k):
+        cum[i] = cum[i - 1] + np.hypot(poly[i, 0] - poly[i - 1, 0], poly[i, 1] - poly[i - 1, 1])
     n = max(int(np.ceil(cum[-1] / spacing)), 1) + 1
-    t = np.linspace(0.0, cum[-1], n)
-    return np.stack([np.interp(t, cum, poly[:, 0]), np.interp(t, cum, poly[:, 1])], -1)
+    out = np.empty((n, 2))
+    step = cum[-1] / (n - 1)
+    j = 0
+    for m in range(n):
+        t = m * step if m < n - 1 else cum[-1]
+        while j < k - 2 and cum[j + 1] < t:
+            j += 1
+        d = cum[j + 1] - cum[j]
+        f = (t - cum[j]) / d if d > 0 else 0.0
+        f = min(max(f, 0.0), 1.0)
+        out[m, 0] = poly[j, 0] + f * (poly[j + 1, 0] - poly[j, 0])
+        out[m, 1] = poly[j, 1] + f * (poly[j + 1, 1] - poly[j, 1])
+    return out
 
 
 def cut_polyline(poly: np.ndarray, s0: float, s1: float) -> np.ndarray:

@@ -85,20 +85,18 @@ def side_slots(start: np.ndarray, along: np.ndarray, inward: np.ndarray, length:
         size = np.zeros((n, 3))
         clear = np.full(n, SLOT_LENGTH / 2)
     else:
-        s_list, sizes = [], []
-        pos = keep_clear + rng.uniform(0.0, cfg["parking_gap_max"])
         room = length - keep_clear
-        while True:
-            _, size1 = draw_vehicles(cfg["parking_mix"], 1, rng)
-            if pos + size1[0, 0] > room:
-                break
-            s_list.append(pos + size1[0, 0] / 2)
-            sizes.append(size1[0])
-            pos += size1[0, 0] + rng.uniform(cfg["parking_gap_min"], cfg["parking_gap_max"])
-        n = len(s_list)
+        # enough vehicles and gaps for the side, drawn at once; the ones that fit are kept
+        m = max(int((room - keep_clear) / 4.0) + 1, 1)
+        _, size = draw_vehicles(cfg["parking_mix"], m, rng)
+        gap = rng.uniform(cfg["parking_gap_min"], cfg["parking_gap_max"], m)
+        first = keep_clear + rng.uniform(0.0, cfg["parking_gap_max"])
+        ends = first + np.cumsum(size[:, 0] + gap) - gap  # rear end of vehicle k + its length
+        n = int(np.searchsorted(ends, room, side="right"))
         if n == 0:
             return np.zeros((0, 6))
-        s, size = np.array(s_list), np.array(sizes)
+        size = size[:n]
+        s = ends[:n] - size[:, 0] / 2
         jit = cfg["parking_lateral_jitter"]
         lat = curb / 2 + rng.uniform(-jit, jit) + rng.normal(0.0, jit / 2, n)
         # the wheels stay in the strip: a wide vehicle is not pushed off the kerb line

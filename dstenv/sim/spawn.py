@@ -115,8 +115,10 @@ def add_row(st: dict[str, np.ndarray], kind: AgentKind, xy, yaw: float, length: 
            "idm": np.asarray(idm, float).reshape(1, 5),
            "height": [AGENT_HEIGHT[int(kind)] if height is None else height]}
     at = len(st["v"]) if at is None else at
-    for f in _FIELDS:
-        st[f] = np.insert(st[f], at, np.asarray(row[f], dtype=st[f].dtype), axis=0)
+    for f in _FIELDS:  # (np.concatenate: the same as np.insert, without its overhead)
+        a = st[f]
+        st[f] = np.concatenate([a[:at], np.asarray(row[f], dtype=a.dtype).reshape(1, *a.shape[1:]),
+                                a[at:]])
     return at
 
 
@@ -149,12 +151,17 @@ def _free(st, xy, yaw, length, width, gap) -> bool:
     if len(st["v"]) == 0:
         return True
     box = box_corners(xy[0], xy[1], yaw, length + 2 * gap, width + 0.4)
-    c, s_ = np.cos(st["yaw"]), np.sin(st["yaw"])
-    hl, hw = st["hl"], st["hw"]
+    # only bodies that can touch the box (half diagonals + margin)
+    reach = 0.5 * np.hypot(length + 2 * gap, width + 0.4) + np.hypot(st["hl"], st["hw"])
+    k = np.flatnonzero(np.hypot(st["xy"][:, 0] - xy[0], st["xy"][:, 1] - xy[1]) <= reach + 0.1)
+    if len(k) == 0:
+        return True
+    c, s_ = np.cos(st["yaw"][k]), np.sin(st["yaw"][k])
+    hl, hw = st["hl"][k], st["hw"][k]
     local = np.stack([np.stack([hl, hw], -1), np.stack([-hl, hw], -1),
                       np.stack([-hl, -hw], -1), np.stack([hl, -hw], -1)], 1)
     rot = np.stack([np.stack([c, -s_], -1), np.stack([s_, c], -1)], 1)
-    others = np.einsum("nij,nkj->nki", rot, local) + st["xy"][:, None, :]
+    others = np.einsum("nij,nkj->nki", rot, local) + st["xy"][k, None, :]
     return not boxes_overlap(box, others).any()
 
 

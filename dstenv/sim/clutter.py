@@ -29,7 +29,7 @@ import numpy as np
 from dstenv.sim.types import ObstacleKind as K
 from dstenv.sim.types import Obstacles
 
-__all__ = ["default_clutter_config", "place_clutter", "Side"]
+__all__ = ["default_clutter_config", "place_clutter", "street_clutter", "Side"]
 
 #: one block side: ``(start (2,), along (2,), inward (2,), length [m], has parking)``
 Side = tuple[np.ndarray, np.ndarray, np.ndarray, float, bool]
@@ -167,6 +167,54 @@ def place_clutter(sides: list[Side], buildings: list[np.ndarray], slots: np.ndar
                          hi - lo, wid, 0.0, rng.uniform(0.8, 1.8) if hedge else
                          rng.uniform(1.0, 1.8), K.HEDGE if hedge else K.FENCE)
             s += seg
+    if not rows["yaw"]:
+        return Obstacles.empty()
+    f = np.float64
+    return Obstacles(np.array(rows["xy"], f).reshape(-1, 2), np.array(rows["yaw"], f),
+                     np.array(rows["length"], f), np.array(rows["width"], f),
+                     np.array(rows["z_min"], f), np.array(rows["z_max"], f),
+                     np.array(rows["kind"], np.uint8))
+
+
+def street_clutter(world_map: Any, cfg: dict[str, Any], rng: np.random.Generator) -> Obstacles:
+    """Clutter beside the streets of any map with ``streets`` and
+    ``meta["street_half_widths"]`` (an OSM map): poles, trees, signs and bins 0.8-2 m
+    beyond both road edges, where the ground is :attr:`MapClass.INTERMEDIATE` for 0.8 m
+    around (clear of roads and buildings)."""
+    from dstenv.sim.raster import lookup
+    from dstenv.sim.types import MapClass
+
+    dens = float(cfg["density"])
+    half = world_map.meta.get("street_half_widths")
+    if dens <= 0 or half is None or not len(world_map.streets):
+        return Obstacles.empty()
+    rows = _rows()
+    ring = 0.8 * np.array([[0, 0], [1, 0], [-1, 0], [0, 1], [0, -1]])
+    trees = cfg["tree_side_prob"] * dens
+    for line, hw in zip(world_map.streets, half):
+        seg = np.diff(line, axis=0)
+        cum = np.concatenate([[0.0], np.cumsum(np.hypot(*seg.T))])
+        for side in (-1.0, 1.0):
+            tree_row = rng.random() < trees
+            spacing = cfg["tree_spacing"] if tree_row else cfg["pole_spacing"] / dens
+            for s in np.arange(rng.uniform(0, spacing), cum[-1], spacing):
+                k = min(int(np.searchsorted(cum, s, side="right")) - 1, len(seg) - 1)
+                d = seg[k] / max(np.hypot(*seg[k]), 1e-9)
+                normal = side * np.array([-d[1], d[0]])
+                p = line[k] + d * (s - cum[k]) + normal * (hw + rng.uniform(0.8, 2.0))
+                if not (lookup(world_map, p + ring) == MapClass.INTERMEDIATE).all():
+                    continue
+                yaw = float(np.arctan2(d[1], d[0]))
+                if tree_row:
+                    r, zc = rng.uniform(0.12, 0.25), rng.uniform(2.0, 3.0)
+                    _add(rows, p, yaw, 2 * r, 2 * r, 0.0, zc + 0.5, K.TREE_TRUNK)
+                    c = rng.uniform(3.0, 6.5)
+                    _add(rows, p, yaw, c, c, zc, zc + rng.uniform(3.0, 7.0), K.TREE_CROWN)
+                else:
+                    kind = (K.POLE, K.SIGN, K.BIN)[int(rng.choice(3, p=[0.6, 0.25, 0.15]))]
+                    size = {K.POLE: 0.26, K.SIGN: 0.1, K.BIN: 0.6}[kind]
+                    _add(rows, p, yaw, size, size, 0.0,
+                         {K.POLE: 7.0, K.SIGN: 2.3, K.BIN: 1.0}[kind], kind)
     if not rows["yaw"]:
         return Obstacles.empty()
     f = np.float64

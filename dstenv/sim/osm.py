@@ -360,9 +360,12 @@ def load_osm(path: str | Path, *, resolution: float = 0.2, lane_width: float = 3
                   building_heights=np.array(poly_heights, np.float64))
     _add_walks(builder, wm, edges, edge_half, trims, foot)
     wm.lanes = builder.build(node_xy, control, phase, lane_width)
+    wm.streets = [np.asarray(e.poly, np.float64) for e in edges]
+    wm.street_lanes = np.array([e.n_fwd + e.n_bwd for e in edges], np.int64)
     wm.meta = {"kind": "osm", "osm_file": str(path), "latlon_origin": (lat0, lon0),
                "mercator_scale": scale, "mercator_offset": (float(mx0), float(my0)),
-               "surface": surface, "clipped_ways": int(clipped), "dropped_ways": int(dropped)}
+               "surface": surface, "clipped_ways": int(clipped), "dropped_ways": int(dropped),
+               "street_half_widths": np.array(edge_half, np.float64)}
     return wm
 
 

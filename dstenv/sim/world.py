@@ -12,6 +12,7 @@ import numpy as np
 from dstenv.config import ConfigError, section
 from dstenv.sim import spawn
 from dstenv.sim.citygen import generate_city
+from dstenv.sim.clutter import street_clutter
 from dstenv.sim.ego import bicycle_step, hits, pure_pursuit
 from dstenv.sim.lanes import LaneKind, LaneNetwork, Turn, lane_pose, project_on_lane
 from dstenv.sim.traffic import choose_successor, route_point, traffic_step
@@ -311,5 +312,8 @@ class World:
             bases = [self._base_dir] if self._base_dir else []
             bases += [Path.cwd(), Path(str(resources.files("dstenv.scenarios")))]
             path = next((b / path for b in bases if (b / path).is_file()), bases[0] / path)
-        return load_osm(path, resolution=m["resolution"], lane_width=m["osm_lane_width"],
-                        margin=m["margin"], traffic=self.config["traffic"])
+        wm = load_osm(path, resolution=m["resolution"], lane_width=m["osm_lane_width"],
+                      margin=m["margin"], traffic=self.config["traffic"])
+        # fixed seed: the same file gives the same street clutter
+        wm.obstacles = street_clutter(wm, self.config["clutter"], np.random.default_rng(0))
+        return wm

@@ -101,3 +101,19 @@ def test_clutter_is_varied_seeded_and_off_in_the_clean_world():
     crowns = a.kind == ObstacleKind.TREE_CROWN
     assert (a.z_min[crowns] >= 2.0).all() and crowns.sum() == (a.kind == ObstacleKind.TREE_TRUNK).sum()
     assert len(World(clean_world({"map": {"blocks_x": 3, "blocks_y": 3}}), seed=6).map.obstacles) == 0
+
+
+def test_osm_maps_get_street_clutter_beside_the_roads():
+    from dstenv.config import load_scenario, scenario_path
+    from dstenv.sim.raster import lookup
+    from dstenv.sim.types import MapClass
+
+    path = scenario_path("osm")
+    cfg = load_scenario("osm", {"world": default_config()})["world"]
+    w = World(cfg, seed=0, base_dir=path.parent)
+    o = w.map.obstacles
+    assert len(o) > 10 and len(w.map.streets) == len(w.map.street_lanes) > 0
+    ground = o.z_min < 0.3
+    assert (lookup(w.map, o.xy[ground]) == MapClass.INTERMEDIATE).all()
+    again = World(cfg, seed=1, base_dir=path.parent).map.obstacles
+    assert np.array_equal(o.xy, again.xy)  # fixed by the file, not the episode

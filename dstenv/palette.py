@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["CLASS_RGB", "IGNORE_RGB", "SENSOR_RGB", "SURFACE_RGB", "MAPCLASS_RGB",
-           "as_float", "label_image"]
+           "CLUTTER_RGB", "as_float", "label_image"]
 
 #: ``(5, 3) uint8`` colour of each class in ``dstenv.dst.CLASSES`` order.
 CLASS_RGB: np.ndarray = np.array(
@@ -34,6 +34,11 @@ SURFACE_RGB: np.ndarray = np.array(
 #: :class:`dstenv.sim.types.MapClass` codes: none, building, road, intermediate
 MAPCLASS_RGB: np.ndarray = np.array(
     [[255, 255, 255], [107, 102, 115], [140, 140, 145], [219, 214, 204]], np.uint8)
+
+
+#: street clutter in scene plots: standing on the ground (dark olive), tree crowns
+#: (green, drawn translucent)
+CLUTTER_RGB = np.array([[85, 107, 47], [60, 141, 47]], np.uint8)
 
 
 def as_float(rgb: np.ndarray) -> np.ndarray:

@@ -43,9 +43,10 @@ def draw_world(ax: Any, world: Any, sweep: Any = None, extent: float | None = No
         # clutter: ground-standing boxes dark olive, tree crowns translucent green on top
         crown = obs.kind == ObstacleKind.TREE_CROWN
         panel = obs.z_min > 1.0
-        ax.add_collection(PolyCollection(obs.corners()[~panel], facecolors="#556b2f",
+        ground_rgb, crown_rgb = palette.as_float(palette.CLUTTER_RGB)
+        ax.add_collection(PolyCollection(obs.corners()[~panel], facecolors=[ground_rgb],
                                          edgecolors="none"))
-        ax.add_collection(PolyCollection(obs.corners()[crown], facecolors="#3c8d2f",
+        ax.add_collection(PolyCollection(obs.corners()[crown], facecolors=[crown_rgb],
                                          edgecolors="none", alpha=0.25))
     ag = world.agents
     if len(ag):

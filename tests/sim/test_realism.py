@@ -117,3 +117,18 @@ def test_osm_maps_get_street_clutter_beside_the_roads():
     assert (lookup(w.map, o.xy[ground]) == MapClass.INTERMEDIATE).all()
     again = World(cfg, seed=1, base_dir=path.parent).map.obstacles
     assert np.array_equal(o.xy, again.xy)  # fixed by the file, not the episode
+
+
+def test_realism_knobs_are_validated_by_name():
+    import pytest
+
+    from dstenv.config import ConfigError
+
+    with pytest.raises(ConfigError, match=r"world\.map\.parking_mix: must be 4 weights"):
+        World({"map": {"parking_mix": [1.0, 2.0]}})
+    with pytest.raises(ConfigError, match=r"world\.traffic\.vehicle_mix: must be \[\]"):
+        World({"traffic": {"vehicle_mix": [0.0, 0.0, 0.0, 0.0]}})
+    with pytest.raises(ConfigError, match=r"world\.clutter\.density: must be in \[0, 5\]"):
+        World({"clutter": {"density": -1.0}})
+    with pytest.raises(ConfigError, match=r"world\.map\.parking_layout: unknown value 'grid'"):
+        World({"map": {"parking_layout": "grid"}})

@@ -44,7 +44,8 @@ def generate_city(cfg: dict[str, Any], traffic: dict[str, Any], rng: np.random.G
     """
     real = rng.spawn(1)[0]
     cfg = dict(cfg)
-    for key, jit in (("curb_strip_width", "curb_strip_jitter"), ("sidewalk_width", "sidewalk_jitter")):
+    for key, jit in (("curb_strip_width", "curb_strip_jitter"),
+                     ("sidewalk_width", "sidewalk_jitter")):
         if cfg[jit] > 0:
             cfg[key] = float(cfg[key] + real.uniform(-cfg[jit], cfg[jit]))
     lw, curb, sw = cfg["lane_width"], cfg["curb_strip_width"], cfg["sidewalk_width"]

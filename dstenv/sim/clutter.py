@@ -238,7 +238,8 @@ def _under_vehicle(xy: np.ndarray, radius: float, slots: np.ndarray) -> bool:
     lat = -d[near, 0] * sn + d[near, 1] * c
     half_l = np.where(s[:, 3] > 0, s[:, 3] / 2, 3.0)
     half_w = np.where(s[:, 4] > 0, s[:, 4] / 2, 1.0)
-    return bool(np.any((np.abs(lon) < half_l + radius + 0.2) & (np.abs(lat) < half_w + radius + 0.2)))
+    return bool(np.any((np.abs(lon) < half_l + radius + 0.2)
+                       & (np.abs(lat) < half_w + radius + 0.2)))
 
 
 def _hits_building(start, along, inward, lo, hi, d0, d1, bbox) -> bool:
@@ -249,4 +250,5 @@ def _hits_building(start, along, inward, lo, hi, d0, d1, bbox) -> bool:
     b = start + along * hi + inward * d1
     x0, x1 = min(a[0], b[0]) - 0.2, max(a[0], b[0]) + 0.2
     y0, y1 = min(a[1], b[1]) - 0.2, max(a[1], b[1]) + 0.2
-    return bool(np.any((bbox[:, 0] < x1) & (bbox[:, 2] > x0) & (bbox[:, 1] < y1) & (bbox[:, 3] > y0)))
+    return bool(np.any((bbox[:, 0] < x1) & (bbox[:, 2] > x0)
+                       & (bbox[:, 1] < y1) & (bbox[:, 3] > y0)))

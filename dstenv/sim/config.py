@@ -65,7 +65,8 @@ def default_config() -> dict[str, Any]:
             "parking_lateral_jitter": 0.3,  # [m] offset in the strip: per side +- this, per car /2
             "parking_heading_jitter": 2.0,  # [deg] std of a parked vehicle's heading error
             "parking_mix": [0.25, 0.55, 0.15, 0.05],  # weights of small car, car, van, truck
-            "half_on_sidewalk_prob": 0.08,  # [-] share of (small / normal) cars half on the sidewalk
+            # [-] share of (small / normal) cars parked half on the sidewalk
+            "half_on_sidewalk_prob": 0.08,
         },
         "traffic": {
             "cars": 70,  # moving cars (KITTI-like class mix: moving >= static)

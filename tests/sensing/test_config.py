@@ -45,7 +45,8 @@ def test_gis_and_plane_height_validation():
         gis_config({"source": "osm"})
     with pytest.raises(ConfigError, match=r"gis\.road_width: unknown value"):
         gis_config({"road_width": "wide"})
-    with pytest.raises(ConfigError, match=r"gis\.nominal_lane_width: must be in \[2, 5\] m, got 9\.0"):
+    msg = r"gis\.nominal_lane_width: must be in \[2, 5\] m, got 9\.0"
+    with pytest.raises(ConfigError, match=msg):
         gis_config({"nominal_lane_width": 9.0})
     with pytest.raises(ConfigError, match=r"gis\.no_map_prob: must be in \[0, 1\]"):
         gis_config({"no_map_prob": 2.0})

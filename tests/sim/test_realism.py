@@ -99,8 +99,10 @@ def test_clutter_is_varied_seeded_and_off_in_the_clean_world():
             ObstacleKind.SIGN, ObstacleKind.BIN} <= kinds
     assert (a.z_max > a.z_min).all()
     crowns = a.kind == ObstacleKind.TREE_CROWN
-    assert (a.z_min[crowns] >= 2.0).all() and crowns.sum() == (a.kind == ObstacleKind.TREE_TRUNK).sum()
-    assert len(World(clean_world({"map": {"blocks_x": 3, "blocks_y": 3}}), seed=6).map.obstacles) == 0
+    assert (a.z_min[crowns] >= 2.0).all()
+    assert crowns.sum() == (a.kind == ObstacleKind.TREE_TRUNK).sum()
+    clean = World(clean_world({"map": {"blocks_x": 3, "blocks_y": 3}}), seed=6)
+    assert len(clean.map.obstacles) == 0
 
 
 def test_osm_maps_get_street_clutter_beside_the_roads():

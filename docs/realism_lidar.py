@@ -60,4 +60,4 @@ if __name__ == "__main__":
     for root, seq in zip(args[::2], args[1::2]):
         print(f"## {root} sequence {seq}")
         for k, v in figures(root, seq).items():
-            print(f"{k:36s} {v}")
+            print(f"{k:36s} {tuple(float(x) for x in v) if isinstance(v, tuple) else v}")

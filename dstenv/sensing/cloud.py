@@ -311,7 +311,8 @@ def _local_ground(x, y, h, n_sec, bin_size, ego_radius, max_slope, step_tol, fla
             if highest[s, b] - cand <= flat_spread and math.isfinite(cand):
                 dr = rc - last_r
                 # a lower outlier (a reflection) must not drag the ground down
-                if cand - g <= step_tol + max_slope * dr and g - cand <= drop_tol + max_drop_slope * dr:
+                rise_ok = cand - g <= step_tol + max_slope * dr
+                if rise_ok and g - cand <= drop_tol + max_drop_slope * dr:
                     g = cand
                     last_r = rc
             ground[s, b] = g

@@ -49,7 +49,7 @@ import numba
 import numpy as np
 from scipy.ndimage import minimum_filter1d
 
-from dstenv.config import merge_config
+from dstenv.config import Validated, merge_config
 from dstenv.dst import SensorState
 from dstenv.grid import GridSpec
 from dstenv.sensing.raycast import sensor_grid
@@ -107,12 +107,21 @@ def default_ray_config() -> dict[str, Any]:
     }
 
 
-def fit_ground_plane(points: np.ndarray, config: dict[str, Any] | None = None) -> np.ndarray:
+def _ground_cfg(config: dict[str, Any] | None) -> Validated:
+    """Ground settings merged over the defaults (a merged one is passed through)."""
+    if isinstance(config, Validated):
+        return config
+    return Validated(merge_config(default_ground_config(), config, "ground"))
+
+
+def fit_ground_plane(points: np.ndarray, config: dict[str, Any] | None = None, *,
+                     polar: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """Fit the ground plane of one scan.
 
     Args:
         points: ``(P, 3+) float`` Velodyne points (x, y, z, ...).
         config: overrides of :func:`default_ground_config`.
+        polar: the points' ``(r, angle)`` if already computed (a speed-up).
 
     Returns:
         ``(4,) float64`` plane ``(a, b, c, d)`` with unit normal ``(a, b, c)``,
@@ -121,9 +130,9 @@ def fit_ground_plane(points: np.ndarray, config: dict[str, Any] | None = None) -
     Raises:
         CloudError: if fewer than 3 candidate points or no acceptable plane exist.
     """
-    cfg = merge_config(default_ground_config(), config, "ground")
+    cfg = _ground_cfg(config)
     xyz = np.asarray(points, dtype=np.float64)[:, :3]
-    r = np.hypot(xyz[:, 0], xyz[:, 1])
+    r = (polar or _polar(xyz))[0]
     near = (r < cfg["fit_range"]) & (r > cfg["ego_radius"])
     cand = xyz[near & (xyz[:, 2] < cfg["max_candidate_z"])]
     if len(cand) < 3:
@@ -143,19 +152,20 @@ def fit_ground_plane(points: np.ndarray, config: dict[str, Any] | None = None) -
     d = -np.einsum("ij,ij->i", normal, tri[:, 0])
     score = np.where(ok, _inlier_counts(normal, d, cand, cfg["inlier_distance"]), -1)
     plane = np.append(normal[np.argmax(score)], d[np.argmax(score)])
-    for _ in range(2):  # least-squares refit on the inliers
-        inl = cand[np.abs(cand @ plane[:3] + plane[3]) < cfg["inlier_distance"]]
-        if len(inl) < 3:
+    for _ in range(2):  # least-squares refit on the inliers: the normal is the
+        # eigenvector of the smallest eigenvalue of their scatter matrix
+        count, centre, scatter = _inlier_moments(cand, plane, cfg["inlier_distance"])
+        if count < 3:
             break
-        centre = inl.mean(axis=0)
-        n = np.linalg.svd(inl - centre, full_matrices=False)[2][-1]
+        n = np.linalg.eigh(scatter)[1][:, 0]
         n = n if n[2] > 0 else -n
         plane = np.append(n, -n @ centre)
     return plane
 
 
 def ground_heights(
-    points: np.ndarray, plane: np.ndarray, config: dict[str, Any] | None = None
+    points: np.ndarray, plane: np.ndarray, config: dict[str, Any] | None = None, *,
+    polar: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> np.ndarray:
     """Height of every point above the local ground.
 
@@ -167,25 +177,28 @@ def ground_heights(
         points: ``(P, 3+) float`` Velodyne points.
         plane: ``(4,)`` from :func:`fit_ground_plane`.
         config: overrides of :func:`default_ground_config`.
+        polar: the points' ``(r, angle)`` if already computed (a speed-up).
 
     Returns:
         ``(P,) float64`` height above ground [m].
     """
-    cfg = merge_config(default_ground_config(), config, "ground")
+    cfg = _ground_cfg(config)
     xyz = np.asarray(points, dtype=np.float64)[:, :3]
     h = xyz @ plane[:3] + plane[3]
     if not cfg["local"] or len(h) == 0:
         return h
     n_sec = max(round(360.0 / cfg["sector_deg"]), 1)
+    r, angle = polar or _polar(xyz)
     return _local_ground(
-        np.ascontiguousarray(xyz[:, 0]), np.ascontiguousarray(xyz[:, 1]), h, n_sec,
+        r, angle, h, n_sec,
         float(cfg["bin_size"]), float(cfg["ego_radius"]), float(cfg["max_slope"]),
         float(cfg["step_tolerance"]), float(cfg["flat_spread"]), float(cfg["max_drop_slope"]),
         float(cfg["drop_tolerance"]))
 
 
 def classify_points(
-    points: np.ndarray, plane: np.ndarray, config: dict[str, Any] | None = None
+    points: np.ndarray, plane: np.ndarray, config: dict[str, Any] | None = None, *,
+    polar: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Split a scan into ground and obstacle points.
 
@@ -193,6 +206,7 @@ def classify_points(
         points: ``(P, 3+) float`` Velodyne points.
         plane: ``(4,)`` from :func:`fit_ground_plane`.
         config: overrides of :func:`default_ground_config`.
+        polar: the points' ``(r, angle)`` if already computed (a speed-up).
 
     Returns:
         ``(ground, obstacle, height)``: two disjoint ``(P,) bool`` masks and the
@@ -200,10 +214,11 @@ def classify_points(
         mask (more than 3 m below the plane, between the bands, above the
         obstacle band, or on the ego car) are not used.
     """
-    cfg = merge_config(default_ground_config(), config, "ground")
+    cfg = _ground_cfg(config)
     xyz = np.asarray(points, dtype=np.float64)[:, :3]
-    height = ground_heights(xyz, plane, cfg)
-    away = np.hypot(xyz[:, 0], xyz[:, 1]) > cfg["ego_radius"]
+    polar = polar or _polar(xyz)
+    height = ground_heights(xyz, plane, cfg, polar=polar)
+    away = polar[0] > cfg["ego_radius"]
     # Returns below the road plane (ditches, lower verges) are free space too.
     ground = away & (height > -3.0) & (height < cfg["ground_height"])
     obstacle = (
@@ -215,7 +230,8 @@ def classify_points(
 def scan_sensor_grid(
     points: np.ndarray, ground: np.ndarray, obstacle: np.ndarray, spec: GridSpec,
     max_range: float, azimuth_bin_deg: float = 0.2, occluded_hits: bool = True,
-    blocking: np.ndarray | None = None, block_window_deg: float = 0.0,
+    blocking: np.ndarray | None = None, block_window_deg: float = 0.0, *,
+    polar: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> np.ndarray:
     """Sensor grid of one scan: one ray per ground or obstacle point.
 
@@ -242,6 +258,7 @@ def scan_sensor_grid(
         blocking: ``(P,) bool`` obstacle points that stop rays (default: all).
         block_window_deg: full width of the azimuth window of blocking obstacles [deg]
             (0: the ray's own bin only).
+        polar: the points' ``(r, angle)`` if already computed (a speed-up).
 
     Returns:
         ``(H, W) uint8``: 0 unknown, 1 free, 2 occupied.
@@ -252,7 +269,8 @@ def scan_sensor_grid(
     block = obstacle if blocking is None else np.asarray(blocking, dtype=bool) & obstacle
     n_bins = max(round(360.0 / azimuth_bin_deg), 1)
     x, y = np.ascontiguousarray(xyz[:, 0]), np.ascontiguousarray(xyz[:, 1])
-    b, rng, nearest = _azimuth_bins(x, y, block, n_bins)
+    rng, angle = polar or _polar(xyz)
+    b, nearest = _azimuth_bins(rng, angle, block, n_bins)
     half = round(0.5 * block_window_deg / azimuth_bin_deg)
     if half > 0:
         nearest = minimum_filter1d(nearest, 2 * half + 1, mode="wrap")
@@ -279,18 +297,56 @@ def _inlier_counts(normal, d, cand, dist):  # pragma: no cover - numba
     return out
 
 
+def _polar(xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(r, angle)``: ``(P,) float64`` horizontal range [m] and azimuth in [-pi, pi]."""
+    return _polar_kernel(np.ascontiguousarray(xyz[:, 0], dtype=np.float64),
+                         np.ascontiguousarray(xyz[:, 1], dtype=np.float64))
+
+
 @numba.njit(cache=True)
-def _local_ground(x, y, h, n_sec, bin_size, ego_radius, max_slope, step_tol, flat_spread,
+def _polar_kernel(x, y):  # pragma: no cover - numba
+    r = np.empty(x.shape[0])
+    a = np.empty(x.shape[0])
+    for p in range(x.shape[0]):
+        r[p] = math.sqrt(x[p] * x[p] + y[p] * y[p])
+        a[p] = math.atan2(y[p], x[p])
+    return r, a
+
+
+@numba.njit(cache=True)
+def _inlier_moments(cand, plane, dist):  # pragma: no cover - numba
+    """Count, centre ``(3,)`` and scatter matrix ``(3, 3)`` of the plane's inliers."""
+    n = 0
+    s = np.zeros(3)
+    for p in range(cand.shape[0]):
+        d = plane[0] * cand[p, 0] + plane[1] * cand[p, 1] + plane[2] * cand[p, 2] + plane[3]
+        if abs(d) < dist:
+            n += 1
+            s += cand[p]
+    centre = s / max(n, 1)
+    m = np.zeros((3, 3))
+    for p in range(cand.shape[0]):
+        d = plane[0] * cand[p, 0] + plane[1] * cand[p, 1] + plane[2] * cand[p, 2] + plane[3]
+        if abs(d) < dist:
+            q = cand[p] - centre
+            for i in range(3):
+                for j in range(3):
+                    m[i, j] += q[i] * q[j]
+    return n, centre, m
+
+
+@numba.njit(cache=True)
+def _local_ground(r_all, angle, h, n_sec, bin_size, ego_radius, max_slope, step_tol, flat_spread,
                   max_drop_slope, drop_tol):  # pragma: no cover - numba
     """Heights above the local ground of the polar walk (see :func:`ground_heights`)."""
-    n = x.shape[0]
+    n = r_all.shape[0]
     sec = np.empty(n, np.int64)
     rbin = np.empty(n, np.int64)
     rmax = 0.0
     for p in range(n):
-        r = math.sqrt(x[p] * x[p] + y[p] * y[p])
+        r = r_all[p]
         rmax = max(rmax, r)
-        s = int((math.atan2(y[p], x[p]) + math.pi) / (2 * math.pi) * n_sec)
+        s = int((angle[p] + math.pi) / (2 * math.pi) * n_sec)
         sec[p] = min(s, n_sec - 1)
         rbin[p] = int(r / bin_size)
     n_bin = int(math.ceil(rmax / bin_size)) + 1
@@ -323,19 +379,17 @@ def _local_ground(x, y, h, n_sec, bin_size, ego_radius, max_slope, step_tol, fla
 
 
 @numba.njit(cache=True)
-def _azimuth_bins(x, y, block, n_bins):  # pragma: no cover - numba
-    """Bin and horizontal range of every point, nearest blocking range per bin."""
-    n = x.shape[0]
+def _azimuth_bins(rng, angle, block, n_bins):  # pragma: no cover - numba
+    """Azimuth bin of every point and the nearest blocking range per bin."""
+    n = rng.shape[0]
     b = np.empty(n, np.int64)
-    rng = np.empty(n)
     nearest = np.full(n_bins, np.inf)
     for p in range(n):
-        rng[p] = math.sqrt(x[p] * x[p] + y[p] * y[p])
-        k = int((math.atan2(y[p], x[p]) + math.pi) / (2 * math.pi) * n_bins)
+        k = int((angle[p] + math.pi) / (2 * math.pi) * n_bins)
         b[p] = min(k, n_bins - 1)
         if block[p] and rng[p] < nearest[b[p]]:
             nearest[b[p]] = rng[p]
-    return b, rng, nearest
+    return b, nearest
 
 
 @numba.njit(cache=True)
@@ -389,13 +443,15 @@ def cloud_sensor_grid(
     Raises:
         CloudError: the scan has no usable ground (see :func:`fit_ground_plane`).
     """
-    gcfg = merge_config(default_ground_config(), ground_cfg, "ground")
+    gcfg = _ground_cfg(ground_cfg)  # merged once, not again in every stage
     rcfg = merge_config(default_ray_config(), ray_cfg, "rays")
-    plane = fit_ground_plane(points, gcfg)
-    ground, obstacle, height = classify_points(points, plane, gcfg)
+    xyz = np.asarray(points, dtype=np.float64)[:, :3]
+    polar = _polar(xyz)  # shared by the three stages
+    plane = fit_ground_plane(xyz, gcfg, polar=polar)
+    ground, obstacle, height = classify_points(xyz, plane, gcfg, polar=polar)
     sensor = scan_sensor_grid(
-        points, ground, obstacle, spec, rcfg["max_range"], rcfg["azimuth_bin_deg"],
+        xyz, ground, obstacle, spec, rcfg["max_range"], rcfg["azimuth_bin_deg"],
         rcfg["occluded_hits"], blocking=obstacle & (height >= rcfg["block_height"]),
-        block_window_deg=rcfg["block_window_deg"],
+        block_window_deg=rcfg["block_window_deg"], polar=polar,
     )
     return sensor, plane, ground, obstacle, height

@@ -137,7 +137,8 @@ def _protocol_defaults() -> dict[str, Any]:
 def _frame_defaults() -> dict[str, Any]:
     return {
         "masses": False,  # attach the (32, H, W) masses to every Frame
-        # attach extras["lidar_points"]: (B, 2) float32 ego frame [m], NaN = no return
+        # attach extras["lidar_points"]: fixed-shape float32, NaN = no return: (B, 2) ego
+        # frame [m] for the 2-D LIDAR, (beams, 4) Velodyne rows for hdl64
         "lidar_points": False,
     }
 

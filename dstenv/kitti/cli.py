@@ -207,7 +207,7 @@ def _common(p: argparse.ArgumentParser) -> None:
 
 
 def _export(args: argparse.Namespace) -> int:
-    from dstenv.cli import CLIError
+    from dstenv.config import CLIError
     from dstenv.data.sampling import scenario_config
     from dstenv.kitti.export import export_drive
 

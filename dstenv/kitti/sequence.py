@@ -39,12 +39,8 @@ from dstenv.kitti.readers import (
     velodyne_path,
 )
 from dstenv.sensing import visible_mask
-from dstenv.sensing.cloud import (
-    CloudError,
-    cloud_sensor_grid,
-    default_ground_config,
-    default_ray_config,
-)
+from dstenv.sensing.cloud import cloud_sensor_grid, default_ray_config
+from dstenv.sensing.ground import CloudError, default_ground_config
 
 __all__ = [
     "FRAME_RATE", "default_config", "kitti_config", "kept_frames",

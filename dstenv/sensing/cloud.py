@@ -1,33 +1,12 @@
 """One road from a 3-D point cloud to the sensor grid, for KITTI scans and simulated ones.
 
 ``points (P, 4) float32`` (Velodyne frame: x forward, y left, z up; the KITTI
-``.bin`` layout) -> :func:`fit_ground_plane` -> :func:`classify_points` (ground,
-obstacle, neither) -> :func:`scan_sensor_grid` (one ray per used point) ->
-``(H, W) uint8`` sensor grid. :func:`cloud_sensor_grid` chains them with the
-settings of :func:`default_ground_config` and :func:`default_ray_config`;
-``dstenv kitti convert`` and the simulated ``hdl64`` LIDAR both call it.
-
-Ground removal
---------------
-Road returns must count as free space, not obstacles (as in the paper). The fit:
-
-1. candidates: points within ``fit_range`` metres horizontally and below
-   ``max_candidate_z`` (the Velodyne is 1.73 m above the road, so the road is
-   near z = -1.7); at most ``sample`` of them, drawn with the seeded generator;
-2. ``iterations`` random triplets -> planes, all scored at once as an
-   ``(iterations, sample)`` distance matrix; planes tilted more than
-   ``max_tilt_deg`` from horizontal are rejected;
-3. the best plane is refit by least squares (SVD) to its inliers, twice.
-
-A global plane misreads sloping verges and dips, so :func:`ground_heights` then
-walks outwards through polar bins (1 deg x 1 m) of every azimuth sector, taking
-the lowest return of a *flat* bin (returns spanning at most ``flat_spread``; a
-bin holding a car's side spans its height) as the local ground when it rises
-less than ``step_tolerance + max_slope * distance`` (and drops less than the
-drop limits) since the last ground bin; other bins keep the last ground height.
-Every point then gets a height above that local ground; :func:`classify_points`
-splits the scan into ground (free-space rays), obstacles (a height band) and
-the rest (ignored: overhanging branches, the car's own body, curbs).
+``.bin`` layout) -> ground removal (:mod:`dstenv.sensing.ground`: plane, local ground,
+ground / obstacle / neither) -> :func:`scan_sensor_grid` (rays per azimuth bin) ->
+``(H, W) uint8`` sensor grid. :func:`cloud_sensor_grid` chains them with the settings
+of :func:`~dstenv.sensing.ground.default_ground_config` and
+:func:`default_ray_config`; ``dstenv kitti convert`` and the simulated ``hdl64`` LIDAR
+both call it.
 
 Rays
 ----
@@ -52,44 +31,15 @@ from scipy.ndimage import minimum_filter1d
 from dstenv.config import merge_config
 from dstenv.dst import SensorState
 from dstenv.grid import GridSpec
+from dstenv.sensing.ground import (
+    classify_points,
+    fit_ground_plane,
+    ground_config,
+    polar_coordinates,
+)
 from dstenv.sensing.raycast import sensor_grid
 
-__all__ = [
-    "CloudError", "default_ground_config", "default_ray_config", "fit_ground_plane",
-    "ground_heights", "classify_points", "scan_sensor_grid", "cloud_sensor_grid",
-]
-
-
-class CloudError(ValueError):
-    """A scan the ground fit cannot use (too few points near the road, no level plane)."""
-
-
-def default_ground_config() -> dict[str, Any]:
-    """Parameters of ground removal and obstacle selection (units in comments)."""
-    return {
-        "iterations": 200,  # RANSAC hypotheses
-        "sample": 4000,  # candidate points scored per hypothesis
-        "fit_range": 30.0,  # [m] horizontal range of candidate points
-        "max_candidate_z": -0.8,  # [m] candidates lie below this height (sensor frame)
-        "inlier_distance": 0.15,  # [m] RANSAC / refit inlier band
-        "max_tilt_deg": 15.0,  # [deg] steepest accepted ground plane
-        "ground_height": 0.25,  # [m] points below this height above the plane are ground
-        "min_obstacle_height": 0.30,  # [m] obstacle band: lower bound above ground
-        "max_obstacle_height": 2.50,  # [m] obstacle band: upper bound above ground
-        "ego_radius": 2.7,  # [m] points closer than this (horizontally) are the ego car
-        # local ground: per azimuth sector, walk outwards through range bins keeping
-        # the lowest return of a flat bin as the ground when it rises no more than
-        # step_tolerance + max_slope * distance since the last ground bin
-        "local": True,  # refine the plane by the polar walk (False: plane only)
-        "sector_deg": 1.0,  # [deg] azimuth sector width
-        "bin_size": 1.0,  # [m] range bin length
-        "max_slope": 0.12,  # [m/m] steepest ground rise between ground bins
-        "step_tolerance": 0.15,  # [m] rise always accepted between neighbouring bins
-        "flat_spread": 0.3,  # [m] a ground bin's returns span at most this height
-        "max_drop_slope": 0.3,  # [m/m] steepest ground drop (ditches) between ground bins
-        "drop_tolerance": 0.3,  # [m] drop always accepted between neighbouring bins
-        "seed": 0,  # RANSAC generator seed (same seed, same result)
-    }
+__all__ = ["default_ray_config", "scan_sensor_grid", "cloud_sensor_grid"]
 
 
 def default_ray_config() -> dict[str, Any]:
@@ -107,115 +57,11 @@ def default_ray_config() -> dict[str, Any]:
     }
 
 
-def fit_ground_plane(points: np.ndarray, config: dict[str, Any] | None = None) -> np.ndarray:
-    """Fit the ground plane of one scan.
-
-    Args:
-        points: ``(P, 3+) float`` Velodyne points (x, y, z, ...).
-        config: overrides of :func:`default_ground_config`.
-
-    Returns:
-        ``(4,) float64`` plane ``(a, b, c, d)`` with unit normal ``(a, b, c)``,
-        ``c > 0``; the height of a point above the ground is ``a x + b y + c z + d``.
-
-    Raises:
-        CloudError: if fewer than 3 candidate points or no acceptable plane exist.
-    """
-    cfg = merge_config(default_ground_config(), config, "ground")
-    xyz = np.asarray(points, dtype=np.float64)[:, :3]
-    r = np.hypot(xyz[:, 0], xyz[:, 1])
-    near = (r < cfg["fit_range"]) & (r > cfg["ego_radius"])
-    cand = xyz[near & (xyz[:, 2] < cfg["max_candidate_z"])]
-    if len(cand) < 3:
-        raise CloudError(f"ground fit: only {len(cand)} candidate points near the road")
-    rng = np.random.default_rng(cfg["seed"])
-    if len(cand) > cfg["sample"]:
-        cand = cand[rng.choice(len(cand), cfg["sample"], replace=False)]
-    tri = cand[rng.integers(0, len(cand), size=(cfg["iterations"], 3))]  # (I, 3, 3)
-    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    norm = np.linalg.norm(normal, axis=1)
-    ok = norm > 1e-9
-    normal[ok] /= norm[ok, None]
-    normal *= np.where(normal[:, 2:3] < 0, -1.0, 1.0)  # point up
-    ok &= normal[:, 2] >= np.cos(np.deg2rad(cfg["max_tilt_deg"]))
-    if not ok.any():
-        raise CloudError("ground fit: no near-horizontal plane among the RANSAC hypotheses")
-    d = -np.einsum("ij,ij->i", normal, tri[:, 0])
-    score = np.where(ok, _inlier_counts(normal, d, cand, cfg["inlier_distance"]), -1)
-    plane = np.append(normal[np.argmax(score)], d[np.argmax(score)])
-    for _ in range(2):  # least-squares refit on the inliers
-        inl = cand[np.abs(cand @ plane[:3] + plane[3]) < cfg["inlier_distance"]]
-        if len(inl) < 3:
-            break
-        centre = inl.mean(axis=0)
-        n = np.linalg.svd(inl - centre, full_matrices=False)[2][-1]
-        n = n if n[2] > 0 else -n
-        plane = np.append(n, -n @ centre)
-    return plane
-
-
-def ground_heights(
-    points: np.ndarray, plane: np.ndarray, config: dict[str, Any] | None = None
-) -> np.ndarray:
-    """Height of every point above the local ground.
-
-    The plane removes the sensor's tilt; with ``local`` on, a polar walk then
-    follows gentle slopes and verges the plane misses (a field rising beside the
-    road would otherwise read as an obstacle ring).
-
-    Args:
-        points: ``(P, 3+) float`` Velodyne points.
-        plane: ``(4,)`` from :func:`fit_ground_plane`.
-        config: overrides of :func:`default_ground_config`.
-
-    Returns:
-        ``(P,) float64`` height above ground [m].
-    """
-    cfg = merge_config(default_ground_config(), config, "ground")
-    xyz = np.asarray(points, dtype=np.float64)[:, :3]
-    h = xyz @ plane[:3] + plane[3]
-    if not cfg["local"] or len(h) == 0:
-        return h
-    n_sec = max(round(360.0 / cfg["sector_deg"]), 1)
-    return _local_ground(
-        np.ascontiguousarray(xyz[:, 0]), np.ascontiguousarray(xyz[:, 1]), h, n_sec,
-        float(cfg["bin_size"]), float(cfg["ego_radius"]), float(cfg["max_slope"]),
-        float(cfg["step_tolerance"]), float(cfg["flat_spread"]), float(cfg["max_drop_slope"]),
-        float(cfg["drop_tolerance"]))
-
-
-def classify_points(
-    points: np.ndarray, plane: np.ndarray, config: dict[str, Any] | None = None
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Split a scan into ground and obstacle points.
-
-    Args:
-        points: ``(P, 3+) float`` Velodyne points.
-        plane: ``(4,)`` from :func:`fit_ground_plane`.
-        config: overrides of :func:`default_ground_config`.
-
-    Returns:
-        ``(ground, obstacle, height)``: two disjoint ``(P,) bool`` masks and the
-        ``(P,) float64`` heights above the local ground [m]. Points in neither
-        mask (more than 3 m below the plane, between the bands, above the
-        obstacle band, or on the ego car) are not used.
-    """
-    cfg = merge_config(default_ground_config(), config, "ground")
-    xyz = np.asarray(points, dtype=np.float64)[:, :3]
-    height = ground_heights(xyz, plane, cfg)
-    away = np.hypot(xyz[:, 0], xyz[:, 1]) > cfg["ego_radius"]
-    # Returns below the road plane (ditches, lower verges) are free space too.
-    ground = away & (height > -3.0) & (height < cfg["ground_height"])
-    obstacle = (
-        away & (height >= cfg["min_obstacle_height"]) & (height <= cfg["max_obstacle_height"])
-    )
-    return ground, obstacle, height
-
-
 def scan_sensor_grid(
     points: np.ndarray, ground: np.ndarray, obstacle: np.ndarray, spec: GridSpec,
     max_range: float, azimuth_bin_deg: float = 0.2, occluded_hits: bool = True,
-    blocking: np.ndarray | None = None, block_window_deg: float = 0.0,
+    blocking: np.ndarray | None = None, block_window_deg: float = 0.0, *,
+    polar: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> np.ndarray:
     """Sensor grid of one scan: one ray per ground or obstacle point.
 
@@ -242,6 +88,7 @@ def scan_sensor_grid(
         blocking: ``(P,) bool`` obstacle points that stop rays (default: all).
         block_window_deg: full width of the azimuth window of blocking obstacles [deg]
             (0: the ray's own bin only).
+        polar: the points' ``(r, angle)`` if already computed (a speed-up).
 
     Returns:
         ``(H, W) uint8``: 0 unknown, 1 free, 2 occupied.
@@ -252,7 +99,8 @@ def scan_sensor_grid(
     block = obstacle if blocking is None else np.asarray(blocking, dtype=bool) & obstacle
     n_bins = max(round(360.0 / azimuth_bin_deg), 1)
     x, y = np.ascontiguousarray(xyz[:, 0]), np.ascontiguousarray(xyz[:, 1])
-    b, rng, nearest = _azimuth_bins(x, y, block, n_bins)
+    rng, angle = polar or polar_coordinates(xyz)
+    b, nearest = _azimuth_bins(rng, angle, block, n_bins)
     half = round(0.5 * block_window_deg / azimuth_bin_deg)
     if half > 0:
         nearest = minimum_filter1d(nearest, 2 * half + 1, mode="wrap")
@@ -266,75 +114,17 @@ def scan_sensor_grid(
 
 
 @numba.njit(cache=True)
-def _inlier_counts(normal, d, cand, dist):  # pragma: no cover - numba
-    """``(I,) int64`` candidates within ``dist`` of each plane hypothesis."""
-    out = np.zeros(normal.shape[0], np.int64)
-    for k in range(normal.shape[0]):
-        a, b, c, e = normal[k, 0], normal[k, 1], normal[k, 2], d[k]
-        n = 0
-        for p in range(cand.shape[0]):
-            if abs(a * cand[p, 0] + b * cand[p, 1] + c * cand[p, 2] + e) < dist:
-                n += 1
-        out[k] = n
-    return out
-
-
-@numba.njit(cache=True)
-def _local_ground(x, y, h, n_sec, bin_size, ego_radius, max_slope, step_tol, flat_spread,
-                  max_drop_slope, drop_tol):  # pragma: no cover - numba
-    """Heights above the local ground of the polar walk (see :func:`ground_heights`)."""
-    n = x.shape[0]
-    sec = np.empty(n, np.int64)
-    rbin = np.empty(n, np.int64)
-    rmax = 0.0
-    for p in range(n):
-        r = math.sqrt(x[p] * x[p] + y[p] * y[p])
-        rmax = max(rmax, r)
-        s = int((math.atan2(y[p], x[p]) + math.pi) / (2 * math.pi) * n_sec)
-        sec[p] = min(s, n_sec - 1)
-        rbin[p] = int(r / bin_size)
-    n_bin = int(math.ceil(rmax / bin_size)) + 1
-    lowest = np.full((n_sec, n_bin), np.inf)
-    highest = np.full((n_sec, n_bin), -np.inf)
-    for p in range(n):
-        lowest[sec[p], rbin[p]] = min(lowest[sec[p], rbin[p]], h[p])
-        highest[sec[p], rbin[p]] = max(highest[sec[p], rbin[p]], h[p])
-    ground = np.zeros((n_sec, n_bin))
-    first = int(ego_radius / bin_size)
-    for s in range(n_sec):
-        g = 0.0  # the plane is the ground next to the car
-        last_r = ego_radius
-        for b in range(first, n_bin):
-            rc = (b + 0.5) * bin_size
-            cand = lowest[s, b]
-            # a bin holding a vertical surface (a car's side) spans its height: never ground
-            if highest[s, b] - cand <= flat_spread and math.isfinite(cand):
-                dr = rc - last_r
-                # a lower outlier (a reflection) must not drag the ground down
-                if cand - g <= step_tol + max_slope * dr and g - cand <= drop_tol + max_drop_slope * dr:
-                    g = cand
-                    last_r = rc
-            ground[s, b] = g
-    out = np.empty(n)
-    for p in range(n):
-        out[p] = h[p] - ground[sec[p], rbin[p]]
-    return out
-
-
-@numba.njit(cache=True)
-def _azimuth_bins(x, y, block, n_bins):  # pragma: no cover - numba
-    """Bin and horizontal range of every point, nearest blocking range per bin."""
-    n = x.shape[0]
+def _azimuth_bins(rng, angle, block, n_bins):  # pragma: no cover - numba
+    """Azimuth bin of every point and the nearest blocking range per bin."""
+    n = rng.shape[0]
     b = np.empty(n, np.int64)
-    rng = np.empty(n)
     nearest = np.full(n_bins, np.inf)
     for p in range(n):
-        rng[p] = math.sqrt(x[p] * x[p] + y[p] * y[p])
-        k = int((math.atan2(y[p], x[p]) + math.pi) / (2 * math.pi) * n_bins)
+        k = int((angle[p] + math.pi) / (2 * math.pi) * n_bins)
         b[p] = min(k, n_bins - 1)
         if block[p] and rng[p] < nearest[b[p]]:
             nearest[b[p]] = rng[p]
-    return b, rng, nearest
+    return b, nearest
 
 
 @numba.njit(cache=True)
@@ -388,13 +178,15 @@ def cloud_sensor_grid(
     Raises:
         CloudError: the scan has no usable ground (see :func:`fit_ground_plane`).
     """
-    gcfg = merge_config(default_ground_config(), ground_cfg, "ground")
+    gcfg = ground_config(ground_cfg)  # merged once, not again in every stage
     rcfg = merge_config(default_ray_config(), ray_cfg, "rays")
-    plane = fit_ground_plane(points, gcfg)
-    ground, obstacle, height = classify_points(points, plane, gcfg)
+    xyz = np.asarray(points, dtype=np.float64)[:, :3]
+    polar = polar_coordinates(xyz)  # shared by the three stages
+    plane = fit_ground_plane(xyz, gcfg, polar=polar)
+    ground, obstacle, height = classify_points(xyz, plane, gcfg, polar=polar)
     sensor = scan_sensor_grid(
-        points, ground, obstacle, spec, rcfg["max_range"], rcfg["azimuth_bin_deg"],
+        xyz, ground, obstacle, spec, rcfg["max_range"], rcfg["azimuth_bin_deg"],
         rcfg["occluded_hits"], blocking=obstacle & (height >= rcfg["block_height"]),
-        block_window_deg=rcfg["block_window_deg"],
+        block_window_deg=rcfg["block_window_deg"], polar=polar,
     )
     return sensor, plane, ground, obstacle, height

@@ -37,7 +37,8 @@ LIDAR_MODELS: tuple[str, ...] = ("2d", "hdl64")
 
 def default_hdl64_config() -> dict[str, Any]:
     """The ``lidar.hdl64`` section: a spinning 64-channel LIDAR like KITTI's HDL-64E."""
-    from dstenv.sensing.cloud import default_ground_config, default_ray_config
+    from dstenv.sensing.cloud import default_ray_config
+    from dstenv.sensing.ground import default_ground_config
 
     return {
         "channels": 64,  # elevation channels [-], spread evenly from top to bottom

@@ -182,7 +182,8 @@ class Hdl64:
         _cast_boxes(boxes, ox, oy, ux, uy, self.slope, c["mount_height"], h_max, best, surf, idx)
         _cast_walls(edges, starts, circles, heights, ox, oy, ux, uy, self.slope,
                     c["mount_height"], h_max, best, surf, idx)
-        _cast_ground(self._raster, np.uint8(MapClass.INTERMEDIATE), float(world_map.origin[0]), float(world_map.origin[1]),
+        _cast_ground(self._raster, np.uint8(MapClass.INTERMEDIATE), float(world_map.origin[0]),
+                     float(world_map.origin[1]),
                      float(world_map.resolution), float(world_map.kerb_height), ox, oy, ux, uy,
                      self.slope, c["mount_height"], h_max, best, surf, idx)
         return self._measure(best, surf, idx, rng)

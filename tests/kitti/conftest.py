@@ -20,7 +20,8 @@ import pytest
 
 FIXTURES = Path(__file__).resolve().parent / "fixtures"
 # ../shared/data next to the repository, or $DSTENV_SHARED_DATA (a worktree elsewhere)
-SHARED = Path(os.environ.get("DSTENV_SHARED_DATA", Path(__file__).resolve().parents[2] / ".." / "shared" / "data")) / "kitti-tracking"
+_DATA = Path(__file__).resolve().parents[2] / ".." / "shared" / "data"
+SHARED = Path(os.environ.get("DSTENV_SHARED_DATA", _DATA)) / "kitti-tracking"
 SENSOR_Z = -1.73
 CAR = (4.0, 1.8, 1.5)  # length, width, height [m]
 POLE = (25.0, -10.0, 0.4, 2.0)  # x, y, side, height [m]

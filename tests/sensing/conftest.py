@@ -8,7 +8,8 @@ from pathlib import Path
 import pytest
 
 # ../shared/data next to the repository, or $DSTENV_SHARED_DATA (a worktree elsewhere)
-SHARED = Path(os.environ.get("DSTENV_SHARED_DATA", Path(__file__).resolve().parents[2] / ".." / "shared" / "data")) / "kitti-tracking"
+_DATA = Path(__file__).resolve().parents[2] / ".." / "shared" / "data"
+SHARED = Path(os.environ.get("DSTENV_SHARED_DATA", _DATA)) / "kitti-tracking"
 
 
 @pytest.fixture(scope="session")

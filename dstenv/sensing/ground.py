@@ -1,0 +1,286 @@
+"""Ground removal of a 3-D point cloud: a seeded RANSAC plane and a local ground walk.
+
+The first half of the point-cloud road (:mod:`dstenv.sensing.cloud`), shared by KITTI
+scans and the simulated ``hdl64`` LIDAR. Road returns must count as free space, not
+obstacles (as in the paper). The fit:
+
+1. candidates: points within ``fit_range`` metres horizontally and below
+   ``max_candidate_z`` (the Velodyne is 1.73 m above the road, so the road is
+   near z = -1.7); at most ``sample`` of them, drawn with the seeded generator;
+2. ``iterations`` random triplets -> planes, each scored by its inlier count;
+   planes tilted more than ``max_tilt_deg`` from horizontal are rejected;
+3. the best plane is refit by least squares to its inliers, twice.
+
+A global plane misreads sloping verges and dips, so :func:`ground_heights` then
+walks outwards through polar bins (1 deg x 1 m) of every azimuth sector, taking
+the lowest return of a *flat* bin (returns spanning at most ``flat_spread``; a
+bin holding a car's side spans its height) as the local ground when it rises
+less than ``step_tolerance + max_slope * distance`` (and drops less than the
+drop limits) since the last ground bin; other bins keep the last ground height.
+Every point then gets a height above that local ground; :func:`classify_points`
+splits the scan into ground (free-space rays), obstacles (a height band) and
+the rest (ignored: overhanging branches, the car's own body, curbs).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numba
+import numpy as np
+
+from dstenv.config import Validated, merge_config
+
+__all__ = ["CloudError", "default_ground_config", "fit_ground_plane", "ground_heights",
+           "classify_points", "ground_config", "polar_coordinates"]
+
+
+class CloudError(ValueError):
+    """A scan the ground fit cannot use (too few points near the road, no level plane)."""
+
+
+def default_ground_config() -> dict[str, Any]:
+    """Parameters of ground removal and obstacle selection (units in comments)."""
+    return {
+        "iterations": 200,  # RANSAC hypotheses
+        "sample": 4000,  # candidate points scored per hypothesis
+        "fit_range": 30.0,  # [m] horizontal range of candidate points
+        "max_candidate_z": -0.8,  # [m] candidates lie below this height (sensor frame)
+        "inlier_distance": 0.15,  # [m] RANSAC / refit inlier band
+        "max_tilt_deg": 15.0,  # [deg] steepest accepted ground plane
+        "ground_height": 0.25,  # [m] points below this height above the plane are ground
+        "min_obstacle_height": 0.30,  # [m] obstacle band: lower bound above ground
+        "max_obstacle_height": 2.50,  # [m] obstacle band: upper bound above ground
+        "ego_radius": 2.7,  # [m] points closer than this (horizontally) are the ego car
+        # local ground: per azimuth sector, walk outwards through range bins keeping
+        # the lowest return of a flat bin as the ground when it rises no more than
+        # step_tolerance + max_slope * distance since the last ground bin
+        "local": True,  # refine the plane by the polar walk (False: plane only)
+        "sector_deg": 1.0,  # [deg] azimuth sector width
+        "bin_size": 1.0,  # [m] range bin length
+        "max_slope": 0.12,  # [m/m] steepest ground rise between ground bins
+        "step_tolerance": 0.15,  # [m] rise always accepted between neighbouring bins
+        "flat_spread": 0.3,  # [m] a ground bin's returns span at most this height
+        "max_drop_slope": 0.3,  # [m/m] steepest ground drop (ditches) between ground bins
+        "drop_tolerance": 0.3,  # [m] drop always accepted between neighbouring bins
+        "seed": 0,  # RANSAC generator seed (same seed, same result)
+    }
+
+
+
+def ground_config(config: dict[str, Any] | None) -> Validated:
+    """Ground settings merged over :func:`default_ground_config` and marked validated
+    (a validated one is passed through: the stages of one scan merge once)."""
+    if isinstance(config, Validated):
+        return config
+    return Validated(merge_config(default_ground_config(), config, "ground"))
+
+
+def fit_ground_plane(points: np.ndarray, config: dict[str, Any] | None = None, *,
+                     polar: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+    """Fit the ground plane of one scan.
+
+    Args:
+        points: ``(P, 3+) float`` Velodyne points (x, y, z, ...).
+        config: overrides of :func:`default_ground_config`.
+        polar: the points' ``(r, angle)`` if already computed (a speed-up).
+
+    Returns:
+        ``(4,) float64`` plane ``(a, b, c, d)`` with unit normal ``(a, b, c)``,
+        ``c > 0``; the height of a point above the ground is ``a x + b y + c z + d``.
+
+    Raises:
+        CloudError: if fewer than 3 candidate points or no acceptable plane exist.
+    """
+    cfg = ground_config(config)
+    xyz = np.asarray(points, dtype=np.float64)[:, :3]
+    r = (polar or polar_coordinates(xyz))[0]
+    near = (r < cfg["fit_range"]) & (r > cfg["ego_radius"])
+    cand = xyz[near & (xyz[:, 2] < cfg["max_candidate_z"])]
+    if len(cand) < 3:
+        raise CloudError(f"ground fit: only {len(cand)} candidate points near the road")
+    rng = np.random.default_rng(cfg["seed"])
+    if len(cand) > cfg["sample"]:
+        cand = cand[rng.choice(len(cand), cfg["sample"], replace=False)]
+    tri = cand[rng.integers(0, len(cand), size=(cfg["iterations"], 3))]  # (I, 3, 3)
+    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    norm = np.linalg.norm(normal, axis=1)
+    ok = norm > 1e-9
+    normal[ok] /= norm[ok, None]
+    normal *= np.where(normal[:, 2:3] < 0, -1.0, 1.0)  # point up
+    ok &= normal[:, 2] >= np.cos(np.deg2rad(cfg["max_tilt_deg"]))
+    if not ok.any():
+        raise CloudError("ground fit: no near-horizontal plane among the RANSAC hypotheses")
+    d = -np.einsum("ij,ij->i", normal, tri[:, 0])
+    score = np.where(ok, _inlier_counts(normal, d, cand, cfg["inlier_distance"]), -1)
+    plane = np.append(normal[np.argmax(score)], d[np.argmax(score)])
+    for _ in range(2):  # least-squares refit on the inliers: the normal is the
+        # eigenvector of the smallest eigenvalue of their scatter matrix
+        count, centre, scatter = _inlier_moments(cand, plane, cfg["inlier_distance"])
+        if count < 3:
+            break
+        n = np.linalg.eigh(scatter)[1][:, 0]
+        n = n if n[2] > 0 else -n
+        plane = np.append(n, -n @ centre)
+    return plane
+
+
+def ground_heights(
+    points: np.ndarray, plane: np.ndarray, config: dict[str, Any] | None = None, *,
+    polar: tuple[np.ndarray, np.ndarray] | None = None,
+) -> np.ndarray:
+    """Height of every point above the local ground.
+
+    The plane removes the sensor's tilt; with ``local`` on, a polar walk then
+    follows gentle slopes and verges the plane misses (a field rising beside the
+    road would otherwise read as an obstacle ring).
+
+    Args:
+        points: ``(P, 3+) float`` Velodyne points.
+        plane: ``(4,)`` from :func:`fit_ground_plane`.
+        config: overrides of :func:`default_ground_config`.
+        polar: the points' ``(r, angle)`` if already computed (a speed-up).
+
+    Returns:
+        ``(P,) float64`` height above ground [m].
+    """
+    cfg = ground_config(config)
+    xyz = np.asarray(points, dtype=np.float64)[:, :3]
+    h = xyz @ plane[:3] + plane[3]
+    if not cfg["local"] or len(h) == 0:
+        return h
+    n_sec = max(round(360.0 / cfg["sector_deg"]), 1)
+    r, angle = polar or polar_coordinates(xyz)
+    return _local_ground(
+        r, angle, h, n_sec,
+        float(cfg["bin_size"]), float(cfg["ego_radius"]), float(cfg["max_slope"]),
+        float(cfg["step_tolerance"]), float(cfg["flat_spread"]), float(cfg["max_drop_slope"]),
+        float(cfg["drop_tolerance"]))
+
+
+def classify_points(
+    points: np.ndarray, plane: np.ndarray, config: dict[str, Any] | None = None, *,
+    polar: tuple[np.ndarray, np.ndarray] | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Split a scan into ground and obstacle points.
+
+    Args:
+        points: ``(P, 3+) float`` Velodyne points.
+        plane: ``(4,)`` from :func:`fit_ground_plane`.
+        config: overrides of :func:`default_ground_config`.
+        polar: the points' ``(r, angle)`` if already computed (a speed-up).
+
+    Returns:
+        ``(ground, obstacle, height)``: two disjoint ``(P,) bool`` masks and the
+        ``(P,) float64`` heights above the local ground [m]. Points in neither
+        mask (more than 3 m below the plane, between the bands, above the
+        obstacle band, or on the ego car) are not used.
+    """
+    cfg = ground_config(config)
+    xyz = np.asarray(points, dtype=np.float64)[:, :3]
+    polar = polar or polar_coordinates(xyz)
+    height = ground_heights(xyz, plane, cfg, polar=polar)
+    away = polar[0] > cfg["ego_radius"]
+    # Returns below the road plane (ditches, lower verges) are free space too.
+    ground = away & (height > -3.0) & (height < cfg["ground_height"])
+    obstacle = (
+        away & (height >= cfg["min_obstacle_height"]) & (height <= cfg["max_obstacle_height"])
+    )
+    return ground, obstacle, height
+
+
+@numba.njit(cache=True)
+def _inlier_counts(normal, d, cand, dist):  # pragma: no cover - numba
+    """``(I,) int64`` candidates within ``dist`` of each plane hypothesis."""
+    out = np.zeros(normal.shape[0], np.int64)
+    for k in range(normal.shape[0]):
+        a, b, c, e = normal[k, 0], normal[k, 1], normal[k, 2], d[k]
+        n = 0
+        for p in range(cand.shape[0]):
+            if abs(a * cand[p, 0] + b * cand[p, 1] + c * cand[p, 2] + e) < dist:
+                n += 1
+        out[k] = n
+    return out
+
+
+def polar_coordinates(xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(r, angle)`` of ``(P, 2+)`` points: ``(P,) float64`` horizontal range [m] and
+    azimuth [rad] in [-pi, pi] (computed once, shared by the stages of the road)."""
+    return _polar_kernel(np.ascontiguousarray(xyz[:, 0], dtype=np.float64),
+                         np.ascontiguousarray(xyz[:, 1], dtype=np.float64))
+
+
+@numba.njit(cache=True)
+def _polar_kernel(x, y):  # pragma: no cover - numba
+    r = np.empty(x.shape[0])
+    a = np.empty(x.shape[0])
+    for p in range(x.shape[0]):
+        r[p] = math.sqrt(x[p] * x[p] + y[p] * y[p])
+        a[p] = math.atan2(y[p], x[p])
+    return r, a
+
+
+@numba.njit(cache=True)
+def _inlier_moments(cand, plane, dist):  # pragma: no cover - numba
+    """Count, centre ``(3,)`` and scatter matrix ``(3, 3)`` of the plane's inliers."""
+    n = 0
+    s = np.zeros(3)
+    for p in range(cand.shape[0]):
+        d = plane[0] * cand[p, 0] + plane[1] * cand[p, 1] + plane[2] * cand[p, 2] + plane[3]
+        if abs(d) < dist:
+            n += 1
+            s += cand[p]
+    centre = s / max(n, 1)
+    m = np.zeros((3, 3))
+    for p in range(cand.shape[0]):
+        d = plane[0] * cand[p, 0] + plane[1] * cand[p, 1] + plane[2] * cand[p, 2] + plane[3]
+        if abs(d) < dist:
+            q = cand[p] - centre
+            for i in range(3):
+                for j in range(3):
+                    m[i, j] += q[i] * q[j]
+    return n, centre, m
+
+
+@numba.njit(cache=True)
+def _local_ground(r_all, angle, h, n_sec, bin_size, ego_radius, max_slope, step_tol, flat_spread,
+                  max_drop_slope, drop_tol):  # pragma: no cover - numba
+    """Heights above the local ground of the polar walk (see :func:`ground_heights`)."""
+    n = r_all.shape[0]
+    sec = np.empty(n, np.int64)
+    rbin = np.empty(n, np.int64)
+    rmax = 0.0
+    for p in range(n):
+        r = r_all[p]
+        rmax = max(rmax, r)
+        s = int((angle[p] + math.pi) / (2 * math.pi) * n_sec)
+        sec[p] = min(s, n_sec - 1)
+        rbin[p] = int(r / bin_size)
+    n_bin = int(math.ceil(rmax / bin_size)) + 1
+    lowest = np.full((n_sec, n_bin), np.inf)
+    highest = np.full((n_sec, n_bin), -np.inf)
+    for p in range(n):
+        lowest[sec[p], rbin[p]] = min(lowest[sec[p], rbin[p]], h[p])
+        highest[sec[p], rbin[p]] = max(highest[sec[p], rbin[p]], h[p])
+    ground = np.zeros((n_sec, n_bin))
+    first = int(ego_radius / bin_size)
+    for s in range(n_sec):
+        g = 0.0  # the plane is the ground next to the car
+        last_r = ego_radius
+        for b in range(first, n_bin):
+            rc = (b + 0.5) * bin_size
+            cand = lowest[s, b]
+            # a bin holding a vertical surface (a car's side) spans its height: never ground
+            if highest[s, b] - cand <= flat_spread and math.isfinite(cand):
+                dr = rc - last_r
+                # a lower outlier (a reflection) must not drag the ground down
+                rise_ok = cand - g <= step_tol + max_slope * dr
+                if rise_ok and g - cand <= drop_tol + max_drop_slope * dr:
+                    g = cand
+                    last_r = rc
+            ground[s, b] = g
+    out = np.empty(n)
+    for p in range(n):
+        out[p] = h[p] - ground[sec[p], rbin[p]]
+    return out

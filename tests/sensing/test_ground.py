@@ -1,0 +1,85 @@
+"""Ground removal: exact planes on synthetic clouds, determinism, the real sample."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from dstenv.config import ConfigError
+from dstenv.kitti.readers import read_velodyne, split_root, velodyne_path
+from dstenv.sensing.ground import CloudError, classify_points, fit_ground_plane, ground_heights
+
+
+def _cloud(slope=0.0, seed=0):
+    """Velodyne-like rings on a (tilted) road and the near face of a car at x = 10 m.
+
+    Returns the points; the last 600 are the car's, 0.3-1.4 m above the road.
+    """
+    rng = np.random.default_rng(seed)
+    r, a = np.meshgrid(np.arange(3.0, 30.0, 0.5), np.deg2rad(np.arange(0, 360, 0.4)))
+    xy = np.column_stack([(r * np.cos(a)).ravel(), (r * np.sin(a)).ravel()])
+    shadow = (xy[:, 0] >= 10.0) & (np.abs(xy[:, 1]) <= xy[:, 0] / 10.0)  # hidden by the car
+    xy = xy[~shadow]
+    ground = np.column_stack([xy, -1.73 + slope * xy[:, 0]])
+    car_y = rng.uniform(-1, 1, 600)
+    car = np.column_stack([np.full(600, 10.0), car_y,
+                           -1.73 + slope * 10.0 + rng.uniform(0.3, 1.4, 600)])
+    return np.vstack([ground, car])
+
+
+def test_plane_recovered_exactly():
+    plane = fit_ground_plane(_cloud())
+    np.testing.assert_allclose(plane, [0, 0, 1, 1.73], atol=1e-9)
+
+
+def test_tilted_plane_and_determinism():
+    pts = _cloud(slope=0.05)
+    plane = fit_ground_plane(pts, {"seed": 3})
+    n = np.array([-0.05, 0.0, 1.0]) / np.hypot(0.05, 1.0)
+    np.testing.assert_allclose(plane[:3], n, atol=1e-9)
+    np.testing.assert_allclose(plane[3], 1.73 / np.hypot(0.05, 1.0), atol=1e-9)
+    np.testing.assert_array_equal(plane, fit_ground_plane(pts, {"seed": 3}))
+
+
+def test_classify_ground_and_obstacles():
+    pts = _cloud()
+    ground, obstacle, height = classify_points(pts, fit_ground_plane(pts))
+    n_ground = len(pts) - 600
+    far = np.hypot(pts[:, 0], pts[:, 1]) > 2.7
+    assert ground[:n_ground][far[:n_ground]].all() and not obstacle[:n_ground].any()
+    car_h = pts[n_ground:, 2] + 1.73
+    np.testing.assert_allclose(height[n_ground:], car_h, atol=1e-9)  # the walk kept the road
+    assert (obstacle[n_ground:] == (car_h >= 0.30)).all()
+    assert not (ground & obstacle).any()
+
+
+def test_local_walk_follows_a_rising_verge():
+    # flat road for y < 5, a verge rising at 10% beyond (a field beside the road)
+    x, y = np.meshgrid(np.arange(-30, 30, 0.25), np.arange(-30, 30, 0.25))
+    z = -1.73 + np.where(y > 5, 0.1 * (y - 5), 0.0)
+    pts = np.column_stack([x.ravel(), y.ravel(), z.ravel()])
+    plane = fit_ground_plane(pts)
+    h_plane = ground_heights(pts, plane, {"local": False})
+    h_local = ground_heights(pts, plane)
+    far_verge = pts[:, 1] > 16  # > 1.1 m above the road plane
+    assert (h_plane[far_verge] > 1.0).all()
+    assert np.abs(h_local[far_verge]).max() < 0.2
+
+
+def test_no_ground_and_unknown_key():
+    with pytest.raises(CloudError, match="ground fit: only 0 candidate points"):
+        fit_ground_plane(np.array([[5.0, 0.0, 1.0]]))
+    with pytest.raises(ConfigError, match="unknown key 'sead'"):
+        fit_ground_plane(_cloud(), {"sead": 1})
+
+
+def test_real_ground_split(real_root):
+    pts = read_velodyne(velodyne_path(split_root(real_root), "0003", 0))
+    plane = fit_ground_plane(pts)
+    assert plane[2] > 0.99 and 1.55 < plane[3] < 1.8  # road ~1.7 m below the sensor
+    ground, obstacle, _ = classify_points(pts, plane)
+    assert 0.45 < ground.mean() < 0.8 and 0.15 < obstacle.mean() < 0.4
+    # the road ahead (5-15 m, within 2 m of the lane centre) is ground
+    ahead = (pts[:, 0] > 5) & (pts[:, 0] < 15) & (np.abs(pts[:, 1]) < 2) & (pts[:, 2] < -1.3)
+    assert ground[ahead].mean() > 0.98
+

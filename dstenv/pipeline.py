@@ -99,7 +99,7 @@ def default_config() -> dict[str, Any]:
     Sections: ``source`` (a :data:`WORLD_SOURCES` key), ``world`` (dstenv city
     simulator), ``highway`` (highway-env backend), ``lidar``, ``grid``, ``gis``,
     ``labels``, ``dst`` (:class:`~dstenv.dst.DSTParams` fields) and ``frame``
-    (optional outputs).
+    (optional outputs: ``labels`` false leaves ``Frame.labels``/``visible`` None).
     """
     from dstenv.sensing.config import default_config as sensing_defaults
     from dstenv.sim.config import default_config as world_defaults
@@ -136,6 +136,7 @@ def _protocol_defaults() -> dict[str, Any]:
 
 def _frame_defaults() -> dict[str, Any]:
     return {
+        "labels": True,  # compute labels + visible (label_grid, ~15 % of a 256x256 step)
         "masses": False,  # attach the (32, H, W) masses to every Frame
         # attach extras["lidar_points"]: fixed-shape float32, NaN = no return: (B, 2) ego
         # frame [m] for the 2-D LIDAR, (beams, 4) Velodyne rows for hdl64
@@ -298,9 +299,12 @@ class Pipeline:
         w, cfg, spec = self.world, self.config, self.spec
         want_masses = cfg["frame"]["masses"]
         pose, agents, sensor, gis, masses = self._sense(want_masses)
-        labels = label_grid(w.map, agents, pose, spec, self.moving_threshold)
-        if self.camera is not None:
-            labels[~self.camera] = IGNORE_INDEX
+        # labels are ground truth for datasets; an RL env that does not show them skips them
+        labels = None
+        if cfg["frame"]["labels"]:
+            labels = label_grid(w.map, agents, pose, spec, self.moving_threshold)
+            if self.camera is not None:
+                labels[~self.camera] = IGNORE_INDEX
         extras: dict[str, np.ndarray] = {}
         if cfg["frame"]["lidar_points"]:
             # fixed shape, NaN rows for beams without return: stacks across envs
@@ -313,7 +317,7 @@ class Pipeline:
             pignistic=self._betp,
             pignistic_prev=self._betp_prev,
             labels=labels,
-            visible=visible_mask(sensor),
+            visible=visible_mask(sensor) if labels is not None else None,
             sensor=sensor,
             gis=gis,
             ego_pose=pose,

@@ -148,6 +148,9 @@ class ShardWriter:
         """Append one frame (arrays as documented in :class:`dstenv.frame.Frame`)."""
         if self._file is None:
             raise RuntimeError("ShardWriter.add() outside a 'with' block")
+        if frame.labels is None or frame.visible is None:
+            raise ValueError(f"{self.path}: frame {self.n_frames} has no labels; shards need "
+                             "them (set the pipeline config frame.labels = true)")
         h, w = frame.labels.shape
         if self._shape is None:
             self._create(h, w)

@@ -23,7 +23,9 @@ class Frame:
     """A perception grid with its inputs and exact labels at one time step.
 
     Attributes:
-        pignistic: ``(5, H, W) float32`` BetP over ``dstenv.dst.CLASSES`` at t.
+        pignistic: ``(5, H, W) float32`` BetP over ``dstenv.dst.CLASSES`` at t (None,
+            with ``pignistic_prev``, from a pipeline that does not fuse:
+            ``Pipeline(fuse=False)``, whose grids a batched filter fuses elsewhere).
         pignistic_prev: ``(5, H, W) float32`` BetP at t-1 (equal to ``pignistic``
             on the first frame of an episode). Stacked, the two are the paper's
             10-channel FCN input.
@@ -44,8 +46,8 @@ class Frame:
         extras: optional named arrays (e.g. LIDAR points) a producer adds.
     """
 
-    pignistic: np.ndarray
-    pignistic_prev: np.ndarray
+    pignistic: np.ndarray | None
+    pignistic_prev: np.ndarray | None
     labels: np.ndarray | None
     visible: np.ndarray | None
     sensor: np.ndarray

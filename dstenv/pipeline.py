@@ -171,6 +171,10 @@ class Pipeline:
         world: an existing world source to drive instead of building one from
             ``config["source"]`` (e.g. a :class:`~dstenv.sim.highway.HighwayWorld`
             around a user's highway-env env).
+        fuse: run the DST filter (default). ``False`` produces the filter's inputs
+            only (sensor and GIS grids, pose, labels; ``Frame.pignistic`` and
+            ``pignistic_prev`` are None) for a batched filter elsewhere
+            (:mod:`dstenv.data.gpu_stream`).
 
     Example:
         >>> p = Pipeline({"grid": {"height": 128, "width": 128}})
@@ -180,8 +184,8 @@ class Pipeline:
         (10, 128, 128)
     """
 
-    def __init__(self, config: Mapping[str, Any] | None = None, world: WorldSource | None = None
-                 ) -> None:
+    def __init__(self, config: Mapping[str, Any] | None = None, world: WorldSource | None = None,
+                 *, fuse: bool = True) -> None:
         from dstenv.sensing.lidar import Lidar
 
         self.config = config if isinstance(config, Validated) else build_config(None, config)
@@ -196,6 +200,7 @@ class Pipeline:
             self.lidar: Any = Hdl64(cfg["lidar"])
         else:
             self.lidar = Lidar(cfg["lidar"])
+        self.fuse = bool(fuse)
         self.tracker = GridTracker(self.spec.shape, params, self.spec.cell_size)
         self.camera = (camera_mask(self.spec, prot["camera_fov"]) if prot["camera_fov"] > 0
                        else None)
@@ -289,6 +294,8 @@ class Pipeline:
         self._last = (pose, float(w.time))
         sensor = self.sweep.sensor_grid(spec)
         gis = gis_grid(w.map, pose, spec, self._map_error)
+        if not self.fuse:
+            return pose, agents, sensor, gis, None
         if self.step_index % self.config["protocol"]["update_every"] == 0:
             out = self.tracker.step(sensor, gis, pose)
             self._betp, self._betp_prev = out.betp, out.betp_prev
@@ -311,8 +318,8 @@ class Pipeline:
             # ((B, 2) ego frame for the 2-D model, (B, 4) Velodyne rows for hdl64)
             extras["lidar_points"] = (self.sweep.points.astype(np.float32)
                                       if not self._3d else self.sweep.dense())
-        if self._betp is None or self._betp_prev is None:  # step 0 is always fused
-            raise RuntimeError("Pipeline: no fused frame yet")
+        if self.fuse and (self._betp is None or self._betp_prev is None):
+            raise RuntimeError("Pipeline: no fused frame yet")  # step 0 is always fused
         frame = Frame(
             pignistic=self._betp,
             pignistic_prev=self._betp_prev,

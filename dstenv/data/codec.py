@@ -34,8 +34,8 @@ from collections.abc import Callable
 import numba as nb
 import numpy as np
 
-__all__ = ["fletcher32", "encode_chunk", "quantize", "class_counts", "DIRECT_COMPRESSIONS",
-           "DEFLATE_ENGINES"]
+__all__ = ["fletcher32", "encode_chunk", "quantize", "class_counts", "same_bytes",
+           "DIRECT_COMPRESSIONS", "DEFLATE_ENGINES"]
 
 #: compressions whose chunks :func:`encode_chunk` can produce (lzf lives inside h5py only)
 DIRECT_COMPRESSIONS = ("gzip", None)
@@ -99,11 +99,11 @@ def encode_chunk(array: np.ndarray, compression: str | None, level: int | None,
     Returns:
         payload + 4-byte little-endian Fletcher-32, as HDF5's filter pipeline would store it.
     """
-    raw = np.ascontiguousarray(array).tobytes()
+    raw = memoryview(np.ascontiguousarray(array)).cast("B")  # no copy: deflate reads it
     if compression == "gzip":
         payload = _deflate(engine)(raw, 6 if level is None else int(level))
     elif compression is None:
-        payload = raw
+        payload = raw.tobytes()
     else:
         raise ValueError(f"cannot encode {compression!r} chunks directly; "
                          f"choose from {DIRECT_COMPRESSIONS}")
@@ -166,3 +166,19 @@ def class_counts(labels: np.ndarray, n_classes: int, ignore: int) -> np.ndarray:
     if bad >= 0:
         raise ValueError(f"labels hold value {bad}; allowed 0..{n_classes - 1} and {ignore}")
     return counts
+
+
+@nb.njit(cache=True, nogil=True)
+def _same(a: np.ndarray, b: np.ndarray) -> bool:
+    for i in range(a.shape[0]):
+        if a[i] != b[i]:
+            return False
+    return True
+
+
+def same_bytes(a: np.ndarray, b: np.ndarray) -> bool:
+    """``array_equal`` for two uint8 arrays, stopping at the first difference."""
+    if a.shape != b.shape or a.dtype != b.dtype:
+        return False
+    return bool(_same(np.ascontiguousarray(a).reshape(-1).view(np.uint8),
+                      np.ascontiguousarray(b).reshape(-1).view(np.uint8)))

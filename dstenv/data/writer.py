@@ -16,7 +16,7 @@ import numpy as np
 
 from dstenv import __version__
 from dstenv.data.codec import (
-    DEFLATE_ENGINES, DIRECT_COMPRESSIONS, class_counts, encode_chunk, quantize,
+    DEFLATE_ENGINES, DIRECT_COMPRESSIONS, class_counts, encode_chunk, quantize, same_bytes,
 )
 from dstenv.io import fsync_dir
 from dstenv.data.format import (
@@ -110,6 +110,7 @@ class ShardWriter:
         self._last_chunk: Any = None  # its encoded chunk (bytes or Future)
         self._file: h5py.File | None = None
         self._shape: tuple[int, int] | None = None
+        self._datasets: dict[str, h5py.Dataset] = {}
         self._pending: list[dict[str, Any]] = []
         self._pending_bytes = 0
         self.n_frames = 0
@@ -138,7 +139,7 @@ class ShardWriter:
             # grids: one frame per chunk (random access); small per-frame records: 64 per
             # chunk, since a chunk per scalar would cost more index than data
             rows = 1 if len(tail) >= 2 else 64
-            f.create_dataset(
+            self._datasets[name] = f.create_dataset(
                 name, shape=(0, *tail), maxshape=(None, *tail), chunks=(rows, *tail),
                 dtype=dtype, track_times=False, **self._filters,
             )
@@ -173,7 +174,7 @@ class ShardWriter:
             if np.ndim(value) < 2:
                 continue
             if (name == "pignistic_prev" and self._last_prob is not None
-                    and np.array_equal(value, self._last_prob)):
+                    and same_bytes(value, self._last_prob)):
                 values[name] = self._last_chunk  # stride 1: same bytes as the last chunk
             elif self._pool is not None:
                 values[name] = self._pool.submit(encode_chunk, value, *self._codec)
@@ -196,7 +197,7 @@ class ShardWriter:
             return
         start, k = self.n_frames - len(self._pending), len(self._pending)
         for name in self._pending[0]:
-            ds = f[name]
+            ds = self._datasets[name]
             ds.resize(start + k, axis=0)
             first = self._pending[0][name]
             if isinstance(first, (bytes, cf.Future)):

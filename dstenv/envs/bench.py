@@ -118,11 +118,11 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         results[label] = time_env(env, steps)
         env.close()
 
-    print(f"{'environment':62s} {'steps/s':>9s} {'x highway-env':>14s}")
+    print(f"{'environment':76s} {'steps/s':>9s} {'x highway-env':>14s}")
     for key, sps in results.items():
         if key == "steps":
             continue
-        print(f"{key:62s} {sps:9.1f} {sps / ref_sps:14.1f}")
+        print(f"{key:76s} {sps:9.1f} {sps / ref_sps:14.1f}")
     results["ratio_256_vs_highway"] = results["DSTGrid-v0 256x256"] / ref_sps
     results["ratio_rl_vs_highway"] = results["DSTGrid-RL-v0 84x84"] / ref_sps
     results["goal_met"] = bool(results["DSTGrid-v0 256x256"] >= 300

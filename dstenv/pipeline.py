@@ -265,15 +265,28 @@ class Pipeline:
     def _advance(self, action: Any = None) -> None:
         """:meth:`step` without building a :class:`Frame` (no labels, no masses copy).
 
-        The world, LIDAR randomness and filter advance exactly as in :meth:`step`, so
-        the frames of later steps are identical; data generation calls this for the
-        steps between kept frames.
+        The world and filter advance exactly as in :meth:`step`, so the frames of later
+        steps are identical; data generation calls this for the steps between kept
+        frames. Steps that are not fused (``protocol.update_every``) only step the
+        world: no sweep, no grids.
         """
         if self._last is None:
             raise RuntimeError("Pipeline.step: call reset(seed) first")
         self.world.step(action)
         self.step_index += 1
+        if self.fuse and self.step_index % self.config["protocol"]["update_every"]:
+            # not a fused step and no frame: nothing but the world (one sweep and one
+            # DST update per fused step; the LIDAR stream is keyed by the step, so the
+            # next sweep is the one step() would give)
+            w = self.world
+            self._last = (np.array(w.ego_pose, dtype=np.float64), float(w.time))
+            return
         self._sense(False)
+
+    def _sweep_rng(self) -> np.random.Generator:
+        """The LIDAR noise of this step: keyed by (episode seed, step), so a sweep does not
+        depend on which earlier steps were swept (skipped steps, see :meth:`_advance`)."""
+        return np.random.default_rng([self.seed, 0x5E45, 0x5EE9, self.step_index])
 
     def _sense(self, want_masses: bool) -> tuple[np.ndarray, Agents, np.ndarray, np.ndarray,
                                                  np.ndarray]:
@@ -283,14 +296,14 @@ class Pipeline:
         pose = np.array(w.ego_pose, dtype=np.float64)
         agents = w.agents
         if not self._3d:
-            self.sweep = self.lidar.sweep(w.map, agents, pose, self._rng)
+            self.sweep = self.lidar.sweep(w.map, agents, pose, self._sweep_rng())
         else:  # the 3-D LIDAR skews with the ego's motion within the turn
             yaw_rate = 0.0
             if self._last is not None and float(w.time) > self._last[1]:
                 dyaw = (pose[2] - self._last[0][2] + np.pi) % (2 * np.pi) - np.pi
                 yaw_rate = float(dyaw) / (float(w.time) - self._last[1])
-            self.sweep = self.lidar.sweep(w.map, agents, pose, self._rng, float(w.ego_speed),
-                                          yaw_rate)
+            self.sweep = self.lidar.sweep(w.map, agents, pose, self._sweep_rng(),
+                                          float(w.ego_speed), yaw_rate)
         self._last = (pose, float(w.time))
         sensor = self.sweep.sensor_grid(spec)
         gis = gis_grid(w.map, pose, spec, self._map_error)

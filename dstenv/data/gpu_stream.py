@@ -49,8 +49,9 @@ class SensorStream(IterableDataset):
         rank: process rank for distributed training.
 
     Yields (one dict per step, tensors on the CPU): ``worker`` (int), ``sensor`` and
-    ``gis`` ``(B, H, W) uint8``, ``motion`` ``(B, 3) float64`` (ego motion since the
-    stream's previous step, zeros on an episode's first step), ``start`` ``(B,) bool``
+    ``gis`` ``(B, H, W) uint8``, ``fused`` (bool: a fused step of
+    ``protocol.update_every``), ``motion`` ``(B, 3) float64`` (ego motion since the
+    previous fused step, zeros on an episode's first step), ``start`` ``(B,) bool``
     (first step of an episode), ``keep`` ``(B,) bool`` (a stored step),
     ``labels`` ``(B, H, W) uint8`` and ``visible`` ``(B, H, W) bool``.
     """
@@ -64,6 +65,7 @@ class SensorStream(IterableDataset):
         self.config = scenario_config(scenario)
         self.seed, self.streams, self.split, self.rank = int(seed), int(streams), split, int(rank)
         self.episode_length = int(episode_length)
+        self.update_every = int(self.config["protocol"]["update_every"])
         self.keep = set(frame_steps(self.episode_length, stride,
                                     stride if warmup is None else warmup))
         next(episode_seeds(self.seed, split, ()))  # validates the split name early
@@ -80,12 +82,15 @@ class SensorStream(IterableDataset):
         prev = [None] * self.streams
         step = 0
         while True:
+            fused = step % self.update_every == 0
             motion = np.zeros((self.streams, 3))
             for s, f in enumerate(frames):
-                if step > 0:
-                    motion[s] = relative_pose(prev[s], f.ego_pose)
-                prev[s] = f.ego_pose
+                if fused:  # ego motion since the stream's previous fused step
+                    if step > 0:
+                        motion[s] = relative_pose(prev[s], f.ego_pose)
+                    prev[s] = f.ego_pose
             yield {
+                "fused": fused,
                 "worker": worker,
                 "sensor": torch.from_numpy(np.stack([f.sensor for f in frames])),
                 "gis": torch.from_numpy(np.stack([f.gis for f in frames])),
@@ -127,6 +132,7 @@ def fuse_batches(batches: Iterable[Mapping[str, Any]], device: str | torch.devic
     grid, params = config["grid"], DSTParams.from_dict(config["dst"])
     filters: dict[int, BatchedGridFilter] = {}
     prev: dict[int, torch.Tensor] = {}
+    last: dict[int, tuple[torch.Tensor, torch.Tensor]] = {}
     for b in batches:
         wid = int(b["worker"])
         sensor = b["sensor"].to(device)
@@ -137,10 +143,13 @@ def fuse_batches(batches: Iterable[Mapping[str, Any]], device: str | torch.devic
         start = b["start"].to(device)
         if bool(start.any()):
             f.reset(start)
-        betp = f.update(sensor, b["gis"].to(device), b["motion"].to(device))
-        before = prev.get(wid, betp)
-        before = torch.where(start[:, None, None, None], betp, before)
-        prev[wid] = betp
+        if bool(b.get("fused", True)) or wid not in last:
+            betp = f.update(sensor, b["gis"].to(device), b["motion"].to(device))
+            before = prev.get(wid, betp)
+            # t-1 is the previous fused frame (the first frame of an episode: itself)
+            before = torch.where(start[:, None, None, None], betp, before)
+            prev[wid], last[wid] = betp, (betp, before)
+        betp, before = last[wid]  # steps between fused ones carry the last fused BetP
         keep = b["keep"].to(device)
         if bool(keep.any()):
             yield {"x": torch.cat([betp, before], dim=1)[keep],

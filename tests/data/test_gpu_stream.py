@@ -15,16 +15,18 @@ from dstenv.pipeline import Pipeline
 from .test_end_to_end import TINY
 
 
-def test_batched_fusion_of_streams_equals_the_pipeline_frames():
-    # 2 streams, episodes of 7 steps, kept steps 2 and 5: 4 episodes per stream
-    ds = SensorStream(TINY, seed=3, streams=2, episode_length=7, stride=3, warmup=2)
+@pytest.mark.parametrize("every,warmup", [(1, 2), (3, 3)])
+def test_batched_fusion_of_streams_equals_the_pipeline_frames(every, warmup):
+    # 2 streams, episodes of 7 steps, kept steps (2, 5) or (3, 6); every = 3: the paper
+    # protocol (fused steps 0, 3, 6; t-1 = the previous fused frame)
+    config = scenario_config(TINY, {"protocol": {"update_every": every}})
+    ds = SensorStream(config, seed=3, streams=2, episode_length=7, stride=3, warmup=warmup)
     loader = DataLoader(ds, batch_size=None, num_workers=0)
-    got = list(islice(fuse_batches(loader), 8))
+    got = list(islice(fuse_batches(loader), 6))
     assert all(b["x"].shape == (2, 10, 32, 32) for b in got)
-    config = scenario_config(TINY)
     for s in range(2):
         want = list(islice(iter_frames(lambda: Pipeline(config),
-                                       episode_seeds(3, "train", (0, 0, s)), 7, 3, 2), 8))
+                                       episode_seeds(3, "train", (0, 0, s)), 7, 3, warmup), 6))
         for b, f in zip(got, want):
             np.testing.assert_allclose(b["x"][s, :5].numpy(), f.pignistic, atol=1e-5)
             np.testing.assert_allclose(b["x"][s, 5:].numpy(), f.pignistic_prev, atol=1e-5)

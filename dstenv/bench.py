@@ -76,4 +76,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--repeats", type=int, default=0, help="timed repetitions (0: automatic)")
     p.add_argument("--quick", action="store_true", help="fewer repetitions, for a smoke run")
     p.add_argument("--json", metavar="FILE", help="also write the results as JSON")
+    p.add_argument("--goals", action="store_true",
+                   help="bench data: only the goal rows (frames/h, reset, write path, env, DST)")
     p.set_defaults(func=_cmd)

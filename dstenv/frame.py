@@ -23,13 +23,18 @@ class Frame:
     """A perception grid with its inputs and exact labels at one time step.
 
     Attributes:
-        pignistic: ``(5, H, W) float32`` BetP over ``dstenv.dst.CLASSES`` at t.
+        pignistic: ``(5, H, W) float32`` BetP over ``dstenv.dst.CLASSES`` at t (None,
+            with ``pignistic_prev``, from a pipeline that does not fuse:
+            ``Pipeline(fuse=False)``, whose grids a batched filter fuses elsewhere).
         pignistic_prev: ``(5, H, W) float32`` BetP at t-1 (equal to ``pignistic``
             on the first frame of an episode). Stacked, the two are the paper's
             10-channel FCN input.
         labels: ``(H, W) uint8`` ground truth, class index in ``dstenv.dst.CLASSES``
-            order, or :data:`IGNORE_INDEX`.
-        visible: ``(H, W) bool`` cells the sensor observed (not unknown) this sweep.
+            order, or :data:`IGNORE_INDEX`; ``None`` when the producer was told not
+            to compute labels (``frame.labels = false`` in the pipeline config, the
+            RL env's default unless ``info.labels`` is set).
+        visible: ``(H, W) bool`` cells the sensor observed (not unknown) this sweep;
+            ``None`` together with ``labels``.
         sensor: ``(H, W) uint8`` sensor grid: 0 unknown, 1 free, 2 occupied.
         gis: ``(H, W) uint8`` GIS grid: 0 no information, 1 building, 2 road,
             3 intermediate.
@@ -41,10 +46,10 @@ class Frame:
         extras: optional named arrays (e.g. LIDAR points) a producer adds.
     """
 
-    pignistic: np.ndarray
-    pignistic_prev: np.ndarray
-    labels: np.ndarray
-    visible: np.ndarray
+    pignistic: np.ndarray | None
+    pignistic_prev: np.ndarray | None
+    labels: np.ndarray | None
+    visible: np.ndarray | None
     sensor: np.ndarray
     gis: np.ndarray
     ego_pose: np.ndarray
@@ -57,7 +62,7 @@ class Frame:
     @property
     def shape(self) -> tuple[int, int]:
         """``(H, W)`` of the grids."""
-        return tuple(self.labels.shape)  # type: ignore[return-value]
+        return tuple(self.sensor.shape)  # type: ignore[return-value]
 
     def fcn_input(self) -> np.ndarray:
         """The paper's FCN input: ``(10, H, W) float32``, BetP at t then at t-1."""

@@ -99,7 +99,7 @@ def default_config() -> dict[str, Any]:
     Sections: ``source`` (a :data:`WORLD_SOURCES` key), ``world`` (dstenv city
     simulator), ``highway`` (highway-env backend), ``lidar``, ``grid``, ``gis``,
     ``labels``, ``dst`` (:class:`~dstenv.dst.DSTParams` fields) and ``frame``
-    (optional outputs).
+    (optional outputs: ``labels`` false leaves ``Frame.labels``/``visible`` None).
     """
     from dstenv.sensing.config import default_config as sensing_defaults
     from dstenv.sim.config import default_config as world_defaults
@@ -136,6 +136,7 @@ def _protocol_defaults() -> dict[str, Any]:
 
 def _frame_defaults() -> dict[str, Any]:
     return {
+        "labels": True,  # compute labels + visible (label_grid, ~15 % of a 256x256 step)
         "masses": False,  # attach the (32, H, W) masses to every Frame
         # attach extras["lidar_points"]: fixed-shape float32, NaN = no return: (B, 2) ego
         # frame [m] for the 2-D LIDAR, (beams, 4) Velodyne rows for hdl64
@@ -170,6 +171,10 @@ class Pipeline:
         world: an existing world source to drive instead of building one from
             ``config["source"]`` (e.g. a :class:`~dstenv.sim.highway.HighwayWorld`
             around a user's highway-env env).
+        fuse: run the DST filter (default). ``False`` produces the filter's inputs
+            only (sensor and GIS grids, pose, labels; ``Frame.pignistic`` and
+            ``pignistic_prev`` are None) for a batched filter elsewhere
+            (:mod:`dstenv.data.gpu_stream`).
 
     Example:
         >>> p = Pipeline({"grid": {"height": 128, "width": 128}})
@@ -179,8 +184,8 @@ class Pipeline:
         (10, 128, 128)
     """
 
-    def __init__(self, config: Mapping[str, Any] | None = None, world: WorldSource | None = None
-                 ) -> None:
+    def __init__(self, config: Mapping[str, Any] | None = None, world: WorldSource | None = None,
+                 *, fuse: bool = True) -> None:
         from dstenv.sensing.lidar import Lidar
 
         self.config = config if isinstance(config, Validated) else build_config(None, config)
@@ -195,6 +200,7 @@ class Pipeline:
             self.lidar: Any = Hdl64(cfg["lidar"])
         else:
             self.lidar = Lidar(cfg["lidar"])
+        self.fuse = bool(fuse)
         self.tracker = GridTracker(self.spec.shape, params, self.spec.cell_size)
         self.camera = (camera_mask(self.spec, prot["camera_fov"]) if prot["camera_fov"] > 0
                        else None)
@@ -259,15 +265,28 @@ class Pipeline:
     def _advance(self, action: Any = None) -> None:
         """:meth:`step` without building a :class:`Frame` (no labels, no masses copy).
 
-        The world, LIDAR randomness and filter advance exactly as in :meth:`step`, so
-        the frames of later steps are identical; data generation calls this for the
-        steps between kept frames.
+        The world and filter advance exactly as in :meth:`step`, so the frames of later
+        steps are identical; data generation calls this for the steps between kept
+        frames. Steps that are not fused (``protocol.update_every``) only step the
+        world: no sweep, no grids.
         """
         if self._last is None:
             raise RuntimeError("Pipeline.step: call reset(seed) first")
         self.world.step(action)
         self.step_index += 1
+        if self.fuse and self.step_index % self.config["protocol"]["update_every"]:
+            # not a fused step and no frame: nothing but the world (one sweep and one
+            # DST update per fused step; the LIDAR stream is keyed by the step, so the
+            # next sweep is the one step() would give)
+            w = self.world
+            self._last = (np.array(w.ego_pose, dtype=np.float64), float(w.time))
+            return
         self._sense(False)
+
+    def _sweep_rng(self) -> np.random.Generator:
+        """The LIDAR noise of this step: keyed by (episode seed, step), so a sweep does not
+        depend on which earlier steps were swept (skipped steps, see :meth:`_advance`)."""
+        return np.random.default_rng([self.seed, 0x5E45, 0x5EE9, self.step_index])
 
     def _sense(self, want_masses: bool) -> tuple[np.ndarray, Agents, np.ndarray, np.ndarray,
                                                  np.ndarray]:
@@ -277,17 +296,19 @@ class Pipeline:
         pose = np.array(w.ego_pose, dtype=np.float64)
         agents = w.agents
         if not self._3d:
-            self.sweep = self.lidar.sweep(w.map, agents, pose, self._rng)
+            self.sweep = self.lidar.sweep(w.map, agents, pose, self._sweep_rng())
         else:  # the 3-D LIDAR skews with the ego's motion within the turn
             yaw_rate = 0.0
             if self._last is not None and float(w.time) > self._last[1]:
                 dyaw = (pose[2] - self._last[0][2] + np.pi) % (2 * np.pi) - np.pi
                 yaw_rate = float(dyaw) / (float(w.time) - self._last[1])
-            self.sweep = self.lidar.sweep(w.map, agents, pose, self._rng, float(w.ego_speed),
-                                          yaw_rate)
+            self.sweep = self.lidar.sweep(w.map, agents, pose, self._sweep_rng(),
+                                          float(w.ego_speed), yaw_rate)
         self._last = (pose, float(w.time))
         sensor = self.sweep.sensor_grid(spec)
         gis = gis_grid(w.map, pose, spec, self._map_error)
+        if not self.fuse:
+            return pose, agents, sensor, gis, None
         if self.step_index % self.config["protocol"]["update_every"] == 0:
             out = self.tracker.step(sensor, gis, pose)
             self._betp, self._betp_prev = out.betp, out.betp_prev
@@ -298,22 +319,25 @@ class Pipeline:
         w, cfg, spec = self.world, self.config, self.spec
         want_masses = cfg["frame"]["masses"]
         pose, agents, sensor, gis, masses = self._sense(want_masses)
-        labels = label_grid(w.map, agents, pose, spec, self.moving_threshold)
-        if self.camera is not None:
-            labels[~self.camera] = IGNORE_INDEX
+        # labels are ground truth for datasets; an RL env that does not show them skips them
+        labels = None
+        if cfg["frame"]["labels"]:
+            labels = label_grid(w.map, agents, pose, spec, self.moving_threshold)
+            if self.camera is not None:
+                labels[~self.camera] = IGNORE_INDEX
         extras: dict[str, np.ndarray] = {}
         if cfg["frame"]["lidar_points"]:
             # fixed shape, NaN rows for beams without return: stacks across envs
             # ((B, 2) ego frame for the 2-D model, (B, 4) Velodyne rows for hdl64)
             extras["lidar_points"] = (self.sweep.points.astype(np.float32)
                                       if not self._3d else self.sweep.dense())
-        if self._betp is None or self._betp_prev is None:  # step 0 is always fused
-            raise RuntimeError("Pipeline: no fused frame yet")
+        if self.fuse and (self._betp is None or self._betp_prev is None):
+            raise RuntimeError("Pipeline: no fused frame yet")  # step 0 is always fused
         frame = Frame(
             pignistic=self._betp,
             pignistic_prev=self._betp_prev,
             labels=labels,
-            visible=visible_mask(sensor),
+            visible=visible_mask(sensor) if labels is not None else None,
             sensor=sensor,
             gis=gis,
             ego_pose=pose,

@@ -13,7 +13,9 @@ hold on any machine:
   and 2 worker processes, with a new city per episode and with 4 episodes per city
   (``--episodes-per-map 4``); figures include Pipeline construction, city
   generation, and for the pool process start-up (~1-2 s);
-* the previous default (gzip level 6) at stride 1, 1 worker, as the in-process
+* the goal rows of the issue first (:mod:`dstenv.data.bench_goals`; ``--goals``
+  stops after them);
+* the previous default (zlib level 3) at stride 1, 1 worker, as the in-process
   reference of the storage path;
 * **bytes per frame**: real frames (stride 10) stored with each encoding, against
   the uncompressed float32 reference (10 probability channels as float32 plus the
@@ -40,12 +42,16 @@ __all__ = ["run"]
 
 #: name -> ShardWriter keyword arguments
 ENCODINGS: dict[str, dict[str, Any]] = {
-    "uint8+gzip3 (default)": {"quantize": True, "compression": "gzip", "compression_opts": 3},
-    "uint8+gzip1": {"quantize": True, "compression": "gzip", "compression_opts": 1},
-    "uint8+gzip6": {"quantize": True, "compression": "gzip", "compression_opts": 6},
-    "uint8+gzip9": {"quantize": True, "compression": "gzip", "compression_opts": 9},
+    "uint8+isal1 (default)": {"quantize": True, "compression": "gzip", "compression_opts": 1},
+    "uint8+isal2": {"quantize": True, "compression": "gzip", "compression_opts": 2},
+    "uint8+zlib3 (previous)": {"quantize": True, "compression": "gzip", "compression_opts": 3,
+                               "deflate": "zlib"},
+    "uint8+zlib1": {"quantize": True, "compression": "gzip", "compression_opts": 1,
+                    "deflate": "zlib"},
+    "uint8+zlib6": {"quantize": True, "compression": "gzip", "compression_opts": 6,
+                    "deflate": "zlib"},
     "uint8+lzf": {"quantize": True, "compression": "lzf", "compression_opts": None},
-    "float32+gzip6": {"quantize": False, "compression": "gzip", "compression_opts": 6},
+    "float32+isal1": {"quantize": False, "compression": "gzip", "compression_opts": 1},
     "uint8 uncompressed": {"quantize": True, "compression": None, "compression_opts": None},
 }
 
@@ -117,15 +123,15 @@ def _cpu_seconds() -> float:
     return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
 
 
-#: generate variants: label -> (workers, stride, episodes per map, gzip level)
-VARIANTS: dict[str, tuple[int, int, int, int]] = {
-    "w1 stride1 gzip6 (previous)": (1, 1, 1, 6),
-    "w1 stride1": (1, 1, 1, 3),
-    "w2 stride1": (2, 1, 1, 3),
-    "w1 stride10": (1, 10, 1, 3),
-    "w2 stride10": (2, 10, 1, 3),
-    "w1 stride10 4ep/map": (1, 10, 4, 3),
-    "w2 stride10 4ep/map": (2, 10, 4, 3),
+#: generate variants: label -> (workers, stride, episodes per map, gzip level, engine)
+VARIANTS: dict[str, tuple[int, int, int, int, str]] = {
+    "w1 stride1 zlib3 (previous)": (1, 1, 1, 3, "zlib"),
+    "w1 stride1": (1, 1, 1, 1, "isal"),
+    "w2 stride1": (2, 1, 1, 1, "isal"),
+    "w1 stride10": (1, 10, 1, 1, "isal"),
+    "w2 stride10": (2, 10, 1, 1, "isal"),
+    "w1 stride10 4ep/map": (1, 10, 4, 1, "isal"),
+    "w2 stride10 4ep/map": (2, 10, 4, 1, "isal"),
 }
 
 
@@ -139,6 +145,12 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     # and frames stored for the encodings
     n1, n10, n_store = (20, 4, 6) if quick else (760, 152, 30)
     result: dict[str, Any] = {"grid": [size, size], "repeat": repeat}
+    from dstenv.data.bench_goals import goal_rows, print_goals
+
+    result["goals"] = goal_rows(config, repeat, quick)
+    print_goals(result["goals"], repeat)
+    if getattr(args, "goals", False):
+        return result
     with tempfile.TemporaryDirectory(prefix="dstenv-bench-") as tmp_name:
         tmp = Path(tmp_name)
         step_rate = _pipeline_rate(config, n1 if quick else 200)
@@ -146,10 +158,10 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         result["pipeline_advance_per_s"] = _pipeline_rate(config, n1 if quick else 200, False)
         result["store"] = _encodings(config, n_store, tmp)
         gen: dict[str, Any] = {}
-        for name, (workers, stride, eps, level) in VARIANTS.items():
+        for name, (workers, stride, eps, level, engine) in VARIANTS.items():
             frames = (n1 if stride == 1 else n10) * workers
             r = _generate_rate(config, frames, workers, stride, tmp, repeat,
-                               episodes_per_map=eps, compression_level=level)
+                               episodes_per_map=eps, compression_level=level, deflate=engine)
             r["ratio_to_pipeline_step"] = r["frames_per_s"] / step_rate
             gen[name] = r
         result["generate"] = gen

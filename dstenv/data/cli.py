@@ -79,7 +79,7 @@ def _generate(args: argparse.Namespace) -> int:
             episodes_per_map=args.episodes_per_map,
             quantize=not args.float32,
             compression=None if args.compression == "none" else args.compression,
-            compression_level=args.gzip_level,
+            compression_level=args.gzip_level, deflate=args.deflate,
         )
         manifest = generate(spec, args.out, workers=args.workers, ray_address=args.ray,
                             progress=not args.quiet, force_unlock=args.force_unlock)
@@ -201,9 +201,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="store probabilities as float32 (default uint8, error <= 1/510)")
     p.add_argument("--compression", default="gzip", choices=["gzip", "lzf", "none"],
                    help="shard compression (default gzip)")
-    p.add_argument("--gzip-level", type=int, default=3, choices=range(10), metavar="0-9",
-                   help="gzip level (default 3: ~30-40 KB per 256x256 frame; 6: ~25-30 KB "
-                        "at twice the write time)")
+    p.add_argument("--gzip-level", type=int, default=1, choices=range(10), metavar="0-9",
+                   help="gzip level (default 1: ~55-60 KB per 256x256 frame with isal; zlib "
+                        "level 6: ~45 KB at ~10x the write time)")
+    p.add_argument("--deflate", default="isal", choices=["isal", "zlib"],
+                   help="gzip engine: isal (default, ~5x faster) or zlib (h5py's own bytes); "
+                        "both read back with plain h5py")
     p.add_argument("--frames-per-shard", type=int, default=256)
     p.add_argument("--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
                    help="run shards as Ray tasks; no ADDRESS starts a local Ray")

@@ -8,10 +8,15 @@ Measures, in one process, ``env.step`` throughput of
 * the reference: highway-env ``intersection-v2`` (``-v1`` if absent) at 10 Hz
   simulation and policy frequency (one grid per 0.1 s, like ours) with an
   ``OccupancyGrid`` observation of the same extent and cell size as the 256 x 256
-  grid (no occlusion, no evidential fusion),
+  grid (no occlusion, no evidential fusion), in two variants of its observation
+  features (:data:`REFERENCE_FEATURES`): ``presence, vx, vy`` (vehicles only) and
+  ``presence, on_road`` + ``vx, vy`` (``on_road`` rasterises the lanes into every
+  grid, which dominates highway-env's step at this size),
 
-and reports each as a ratio to the reference, so the figures travel across machines.
-Resets are not timed; a terminated episode is reset outside the timer.
+and reports each as a ratio to the ``presence, vx, vy`` reference, so the figures
+travel across machines. Actions are random (seeded); resets are not timed (a
+terminated episode is reset outside the timer) unless ``resets=True``
+(:func:`time_env`), as in the goal row of ``dstenv bench data``.
 """
 
 from __future__ import annotations
@@ -22,27 +27,48 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["run", "time_env"]
+__all__ = ["REFERENCE_FEATURES", "run", "time_env", "highway_reference"]
+
+#: highway-env OccupancyGrid feature sets of the reference (name -> features)
+REFERENCE_FEATURES: dict[str, list[str]] = {
+    "presence,vx,vy": ["presence", "vx", "vy"],
+    "presence,on_road,vx,vy": ["presence", "on_road", "vx", "vy"],
+}
 
 
-def time_env(env: Any, steps: int, action: Any, seed: int = 0) -> float:
-    """Steps per second of ``env.step(action)`` over ``steps`` steps (resets untimed)."""
+def time_env(env: Any, steps: int, action: Any = None, seed: int = 0,
+             resets: bool = False) -> float:
+    """Steps per second of ``env.step`` over ``steps`` steps.
+
+    Args:
+        action: a fixed action, or ``None`` for random actions (``action_space``
+            seeded with ``seed``).
+        resets: also time the resets of terminated or truncated episodes.
+    """
+    env.action_space.seed(seed)
+    pick = (lambda: env.action_space.sample()) if action is None else (lambda: action)
     env.reset(seed=seed)
     for _ in range(5):  # warm-up: numba dispatch, caches
-        _, _, term, trunc, _ = env.step(action)
+        _, _, term, trunc, _ = env.step(pick())
         if term or trunc:
             env.reset()
     elapsed = 0.0
     for _ in range(steps):
         t0 = time.perf_counter()
-        _, _, term, trunc, _ = env.step(action)
-        elapsed += time.perf_counter() - t0
+        _, _, term, trunc, _ = env.step(pick())
         if term or trunc:
+            if not resets:
+                elapsed += time.perf_counter() - t0
+                t0 = None
             env.reset()
+        if t0 is not None:
+            elapsed += time.perf_counter() - t0
     return steps / elapsed
 
 
-def _highway_reference(spec_hw: tuple[int, int], cell: float) -> tuple[str, Any]:
+def highway_reference(spec_hw: tuple[int, int], cell: float,
+                      features: str = "presence,vx,vy") -> tuple[str, Any]:
+    """highway-env's intersection with an OccupancyGrid of our grid's extent: ``(id, env)``."""
     import gymnasium as gym
     import highway_env  # noqa: F401  (registers the ids)
 
@@ -56,6 +82,7 @@ def _highway_reference(spec_hw: tuple[int, int], cell: float) -> tuple[str, Any]
             "type": "OccupancyGrid",
             "grid_size": [[-half_x, half_x], [-half_y, half_y]],
             "grid_step": [cell, cell],
+            "features": REFERENCE_FEATURES[features],
             "align_to_vehicle_axes": True,
         },
     })
@@ -73,10 +100,13 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     steps = repeats if repeats > 0 else (40 if quick else 300)
     results: dict[str, Any] = {"steps": steps}
 
-    env_id, ref = _highway_reference((256, 256), 0.33)
-    ref_sps = time_env(ref, max(steps // 10, 10), 1)  # IDLE
-    ref.close()
-    results[f"highway-env {env_id} OccupancyGrid 256x256"] = ref_sps
+    ref_sps = 0.0
+    for features in REFERENCE_FEATURES:
+        env_id, ref = highway_reference((256, 256), 0.33, features)
+        sps = time_env(ref, max(steps // 10, 10))
+        ref.close()
+        results[f"highway-env {env_id} OccupancyGrid 256x256 ({features})"] = sps
+        ref_sps = ref_sps or sps  # the first (presence, vx, vy) is the reference
 
     cases = [
         ("DSTGrid-v0 256x256", "DSTGrid-v0"),
@@ -85,14 +115,14 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     ]
     for label, gid in cases:
         env = gym.make(gid)
-        results[label] = time_env(env, steps, 1)
+        results[label] = time_env(env, steps)
         env.close()
 
-    print(f"{'environment':44s} {'steps/s':>9s} {'x highway-env':>14s}")
+    print(f"{'environment':76s} {'steps/s':>9s} {'x highway-env':>14s}")
     for key, sps in results.items():
         if key == "steps":
             continue
-        print(f"{key:44s} {sps:9.1f} {sps / ref_sps:14.1f}")
+        print(f"{key:76s} {sps:9.1f} {sps / ref_sps:14.1f}")
     results["ratio_256_vs_highway"] = results["DSTGrid-v0 256x256"] / ref_sps
     results["ratio_rl_vs_highway"] = results["DSTGrid-RL-v0 84x84"] / ref_sps
     results["goal_met"] = bool(results["DSTGrid-v0 256x256"] >= 300

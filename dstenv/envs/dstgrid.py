@@ -25,6 +25,9 @@ _ENV_SECTIONS = ("observation", "action", "reward", "info")
 
 #: The ``info`` section: optional extras of the step's ``info`` dict.
 INFO_SECTION = Section(lambda: {
+    # add info["labels"] (H, W) uint8 and info["visible"] (H, W) bool: ground truth
+    # computed every step (label_grid), ~15 % of a 256 x 256 step
+    "labels": False,
     "lidar_points": False,  # add info["lidar_points"] (B, 2) float32 [m]
 }, {})
 
@@ -95,12 +98,14 @@ class DSTGridEnv(gym.Env):
 
     ## Info
 
-    ``labels`` (H, W) uint8 ground truth (``dstenv.dst.CLASSES`` order, occluded cells
-    too), ``visible`` (H, W) bool, ``sensor`` (H, W) uint8 (0 unknown, 1 free, 2
-    occupied), ``gis`` (H, W) uint8 (``MapClass``), ``ego_pose`` (3,) float64,
-    ``ego_speed`` [m/s], ``time`` [s], ``seed``, ``collision``, ``off_road``,
-    ``arrived``, ``rewards`` (dict); with ``config["info"]["lidar_points"]``,
-    ``lidar_points`` (B, 2) float32 ego-frame returns [m] (NaN rows: no return).
+    ``sensor`` (H, W) uint8 (0 unknown, 1 free, 2 occupied), ``gis`` (H, W) uint8
+    (``MapClass``), ``ego_pose`` (3,) float64, ``ego_speed`` [m/s], ``time`` [s],
+    ``seed``, ``collision``, ``off_road``, ``arrived``, ``rewards`` (dict); these are
+    the step's own arrays, not copies. With ``config["info"]["labels"]``: ``labels``
+    (H, W) uint8 ground truth (``dstenv.dst.CLASSES`` order, occluded cells too) and
+    ``visible`` (H, W) bool (computed only then: ~15 % of a 256 x 256 step). With
+    ``config["info"]["lidar_points"]``, ``lidar_points`` (B, 2) float32 ego-frame
+    returns [m] (NaN rows: no return).
 
     ## Arguments
 
@@ -139,7 +144,8 @@ class DSTGridEnv(gym.Env):
 
     ## Version History
 
-    * v0: initial version.
+    * v0: initial version. ``info["labels"]``/``info["visible"]`` became opt-in
+      (``info.labels``) to keep the step cost to what the observation needs.
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
@@ -196,6 +202,8 @@ class DSTGridEnv(gym.Env):
         pipe_cfg["highway"]["action_mode"] = ("meta" if cfg["action"]["type"] == "discrete"
                                               else "continuous")
         pipe_cfg["frame"]["masses"] = pipe_cfg["frame"]["masses"] or mode.needs_masses
+        # ground truth only when shown (info.labels) or drawn (render)
+        pipe_cfg["frame"]["labels"] = bool(cfg["info"]["labels"] or self.render_mode)
         pipe_cfg["frame"]["lidar_points"] = (pipe_cfg["frame"]["lidar_points"]
                                              or cfg["info"]["lidar_points"])
         pipeline = Pipeline(Validated(pipe_cfg), world=self._user_world)
@@ -267,8 +275,6 @@ class DSTGridEnv(gym.Env):
         f, w = self._frame, self._world
         assert f is not None and w is not None
         info: dict[str, Any] = {
-            "labels": f.labels,
-            "visible": f.visible,
             "sensor": f.sensor,
             "gis": f.gis,
             "ego_pose": f.ego_pose,
@@ -280,6 +286,8 @@ class DSTGridEnv(gym.Env):
             "arrived": bool(getattr(w, "route_done", False)),
             "rewards": terms,
         }
+        if self.config["info"]["labels"]:
+            info["labels"], info["visible"] = f.labels, f.visible
         if self.config["info"]["lidar_points"]:
             info["lidar_points"] = f.extras["lidar_points"]
         self._last_info = info

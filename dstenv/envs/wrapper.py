@@ -26,8 +26,9 @@ class DSTGridObservation(gym.Wrapper):
     seeded buildings off-road so that the LIDAR is occluded), sweeps a LIDAR from
     its controlled vehicle every step, fuses the perception grid and returns it as
     the observation. The grids dataset users need are added to ``info``
-    (``labels``, ``visible``, ``sensor``, ``gis``, ``ego_pose``; ``lidar_points`` on
-    request), like :class:`~dstenv.envs.DSTGridEnv`.
+    (``sensor``, ``gis``, ``ego_pose``; ``labels`` and ``visible`` with
+    ``info.labels``, ``lidar_points`` with ``info.lidar_points``), like
+    :class:`~dstenv.envs.DSTGridEnv`.
 
     The filter assumes one env step per LIDAR sweep; give the env
     ``policy_frequency = simulation_frequency = 10`` for the sensor's 10 Hz (other
@@ -58,6 +59,8 @@ class DSTGridObservation(gym.Wrapper):
         pipe_cfg = {k: copy.deepcopy(v) for k, v in cfg.items() if k not in ("observation", "info")}
         pipe_cfg["source"] = "highway"
         pipe_cfg["frame"]["masses"] = pipe_cfg["frame"]["masses"] or mode.needs_masses
+        pipe_cfg["frame"]["labels"] = bool(cfg["info"]["labels"]
+                                           or env.unwrapped.render_mode == "rgb_array")
         pipe_cfg["frame"]["lidar_points"] = (pipe_cfg["frame"]["lidar_points"]
                                              or cfg["info"]["lidar_points"])
         world = HighwayWorld(pipe_cfg["highway"], env=env, external=True)
@@ -95,8 +98,9 @@ class DSTGridObservation(gym.Wrapper):
         f = self._frame
         assert f is not None
         info = dict(info)
-        info.update(labels=f.labels, visible=f.visible, sensor=f.sensor, gis=f.gis,
-                    ego_pose=f.ego_pose)
+        info.update(sensor=f.sensor, gis=f.gis, ego_pose=f.ego_pose)
+        if self.config["info"]["labels"]:
+            info.update(labels=f.labels, visible=f.visible)
         if self.config["info"]["lidar_points"]:
             info["lidar_points"] = f.extras["lidar_points"]
         return observation_mode(self._obs_name).build(f), info

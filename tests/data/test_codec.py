@@ -6,7 +6,7 @@ import h5py
 import numpy as np
 import pytest
 
-from dstenv.data.codec import encode_chunk, fletcher32
+from dstenv.data.codec import class_counts, encode_chunk, fletcher32, quantize
 from dstenv.data.shards import ShardReader, ShardWriter
 
 
@@ -32,7 +32,58 @@ def test_chunks_match_h5py_filters(tmp_path, compression, level):
     with h5py.File(tmp_path / "ref.h5") as f:
         for i in range(3):
             mask, stored = f["x"].id.read_direct_chunk((i, 0, 0, 0))
-            assert mask == 0 and stored == encode_chunk(a[i], compression, level)
+            assert mask == 0 and stored == encode_chunk(a[i], compression, level, "zlib")
+
+
+@pytest.mark.parametrize("level", [0, 1, 3, 6])
+def test_isal_chunks_read_back_with_plain_h5py(tmp_path, level):
+    # ISA-L deflate: other bytes than zlib, but a standard stream HDF5's filter decodes,
+    # with a checksum h5py verifies
+    rng = np.random.default_rng(1)
+    a = (rng.random((3, 5, 37, 29)) < 0.2) * rng.integers(0, 256, (3, 5, 37, 29))
+    a = a.astype(np.uint8)
+    with h5py.File(tmp_path / "x.h5", "w") as f:
+        ds = f.create_dataset("x", shape=a.shape, chunks=(1, 5, 37, 29), dtype=np.uint8,
+                              compression="gzip", compression_opts=level, fletcher32=True)
+        for i in range(3):
+            ds.id.write_direct_chunk((i, 0, 0, 0), encode_chunk(a[i], "gzip", level, "isal"))
+    with h5py.File(tmp_path / "x.h5") as f:
+        np.testing.assert_array_equal(f["x"][:], a)
+        raw = bytearray(f["x"].id.read_direct_chunk((1, 0, 0, 0))[1])
+    raw[len(raw) // 2] ^= 0xFF  # a flipped byte must fail the checksum on read
+    with h5py.File(tmp_path / "x.h5", "r+") as f:
+        f["x"].id.write_direct_chunk((1, 0, 0, 0), bytes(raw))
+    with h5py.File(tmp_path / "x.h5") as f, pytest.raises(OSError):
+        f["x"][1]
+
+
+def test_encode_chunk_rejects_unknown_engine():
+    with pytest.raises(ValueError, match="deflate engine 'zstd'"):
+        encode_chunk(np.zeros(4, np.uint8), "gzip", 1, "zstd")
+
+
+def test_quantize_matches_numpy_expression_including_ties():
+    rng = np.random.default_rng(2)
+    # exact half-way values k + 0.5 (round half to even), out-of-range values, random
+    ties = ((np.arange(255) + 0.5) / 255).astype(np.float32)
+    p = np.concatenate([ties, np.float32([-0.5, 0.0, 1.0, 1.5]),
+                        rng.random(10_001).astype(np.float32)]).reshape(2, -1)
+    expected = np.rint(np.clip(p, 0.0, 1.0) * 255).astype(np.uint8)
+    np.testing.assert_array_equal(quantize(p, 255), expected)
+    assert quantize(p, 255).shape == p.shape
+    for bad in (np.nan, np.inf):
+        q = p.copy()
+        q[1, 7] = bad
+        with pytest.raises(ValueError, match="NaN/inf"):
+            quantize(q, 255)
+
+
+def test_class_counts_values_and_bad_label():
+    labels = np.array([[0, 1, 1, 4], [255, 4, 4, 2]], np.uint8)
+    np.testing.assert_array_equal(class_counts(labels, 5, 255), [1, 2, 1, 0, 3])
+    labels[1, 3] = 7
+    with pytest.raises(ValueError, match="labels hold value 7; allowed 0..4 and 255"):
+        class_counts(labels, 5, 255)
 
 
 def test_stride1_prev_chunk_is_shared_and_reads_back(tmp_path, frames, shard_attrs):

@@ -91,3 +91,23 @@ def test_generate_with_map_reuse_is_deterministic_over_workers(tmp_path):
         with ShardReader(path) as r:
             assert r.attrs["task"]["episodes_per_map"] == 2
             assert all(split_of_seed(int(r[i].seed)) == r.attrs["split"] for i in range(len(r)))
+
+
+def test_paper_protocol_sweeps_only_fused_steps_and_keeps_the_frames():
+    # 1 fusion every 3 steps, one stored frame every 3 steps: steps 1, 2, 4, 5 only move
+    # the world; the stored frames equal those of a plain step loop
+    config = {**CONFIG, "protocol": {"update_every": 3}}
+    sweeps = []
+
+    def make():
+        p = Pipeline(config)
+        sweep = p.lidar.sweep
+        p.lidar.sweep = lambda *a, **k: sweeps.append(1) or sweep(*a, **k)
+        return p
+
+    got = list(iter_frames(make, iter([11]), 7, 3, 3))
+    assert [f.step for f in got] == [3, 6] and len(sweeps) == 3  # steps 0, 3, 6
+    p = Pipeline(config)
+    full = [p.reset(11)] + [p.step() for _ in range(6)]
+    for f in got:
+        _same(f, full[f.step])

@@ -76,10 +76,24 @@ def _make_highway():
     return gym.make("DSTGrid-Highway-v0", config=SMALL_HIGHWAY)
 
 
+def test_labels_in_info_are_opt_in_and_change_nothing_else():
+    # default: no ground truth computed or returned; info.labels adds it, and the
+    # observations and every other info entry stay bit-identical
+    plain = _rollout(SMALL_CITY, 3, 12)
+    full = _rollout({**SMALL_CITY, "info": {"labels": True}}, 3, 12)
+    for (oa, ia), (ob, ib) in zip(plain, full):
+        assert "labels" not in ia and "visible" not in ia
+        assert ib["labels"].shape == ib["visible"].shape == ib["sensor"].shape
+        assert ib["labels"].dtype == np.uint8 and ib["visible"].dtype == bool
+        assert np.array_equal(ib["visible"], ib["sensor"] != 0)
+        _assert_same(oa, ob)
+        _assert_same(ia, {k: v for k, v in ib.items() if k not in ("labels", "visible")})
+
+
 def test_sync_vector_env():
     venv = gym.vector.SyncVectorEnv([_make_highway, _make_highway])
     obs, info = venv.reset(seed=[1, 2])
-    assert obs.shape == (2, 4, 40, 40) and info["labels"].shape == (2, 40, 40)
+    assert obs.shape == (2, 4, 40, 40) and info["sensor"].shape == (2, 40, 40)
     for _ in range(3):
         obs, rew, term, trunc, info = venv.step(np.array([1, 2]))
     assert rew.shape == (2,) and info["rewards"]["progress"].shape == (2,)
@@ -130,7 +144,7 @@ def test_bad_config_names_the_key():
 
 
 def test_collision_terminates_with_penalty_and_info_is_complete():
-    env = DSTGridEnv({**SMALL_HIGHWAY, "info": {"lidar_points": True}})
+    env = DSTGridEnv({**SMALL_HIGHWAY, "info": {"lidar_points": True, "labels": True}})
     env.reset(seed=0)
     for _ in range(300):  # full speed through the busy junction, never braking
         obs, reward, term, trunc, info = env.step(2)

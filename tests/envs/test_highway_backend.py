@@ -84,7 +84,7 @@ def test_wrapper_gives_grid_observations_and_keeps_env_reward():
     base = gym.make("intersection-v2", config={"simulation_frequency": 10, "policy_frequency": 10})
     env = DSTGridObservation(base, config={"grid": {"height": 40, "width": 40, "cell_size": 1.0},
                                            "lidar": {"beams": 360}, "highway": {"resolution": 0.5},
-                                           "info": {"lidar_points": True}})
+                                           "info": {"lidar_points": True, "labels": True}})
     obs, info = env.reset(seed=5)
     assert obs.shape == (4, 40, 40) and obs.dtype == np.uint8
     assert env.observation_space.contains(obs)

@@ -1,0 +1,197 @@
+"""The goal rows of ``dstenv bench data`` (issue "a million labelled frames an hour").
+
+Each row is the median of ``repeat`` runs (>= 3 unless ``--quick``), measured in
+this process (generation rows use ``workers`` worker processes):
+
+* generation at stride 10 with 10 Hz fusion, 2-D LIDAR (``dstenv generate``);
+* the paper's protocol (1 Hz fusion: ``protocol.update_every = 10``) with the 2-D
+  and the 3-D LIDAR, when this build has them (else the row says so);
+* a reset of ``DSTGrid-v0`` with a fresh map;
+* the write path per 256 x 256 frame on one core: labels (label grid and visible
+  mask) + :class:`~dstenv.data.ShardWriter` (quantisation, compression, checksums,
+  HDF5 writes), CPU time of this thread and wall time;
+* ``DSTGrid-v0`` steps/s with random actions, resets included, against highway-env
+  ``intersection`` with an ``OccupancyGrid`` (presence, vx, vy) of the same extent;
+* one DST update at 256 x 256 on one core.
+"""
+
+from __future__ import annotations
+
+import statistics
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+__all__ = ["goal_rows", "print_goals"]
+
+
+def _median(fn: Callable[[], float], repeat: int) -> tuple[float, list[float]]:
+    runs = [fn() for _ in range(repeat)]
+    return statistics.median(runs), runs
+
+
+def _generate_rate(config: dict[str, Any], frames: int, workers: int, tmp: Path) -> float:
+    from dstenv.data.generate import GenerateSpec, generate
+
+    spec = GenerateSpec(config=config, frames=frames, seed=1, split="train",
+                        frames_per_shard=max(1, frames // (2 * workers)), episode_length=200,
+                        stride=10, warmup=10)
+    out = tmp / f"gen-{len(list(tmp.iterdir()))}"
+    t0 = time.perf_counter()
+    generate(spec, out, workers=workers, progress=False)
+    return 3600 * frames / (time.perf_counter() - t0)
+
+
+def _protocol(config: dict[str, Any], three_d: bool) -> dict[str, Any] | None:
+    """The paper-protocol config, or None if this build lacks the option."""
+    from dstenv.config import ConfigError
+    from dstenv.data.sampling import scenario_config
+
+    over: dict[str, Any] = {"protocol": {"update_every": 10}}
+    if three_d:
+        over["lidar"] = {"model": "hdl64"}
+    try:
+        return scenario_config(config, over)
+    except ConfigError:
+        return None
+
+
+def _write_path_ms(config: dict[str, Any], n: int, tmp: Path) -> dict[str, float]:
+    """Labels + ShardWriter per frame [ms]: CPU time of this thread, and wall time."""
+    from dstenv.data.shards import ShardWriter
+    from dstenv.pipeline import Pipeline
+    from dstenv.sensing.labels import label_grid, visible_mask
+
+    p = Pipeline(config)
+    p.reset(7)
+    frames, label_cpu, label_wall = [], 0.0, 0.0
+    for k in range(10 * n + 10):
+        f = p.step()
+        if k >= 10 and k % 10 == 0:  # stride 10, after the warm-up
+            w = p.world
+            c0, t0 = time.thread_time(), time.perf_counter()
+            label_grid(w.map, w.agents, f.ego_pose, p.spec,
+                       config["labels"]["moving_threshold"])
+            visible_mask(f.sensor)
+            label_cpu += time.thread_time() - c0
+            label_wall += time.perf_counter() - t0
+            frames.append(f)
+    attrs = {"config": config, "seed": 7}
+    with ShardWriter(tmp / "warm.h5", attrs) as wr:  # numba compilation, imports
+        wr.add(frames[0])
+    # steady state: the adds (quantise, compress, checksum, buffered HDF5 writes), plus
+    # opening and committing a shard (attrs, fsync, rename) spread over the default
+    # 256 frames per shard
+    wr = ShardWriter(tmp / "w.h5", attrs)
+    c0, t0 = time.thread_time(), time.perf_counter()
+    wr.__enter__()
+    c1, t1 = time.thread_time(), time.perf_counter()
+    for f in frames:
+        wr.add(f)
+    c2, t2 = time.thread_time(), time.perf_counter()
+    wr.__exit__(None, None, None)
+    c3, t3 = time.thread_time(), time.perf_counter()
+    n = len(frames)
+    write_cpu = (c2 - c1) / n + ((c1 - c0) + (c3 - c2)) / 256
+    write_wall = (t2 - t1) / n + ((t1 - t0) + (t3 - t2)) / 256
+    return {"cpu_ms": 1e3 * (label_cpu / n + write_cpu),
+            "wall_ms": 1e3 * (label_wall / n + write_wall),
+            "labels_cpu_ms": 1e3 * label_cpu / n,
+            "writer_cpu_ms": 1e3 * write_cpu,
+            "bytes_per_frame": (tmp / "w.h5").stat().st_size / n}
+
+
+def _reset_ms() -> float:
+    import gymnasium as gym
+
+    import dstenv  # noqa: F401  (registers the ids)
+
+    env = gym.make("DSTGrid-v0")
+    env.reset(seed=0)  # compilation out of the timing
+    times = []
+    for seed in range(1, 4):  # a fresh map each: new episode seed
+        t0 = time.perf_counter()
+        env.reset(seed=seed)
+        times.append(time.perf_counter() - t0)
+    env.close()
+    return 1e3 * statistics.median(times)
+
+
+def _env_ratio(steps: int) -> dict[str, float]:
+    import gymnasium as gym
+
+    import dstenv  # noqa: F401
+    from dstenv.envs.bench import highway_reference, time_env
+
+    env_id, ref = highway_reference((256, 256), 0.33, "presence,vx,vy")
+    ref_sps = time_env(ref, max(steps // 5, 10), resets=True)
+    ref.close()
+    env = gym.make("DSTGrid-v0")
+    sps = time_env(env, steps, resets=True)
+    env.close()
+    return {"steps_per_s": sps, "highway_steps_per_s": ref_sps, "ratio": sps / ref_sps}
+
+
+def _dst_ms() -> float:
+    from dstenv.bench import median_ms
+    from dstenv.dst import PerceptionGridFilter
+    from dstenv.dst.bench import street_inputs
+
+    sensor, gis = street_inputs(256)
+    f = PerceptionGridFilter((256, 256))
+    return median_ms(lambda: f.update(sensor, gis, (0.33, 0.02, 0.004), copy=False), 50, 3)
+
+
+def goal_rows(config: dict[str, Any], repeat: int, quick: bool, workers: int = 2
+              ) -> dict[str, Any]:
+    """Measure every goal row; ``{row: {"value", "runs", "unit", "goal"}}``."""
+    rows: dict[str, Any] = {}
+    frames = 8 if quick else 40
+    with tempfile.TemporaryDirectory(prefix="dstenv-goals-") as name:
+        tmp = Path(name)
+        gen = [("stride 10, 10 Hz fusion, 2-D LIDAR", config, ">= 500,000"),
+               ("stride 10, paper protocol, 2-D LIDAR", _protocol(config, False), ">= 1,500,000"),
+               ("stride 10, paper protocol, 3-D LIDAR", _protocol(config, True), ">= 500,000")]
+        for label, cfg, goal in gen:
+            if cfg is None:
+                rows[label] = {"value": None, "unit": "frames/h", "goal": goal,
+                               "note": "not in this build (protocol.update_every / lidar.model)"}
+                continue
+            value, runs = _median(lambda c=cfg: _generate_rate(c, frames * workers, workers,
+                                                               tmp), repeat)
+            rows[label] = {"value": value, "runs": runs, "unit": f"frames/h, {workers} workers",
+                           "goal": goal}
+        value, runs = _median(_reset_ms, repeat)
+        rows["reset of DSTGrid-v0 with a fresh map"] = {"value": value, "runs": runs,
+                                                         "unit": "ms", "goal": "<= 150"}
+        wp = [_write_path_ms(config, 12 if quick else 32, tmp) for _ in range(repeat)]
+        rows["write path per frame (one core)"] = {
+            "value": statistics.median(w["cpu_ms"] for w in wp), "runs": wp,
+            "unit": "ms CPU", "goal": "<= 1"}
+    env = [_env_ratio(30 if quick else 200) for _ in range(repeat)]
+    rows["DSTGrid-v0 steps/s vs highway-env (presence, vx, vy)"] = {
+        "value": statistics.median(e["ratio"] for e in env), "runs": env, "unit": "x",
+        "goal": ">= 10"}
+    value, runs = _median(_dst_ms, repeat)
+    rows["DST update 256 x 256, one core"] = {"value": value, "runs": runs, "unit": "ms",
+                                             "goal": "<= 0.6"}
+    return rows
+
+
+def print_goals(rows: dict[str, Any], repeat: int) -> None:
+    print(f"goal rows (median of {repeat})")
+    print(f"{'setting':<54}{'measured':>14}  {'unit':<22}{'goal':>12}")
+    for label, r in rows.items():
+        v = r["value"]
+        shown = "n/a" if v is None else (f"{v:,.0f}" if v >= 1000 else f"{v:.2f}")
+        print(f"{label:<54}{shown:>14}  {r['unit']:<22}{r['goal']:>12}")
+        if "note" in r:
+            print(f"    {r['note']}")
+    wp = rows.get("write path per frame (one core)")
+    if wp:
+        w = wp["runs"][0]
+        print(f"write path split (first run): labels {w['labels_cpu_ms']:.2f} ms + writer "
+              f"{w['writer_cpu_ms']:.2f} ms CPU; wall {w['wall_ms']:.2f} ms; "
+              f"{w['bytes_per_frame']:,.0f} B/frame")

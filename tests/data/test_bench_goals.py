@@ -1,0 +1,30 @@
+"""The goal table of ``dstenv bench data``: rows and their printing (no timings here)."""
+
+from __future__ import annotations
+
+from dstenv.data.bench_goals import _protocol, print_goals
+from dstenv.data.sampling import scenario_config
+
+
+def test_protocol_rows_follow_what_the_build_supports():
+    config = scenario_config(None, {})
+    proto = _protocol(config, False)
+    if "protocol" in config:  # the paper protocol: one fusion per simulated second
+        assert proto["protocol"]["update_every"] == 10
+    else:
+        assert proto is None
+
+
+def test_print_goals_marks_missing_rows(capsys):
+    rows = {
+        "stride 10, paper protocol, 3-D LIDAR": {"value": None, "unit": "frames/h",
+                                                 "goal": ">= 500,000", "note": "not here"},
+        "DST update 256 x 256, one core": {"value": 0.512, "runs": [0.5, 0.512, 0.6],
+                                           "unit": "ms", "goal": "<= 0.6"},
+        "stride 10, 10 Hz fusion, 2-D LIDAR": {"value": 512345.0, "runs": [], "unit": "frames/h",
+                                               "goal": ">= 500,000"},
+    }
+    print_goals(rows, 3)
+    out = capsys.readouterr().out
+    assert "median of 3" in out and "n/a" in out and "not here" in out
+    assert "0.51" in out and "512,345" in out

@@ -256,15 +256,15 @@ class Pipeline:
         self.step_index += 1
         return self._observe()
 
-    def _advance(self, action: Any = None) -> None:
+    def advance(self, action: Any = None) -> None:
         """:meth:`step` without building a :class:`Frame` (no labels, no masses copy).
 
         The world, LIDAR randomness and filter advance exactly as in :meth:`step`, so
         the frames of later steps are identical; data generation calls this for the
-        steps between kept frames.
+        steps between kept frames, an RL frame-skip for the skipped steps.
         """
         if self._last is None:
-            raise RuntimeError("Pipeline.step: call reset(seed) first")
+            raise RuntimeError("Pipeline.advance: call reset(seed) first")
         self.world.step(action)
         self.step_index += 1
         self._sense(False)

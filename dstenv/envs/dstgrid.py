@@ -8,9 +8,12 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from gymnasium import spaces
 
-from dstenv.config import ConfigError, Section, Validated, build_config
+from dstenv.config import ConfigError, Section, Validated, between, build_config
 from dstenv.envs.actions import action_mode, default_action_config
+from dstenv.envs.navigation import ego_vector, navigation_spaces, route_points
+from dstenv.envs.observation import SECTION as OBSERVATION_SECTION
 from dstenv.envs.observation import observation_mode
 from dstenv.envs.render import HumanWindow, render_frame
 from dstenv.envs.rewards import StepOutcome, default_reward_config, reward_terms
@@ -26,7 +29,10 @@ _ENV_SECTIONS = ("observation", "action", "reward", "info")
 #: The ``info`` section: optional extras of the step's ``info`` dict.
 INFO_SECTION = Section(lambda: {
     "lidar_points": False,  # add info["lidar_points"] (B, 2) float32 [m]
-}, {})
+    # [m] route progress that makes an episode without collision, off-road or arrival a
+    # success (info["is_success"])
+    "success_distance": 100.0,
+}, {"success_distance": between(0.0, 1e5, "m")})
 
 
 class DSTGridEnv(gym.Env):
@@ -172,9 +178,7 @@ class DSTGridEnv(gym.Env):
         ``observation``, ``action``, ``reward`` and ``info``."""
         cfg = pipeline_config()
         cfg.update({
-            "observation": {
-                "type": "image",  # "image" | "pignistic" | "fcn10" | "masses"
-            },
+            "observation": OBSERVATION_SECTION.defaults(),
             "action": default_action_config(),
             "reward": default_reward_config(),
             "info": INFO_SECTION.defaults(),
@@ -182,28 +186,47 @@ class DSTGridEnv(gym.Env):
         return cfg
 
     # -- configuration ------------------------------------------------------------------
-    _STATE = ("config", "_obs_name", "_action", "pipeline", "observation_space",
+    _STATE = ("config", "_obs_name", "_grid_mode", "_action", "pipeline", "observation_space",
               "action_space", "_world")
 
     def _configure(self, cfg: Mapping[str, Any] | None = None) -> None:
         """Build the pipeline and spaces for ``cfg`` (default ``self.config``); every
         attribute is assigned only after everything was built."""
         cfg = self.config if cfg is None else cfg
-        obs_name = cfg["observation"]["type"]
-        mode = observation_mode(obs_name)
+        obs_cfg = cfg["observation"]
+        obs_name = obs_cfg["type"]
+        grid_mode = observation_mode(obs_cfg["grid"] if obs_name == "dict" else obs_name)
         action = action_mode(cfg["action"]["type"])
+        mode = grid_mode
         pipe_cfg = {k: copy.deepcopy(v) for k, v in cfg.items() if k not in _ENV_SECTIONS}
-        pipe_cfg["highway"]["action_mode"] = ("meta" if cfg["action"]["type"] == "discrete"
-                                              else "continuous")
+        pipe_cfg["highway"]["action_mode"] = ("continuous" if cfg["action"]["type"] == "continuous"
+                                              else "meta")
+        # one braking limit for the meta-actions, whichever world runs them
+        pipe_cfg["highway"]["brake_decel"] = min(cfg["action"]["brake_decel"],
+                                                 cfg["action"]["max_accel"])
         pipe_cfg["frame"]["masses"] = pipe_cfg["frame"]["masses"] or mode.needs_masses
         pipe_cfg["frame"]["lidar_points"] = (pipe_cfg["frame"]["lidar_points"]
                                              or cfg["info"]["lidar_points"])
         pipeline = Pipeline(Validated(pipe_cfg), world=self._user_world)
-        observation_space = mode.space(pipeline.spec.shape)
+        grid_space = mode.space(pipeline.spec.shape)
+        observation_space: gym.Space = (
+            spaces.Dict({"grid": grid_space, **navigation_spaces(obs_cfg["route_points"])})
+            if obs_name == "dict" else grid_space)
         action_space = action.space(cfg["action"], cfg["source"])
-        self.config, self._obs_name, self._action = cfg, obs_name, action
+        self.config, self._obs_name, self._grid_mode, self._action = cfg, obs_name, mode, action
         self.pipeline, self._world = pipeline, self._user_world
         self.observation_space, self.action_space = observation_space, action_space
+
+    def get_action_meanings(self) -> list[str]:
+        """The meaning of each discrete action, by index (Atari's convention).
+
+        Raises:
+            TypeError: the action space is continuous.
+        """
+        if not self._action.names:
+            raise TypeError(f"get_action_meanings: action type {self._action.name!r} is "
+                            "continuous (acceleration, steering)")
+        return list(self._action.names)
 
     # -- gymnasium API ------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None
@@ -222,6 +245,17 @@ class DSTGridEnv(gym.Env):
                                    defaults=self.config)
                 saved = {k: getattr(self, k) for k in self._STATE}
                 self._configure(cfg)
+                if (self.observation_space, self.action_space) != (
+                        saved["observation_space"], saved["action_space"]):
+                    new = (self.observation_space, self.action_space)
+                    for k, v in saved.items():
+                        setattr(self, k, v)
+                    raise ConfigError(
+                        "reset(options={'config': ...}): the change alters the observation or "
+                        f"action space ({self.observation_space} -> {new[0]}, "
+                        f"{self.action_space} -> {new[1]}); spaces are fixed once an env "
+                        "exists (vector envs and policies rely on them): build a new env "
+                        "with gym.make(id, config=...) instead")
         episode_seed = int(self.np_random.integers(2**31 - 1))
         try:
             self._frame = self.pipeline.reset(episode_seed)
@@ -233,11 +267,13 @@ class DSTGridEnv(gym.Env):
         self._world = self.pipeline.world
         self._controller = self._action.controller(self.config["action"], self._world,
                                                    self.config["source"])
+        self._accel = 0.0
+        self._progress = 0.0
         zero = StepOutcome(0.0, self._world.ego_speed, 0.0, False, False)
-        info = self._info(reward_terms(zero, self.config["reward"]))
+        info = self._info(reward_terms(zero, self.config["reward"]), False)
         if self.render_mode == "human":
             self.render()
-        return observation_mode(self._obs_name).build(self._frame), info
+        return self._observation(), info
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         if self._frame is None:
@@ -257,13 +293,26 @@ class DSTGridEnv(gym.Env):
                           bool(w.collision), bool(w.off_road), arrived)
         terms = reward_terms(out, self.config["reward"])
         terminated = out.collision or out.off_road or arrived
-        info = self._info(terms)
+        self._accel = (w.ego_speed - prev_speed) / dt
+        self._progress += float(progress)
+        info = self._info(terms, terminated)
         if self.render_mode == "human":
             self.render()
-        obs = observation_mode(self._obs_name).build(self._frame)
-        return obs, float(sum(terms.values())), terminated, False, info
+        return self._observation(), float(sum(terms.values())), terminated, False, info
 
-    def _info(self, terms: dict[str, float]) -> dict[str, Any]:
+    def _observation(self) -> np.ndarray | dict[str, np.ndarray]:
+        assert self._frame is not None
+        grid = self._grid_mode.build(self._frame)
+        if self._obs_name != "dict":
+            return grid
+        cfg = self.config["observation"]
+        target = getattr(self._controller, "target_speed", 0.0)
+        return {"grid": grid,
+                "ego": ego_vector(self._world, self._accel, target),
+                "route": route_points(self._world, self._frame.ego_pose, cfg["route_points"],
+                                      cfg["route_spacing"])}
+
+    def _info(self, terms: dict[str, float], terminated: bool) -> dict[str, Any]:
         f, w = self._frame, self._world
         assert f is not None and w is not None
         info: dict[str, Any] = {
@@ -279,7 +328,13 @@ class DSTGridEnv(gym.Env):
             "off_road": bool(w.off_road),
             "arrived": bool(getattr(w, "route_done", False)),
             "rewards": terms,
+            "route_progress": self._progress,
         }
+        crash, off, arrived = info["collision"], info["off_road"], info["arrived"]
+        info["is_success"] = not (crash or off) and (
+            arrived or self._progress >= self.config["info"]["success_distance"])
+        info["termination_reason"] = (("collision" if crash else "off_road" if off else "arrived")
+                                      if terminated else "timeout")
         if self.config["info"]["lidar_points"]:
             info["lidar_points"] = f.extras["lidar_points"]
         self._last_info = info

@@ -185,7 +185,8 @@ def run(args: Args, command: str) -> str:
                       f"evaluated on {args.env_id}")
         start = time.monotonic()
         try:
-            results = evaluate_policy(env, policy, seeds)
+            results = evaluate_policy(env, policy, seeds,
+                                      log=lambda r: print(policy.name, r, flush=True))
         finally:
             env.close()
         summary = summarize(results)

@@ -11,7 +11,9 @@ Measures, in one process, ``env.step`` throughput of
   grid (no occlusion, no evidential fusion),
 
 and reports each as a ratio to the reference, so the figures travel across machines.
-Resets are not timed; a terminated episode is reset outside the timer.
+Resets are not timed there; a terminated episode is reset outside the timer.
+:func:`time_resets` times ``DSTGrid-RL-v0`` resets apart: with a fresh map per
+episode and with a map pool (``world.map.pool``, maps generated before the timer).
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["run", "time_env"]
+__all__ = ["run", "time_env", "time_resets"]
 
 
 def time_env(env: Any, steps: int, action: Any, seed: int = 0) -> float:
@@ -40,6 +42,24 @@ def time_env(env: Any, steps: int, action: Any, seed: int = 0) -> float:
         if term or trunc:
             env.reset()
     return steps / elapsed
+
+
+def time_resets(env: Any, resets: int, pool: int = 0) -> float:
+    """Mean wall time [ms] of ``env.reset(seed=k)``; with ``pool`` > 0, seeds that
+    cover every pool map run first, untimed (the maps exist, as after warm-up)."""
+    if pool > 0:
+        seen: set[int] = set()
+        k = 10_000
+        while len(seen) < pool and k < 10_000 + 50 * pool:
+            env.reset(seed=k)
+            seen.add(env.unwrapped.pipeline.world.map_index)
+            k += 1
+    else:
+        env.reset(seed=10_000)
+    t0 = time.perf_counter()
+    for k in range(resets):
+        env.reset(seed=k)
+    return 1000.0 * (time.perf_counter() - t0) / resets
 
 
 def _highway_reference(spec_hw: tuple[int, int], cell: float) -> tuple[str, Any]:
@@ -88,11 +108,20 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         results[label] = time_env(env, steps, 1)
         env.close()
 
+    n_resets = 5 if quick else 20
+    for label, pool in (("DSTGrid-RL-v0 reset ms, fresh map", 0),
+                        ("DSTGrid-RL-v0 reset ms, map pool 10", 10)):
+        env = gym.make("DSTGrid-RL-v0", config={"world": {"map": {"pool": pool}}})
+        results[label] = time_resets(env, n_resets, pool)
+        env.close()
+
     print(f"{'environment':44s} {'steps/s':>9s} {'x highway-env':>14s}")
     for key, sps in results.items():
-        if key == "steps":
+        if key == "steps" or "reset ms" in key:
             continue
         print(f"{key:44s} {sps:9.1f} {sps / ref_sps:14.1f}")
+    for key in [k for k in results if "reset ms" in k]:
+        print(f"{key:44s} {results[key]:9.1f} ms")
     results["ratio_256_vs_highway"] = results["DSTGrid-v0 256x256"] / ref_sps
     results["ratio_rl_vs_highway"] = results["DSTGrid-RL-v0 84x84"] / ref_sps
     results["goal_met"] = bool(results["DSTGrid-v0 256x256"] >= 300

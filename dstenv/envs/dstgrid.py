@@ -58,26 +58,36 @@ class DSTGridEnv(gym.Env):
     ``config["observation"]["type"]`` (:mod:`dstenv.envs.observation`), for an
     ``H x W`` grid (``config["grid"]``: default 256 x 256 cells of 0.33 m):
 
-    * ``"image"`` (default): ``Box(0, 255, (4, H, W), uint8)``, ``round(255 * BetP)``
-      of navigable, building, static, moving (non_navigable = the rest). Ready for
-      stable-baselines3 ``CnnPolicy`` (needs H, W >= 36).
+    * ``"image"`` (default of the paper-size ids): ``Box(0, 255, (4, H, W), uint8)``,
+      ``round(255 * BetP)`` of navigable, building, static, moving (non_navigable =
+      the rest). Ready for stable-baselines3 ``CnnPolicy`` (needs H, W >= 36).
     * ``"pignistic"``: ``Box(0, 1, (5, H, W), float32)``, BetP over the 5 classes.
     * ``"fcn10"``: ``Box(0, 1, (10, H, W), float32)``, BetP at t and t-1.
     * ``"masses"``: ``Box(0, 1, (32, H, W), float32)``, the raw masses.
+    * ``"dict"`` (default of the RL ids): ``Dict(grid=<the "grid" mode, default
+      image>, ego=Box(-1, 1, (10,)), route=Box(-1, 1, (2 K,)))``: the ego's speed,
+      acceleration, steering, target speed, distance to the next junction, its
+      control (one-hot) and signal state, and the next ``route_points`` route points
+      ``route_spacing`` m apart in the ego frame (:mod:`dstenv.envs.navigation`).
+      stable-baselines3's ``MultiInputPolicy`` takes it as is.
 
     ## Action Space
 
-    ``config["action"]["type"]`` (:mod:`dstenv.envs.actions`):
+    ``config["action"]["type"]`` (:mod:`dstenv.envs.actions`); the space depends on
+    the type alone, ``get_action_meanings()`` names the actions:
 
-    * ``"discrete"`` (default): meta-actions, ``Discrete(5)`` = ``0 SLOWER, 1 IDLE,
-      2 FASTER, 3 LEFT, 4 RIGHT``. SLOWER / FASTER step a target speed through
-      ``target_speeds`` (default 0, 4.5, 9 m/s). City: LEFT / RIGHT choose the turn
-      at the next junction (no effect where it has none) while the autopilot's
-      route-following steering drives the planned route; ``turns = false`` gives
-      ``Discrete(3)``, speed only. highway-env scenes: LEFT / RIGHT change lane
-      (highway-env's ``DiscreteMetaAction``).
+    * ``"discrete"`` (default): ``Discrete(5)`` = ``0 SLOWER, 1 IDLE, 2 FASTER,
+      3 LEFT, 4 RIGHT``. SLOWER / FASTER step a target speed through
+      ``target_speeds`` (default 0, 4.5, 9 m/s), braking at most ``brake_decel``.
+      City: LEFT / RIGHT choose the turn at the next junction (no effect where it has
+      none) while the world's route-following steering (the autopilot's rule) drives
+      the planned route. highway-env scenes: LEFT / RIGHT change lane.
+    * ``"speed"``: ``Discrete(3)`` = SLOWER, IDLE, FASTER (the route fixes the turns;
+      ``DSTGrid-Occluded-v0``).
     * ``"continuous"``: ``Box(-1, 1, (2,), float32)``, (acceleration, steering)
       scaled by ``max_accel`` [m/s^2] and ``max_steer`` [rad], positive = left.
+    * ``"autopilot"``: ``Discrete(1)``: the world's own driver (privileged: it reads
+      the ground truth), a reference for baselines.
 
     ## Rewards
 
@@ -90,7 +100,9 @@ class DSTGridEnv(gym.Env):
     ## Starting State
 
     A new world from the episode seed (drawn from ``self.np_random``): new city or
-    scene, traffic and ego start. The filter starts from total ignorance, so the first
+    scene, traffic and ego start. With ``world.map.pool = N`` the city is one of N
+    maps generated once (Procgen's ``num_levels``), for fast resets and to measure
+    generalisation to unseen maps. The filter starts from total ignorance, so the first
     observation holds one sweep.
 
     ## Episode End
@@ -105,7 +117,12 @@ class DSTGridEnv(gym.Env):
     too), ``visible`` (H, W) bool, ``sensor`` (H, W) uint8 (0 unknown, 1 free, 2
     occupied), ``gis`` (H, W) uint8 (``MapClass``), ``ego_pose`` (3,) float64,
     ``ego_speed`` [m/s], ``time`` [s], ``seed``, ``collision``, ``off_road``,
-    ``arrived``, ``rewards`` (dict); with ``config["info"]["lidar_points"]``,
+    ``arrived``, ``rewards`` (dict), ``route_progress`` [m] along the route since
+    reset, ``is_success`` (no collision, on the road, and arrived or
+    ``info.success_distance`` m of progress) and ``termination_reason``
+    (``"collision"``, ``"off_road"``, ``"arrived"``; ``"timeout"`` on a step that does
+    not terminate: read it at the episode's last step); with
+    ``config["info"]["lidar_points"]``,
     ``lidar_points`` (B, 2) float32 ego-frame returns [m] (NaN rows: no return).
 
     ## Arguments
@@ -127,11 +144,12 @@ class DSTGridEnv(gym.Env):
     ``DSTGrid-Suburb-v0``       scenario ``suburb``
     ``DSTGrid-Parking-v0``      scenario ``parking`` (parked cars everywhere)
     ``DSTGrid-OSM-v0``          scenario ``osm`` (a real OpenStreetMap extract)
-    ``DSTGrid-RL-v0``           default city, RL-sized grid 84 x 84 x 1.0 m (same 84 m view)
+    ``DSTGrid-RL-v0``           default city, RL-sized grid 84 x 84 x 1.0 m (same 84 m
+                                view), ``"dict"`` observation (as every id below)
     ``DSTGrid-Continuous-v0``   as ``DSTGrid-RL-v0`` with (acceleration, steering) actions
-    ``DSTGrid-Occluded-v0``     occlusion task, RL-sized: junctions with cross traffic
-                                hidden by buildings, parked cars along the route and
-                                pedestrians stepping out; see below
+    ``DSTGrid-Occluded-v0``     occlusion task, RL-sized, speed actions: junctions with
+                                cross traffic hidden by buildings, parked cars along
+                                the route and pedestrians stepping out; see below
     ``DSTGrid-Highway-v0``      highway-env ``intersection-v1`` scene with buildings,
                                 RL-sized grid, highway-env meta-actions
     =========================== ==========================================================
@@ -145,7 +163,9 @@ class DSTGridEnv(gym.Env):
 
     ## Version History
 
-    * v0: initial version.
+    * v0: initial version; ``"dict"`` observation default on the RL ids, ``"speed"``
+      actions on ``DSTGrid-Occluded-v0`` (``action.turns`` removed), episode outcome
+      in ``info``.
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10}

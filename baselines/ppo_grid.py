@@ -221,6 +221,8 @@ def save(model: PPO, out: Path, args: Args, wall_s: float) -> Path:
         "finished_utc": time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime()),
         "machine": machine_info(),
         "command": shlex.join(["python", "baselines/ppo_grid.py", *to_argv(args)]),
+        "observation_space": str(model.observation_space),
+        "action_space": str(model.action_space),
     }
     atomic_write_text(out / "model.json", json.dumps(meta, indent=2) + "\n")
     return path
@@ -239,6 +241,13 @@ def load(path: str | Path, env: gym.Env) -> tuple[PPO, dict[str, Any]]:
     if not sidecar.is_file():
         raise FileNotFoundError(f"{path}: missing its sidecar {sidecar.name}")
     meta = json.loads(sidecar.read_text())
+    spaces_now = (str(env.observation_space), str(env.action_space))
+    trained = (meta.get("observation_space", spaces_now[0]), meta.get("action_space",
+                                                                      spaces_now[1]))
+    if spaces_now != trained:
+        raise ValueError(f"{path}: trained on {meta['observation_space']} / "
+                         f"{meta['action_space']}, the env gives {spaces_now[0]} / "
+                         f"{spaces_now[1]} (grid size, observation or action type?)")
     known = {f for f in Args.__dataclass_fields__}
     args = Args(**{k: v for k, v in meta["args"].items() if k in known})
     model = build_model(args, env)

@@ -55,7 +55,7 @@ def parse_args(cls: type[T], argv: Sequence[str] | None = None) -> T:
     """Parse ``argv`` into the dataclass ``cls``: one ``--flag-name`` per field.
 
     Types come from the field annotations: ``bool`` fields take ``--flag`` /
-    ``--no-flag``; ``list[X]`` fields take one or more values of type ``X``.
+    ``--no-flag``; ``list[X]`` fields take zero or more values of type ``X``.
     """
     import typing
 
@@ -71,7 +71,7 @@ def parse_args(cls: type[T], argv: Sequence[str] | None = None) -> T:
                                 action=argparse.BooleanOptionalAction)
         elif typing.get_origin(kind) is list:
             parser.add_argument(flag, dest=f.name, default=default, help=helptext,
-                                nargs="+", type=typing.get_args(kind)[0])
+                                nargs="*", type=typing.get_args(kind)[0])
         else:
             parser.add_argument(flag, dest=f.name, default=default, help=helptext, type=kind)
     return cls(**vars(parser.parse_args(argv)))

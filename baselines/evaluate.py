@@ -1,18 +1,21 @@
-"""Evaluate drivers on a fixed set of seeds and write the results table.
+"""Evaluate drivers on a fixed set of seeds and print (optionally write) the results table.
 
 Every policy drives one episode per seed ``--seed .. --seed + --episodes - 1`` of
-the same env (same worlds, same traffic): ``random`` (:mod:`random_policy`),
-``autopilot`` and ``constant`` (:mod:`rule_based`), and each trained PPO
-checkpoint given with ``--checkpoints`` (``model.zip`` from :mod:`ppo_grid`, with
-its ``model.json`` sidecar: observation type, training budget, machine). Reported
-per policy: success rate, collision rate, off-road rate, mean return and mean
-route progress [m] with standard errors (definitions in :mod:`rl_common`).
+the same registered env with its default observation (same worlds, same traffic,
+a fresh map per seed, none of them a training map): ``random``
+(:mod:`random_policy`), ``grid`` (the grid-aware rule driver), ``autopilot``
+(privileged) and ``constant`` (:mod:`rule_based`), and each trained PPO checkpoint
+given with ``--checkpoints`` (``model.pt`` state_dicts from :mod:`ppo_grid`, with
+their ``model.json`` sidecars; only tensors are loaded). Reported per policy:
+success rate, collision rate, off-road rate, mean return and mean route progress
+[m] with standard errors (definitions in :mod:`rl_common`).
 
 The Markdown table, the command that produced it, the training budgets and the
-machine replace the block between ``<!-- results:begin -->`` and
-``<!-- results:end -->`` of ``--readme`` (written atomically). Run::
+machine are printed; ``--write-readme`` also replaces the block between
+``<!-- results:begin -->`` and ``<!-- results:end -->`` of ``--readme`` (written
+atomically); without it no file but ``--csv`` is written. Run::
 
-    python baselines/evaluate.py --episodes 50 --checkpoints runs/ppo_grid/model.zip
+    python baselines/evaluate.py --episodes 100 --checkpoints baselines/checkpoints/ppo_occluded.pt
 """
 
 from __future__ import annotations
@@ -31,55 +34,56 @@ import numpy as np
 from random_policy import RandomPolicy
 from rl_common import EnvArgs, EpisodeResult, atomic_write_text, evaluate_policy, machine_info
 from rl_common import make_env, opt, parse_args, summarize, write_results_csv
-from rule_based import AutopilotPolicy, ConstantPolicy, make_autopilot_env
+from rule_based import DRIVERS, reference_driver
 
 BEGIN, END = "<!-- results:begin -->", "<!-- results:end -->"
-POLICIES = ("random", "autopilot", "constant")
+POLICIES = ("random", *DRIVERS)
 
 
 @dataclass
 class Args(EnvArgs):
     """Evaluate drivers on fixed seeds and write the results table."""
 
-    policies: list[str] = opt(["random", "autopilot", "constant"],
-                              "reference drivers: random | autopilot | constant")
-    checkpoints: list[str] = opt([], "PPO model.zip files from ppo_grid.py")
+    policies: list[str] = opt(["random", "grid", "autopilot", "constant"],
+                              "reference drivers: random | grid | autopilot | constant")
+    checkpoints: list[str] = opt([], "PPO model.pt files from ppo_grid.py")
     constant_action: int = opt(2, "action of the constant driver (city: 2 = FASTER)")
     episodes: int = opt(50, "episodes per policy, one per seed")
     seed: int = opt(10_000, "first evaluation seed (episode k uses seed + k)")
-    success_distance: float = opt(100.0, "[m] route progress that counts as success")
     deterministic: bool = opt(True, "PPO: take the most likely action")
-    readme: str = opt("baselines/README.md", "Markdown file to update; '' = do not write")
+    readme: str = opt("baselines/README.md", "Markdown file whose results block "
+                                             "--write-readme replaces")
+    write_readme: bool = opt(False, "replace the results block of --readme (else print only)")
     csv: str = opt("", "write every episode of every policy to this CSV file")
     torch_threads: int = opt(1, "torch CPU threads for the PPO policies")
 
 
 class PPOPolicy:
-    """A trained stable-baselines3 PPO checkpoint and its ``model.json`` sidecar."""
+    """A trained PPO policy: ``model.pt`` (state_dict) and its ``model.json`` sidecar."""
 
     def __init__(self, path: str | Path, deterministic: bool = True) -> None:
-        from stable_baselines3 import PPO
-
         self.path = Path(path)
         if not self.path.is_file():
             raise FileNotFoundError(f"--checkpoints: no such file {self.path}")
-        sidecar = self.path.with_name(self.path.stem + ".json")
+        sidecar = self.path.with_suffix(".json")
         if not sidecar.is_file():
             raise FileNotFoundError(f"{self.path}: missing its sidecar {sidecar.name}")
         self.meta: dict[str, Any] = json.loads(sidecar.read_text())
-        self.model = PPO.load(self.path, device="cpu")
         self.deterministic = deterministic
         a = self.meta["args"]
-        self.name = f"PPO {a['extractor']} on {a['obs']} ({self.path.parent.name})"
+        self.name = f"PPO {a['extractor']} ({self.path.stem})"
+        self.model: Any = None
 
     def make_env(self, args: EnvArgs) -> gym.Env:
-        """The evaluation env with this checkpoint's observation."""
-        a = self.meta["args"]
-        env = make_env(args, a["obs"], a["ego_state"])
-        if env.observation_space != self.model.observation_space:
+        """The evaluation env; the policy is rebuilt on its spaces."""
+        from ppo_grid import load
+
+        env = make_env(args)
+        try:
+            self.model, self.meta = load(self.path, env)
+        except Exception:
             env.close()
-            raise ValueError(f"{self.path}: trained on observations {self.model.observation_space}"
-                             f", the env gives {env.observation_space} (grid size or --obs?)")
+            raise
         return env
 
     def reset(self, env: gym.Env, seed: int) -> None:
@@ -93,11 +97,9 @@ class PPOPolicy:
 def _reference(name: str, args: Args) -> tuple[Any, gym.Env]:
     if name == "random":
         return RandomPolicy(), make_env(args)
-    if name == "autopilot":
-        return AutopilotPolicy(), make_autopilot_env(args)
-    if name == "constant":
-        return ConstantPolicy(args.constant_action), make_env(args)
-    raise ValueError(f"--policies: unknown policy {name!r}; known: {', '.join(POLICIES)}")
+    if name not in DRIVERS:
+        raise ValueError(f"--policies: unknown policy {name!r}; known: {', '.join(POLICIES)}")
+    return reference_driver(name, args, args.constant_action)
 
 
 def _pct(x: float) -> str:
@@ -118,7 +120,7 @@ def results_markdown(rows: list[tuple[str, dict[str, float], dict[str, Any] | No
         f"Env `{args.env_id}`" + (f" with `--env-config '{args.env_config}'`"
                                   if args.env_config else "")
         + f", seeds {args.seed}..{args.seed + args.episodes - 1} (one episode each), "
-        f"success = no collision, on the road, >= {args.success_distance:g} m of route "
+        "success = the env's `is_success`: no collision, on the road, >= 100 m of route "
         "progress (or arrived).",
         "",
         "| policy | success | collision | off-road | return | progress [m] | length [steps]"
@@ -183,7 +185,8 @@ def run(args: Args, command: str) -> str:
                       f"evaluated on {args.env_id}")
         start = time.monotonic()
         try:
-            results = evaluate_policy(env, policy, seeds, args.success_distance)
+            results = evaluate_policy(env, policy, seeds,
+                                      log=lambda r: print(policy.name, r, flush=True))
         finally:
             env.close()
         summary = summarize(results)
@@ -192,7 +195,7 @@ def run(args: Args, command: str) -> str:
         rows.append((policy.name, summary, meta))
         episodes.append((policy.name, results))
     block = results_markdown(rows, args, command)
-    if args.readme:
+    if args.write_readme:
         write_readme(args.readme, block)
     if args.csv:
         write_results_csv(args.csv, episodes)

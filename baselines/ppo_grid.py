@@ -1,20 +1,27 @@
 """PPO (stable-baselines3) driving on DST perception grids, in one readable file.
 
-The agent sees the env's grid observation (``--obs``: ``pignistic`` 5 x H x W,
-``fcn10`` 10 x H x W, ``masses`` 32 x H x W floats, or the ``image`` uint8 mode)
-plus, by default, an ego vector (``--ego-state speed+route``: its speed and the
-route 5..40 m ahead, :class:`rl_common.EgoStateObservation`; one ego-centred grid
-shows neither). Feature extractors (``--extractor``):
+The agent sees the registered env's default observation: on the RL ids the
+``"dict"`` observation ``{"grid": (4, 84, 84) uint8, "ego": speed, acceleration,
+steering, target speed, next junction, "route": the route ahead}``
+(:mod:`dstenv.envs.navigation`); no wrapper adds anything. Feature extractors
+(``--extractor``):
 
-* ``grid-cnn``: :class:`GridCNN`, four small strided convolutions for float grids
-  of a few channels (84 x 84 -> 6 x 6), then one linear layer;
-* ``nature-cnn``: stable-baselines3's ``CnnPolicy`` (NatureCNN) on ``--obs image``
-  (``MultiInputPolicy`` with the ego vector).
+* ``grid-cnn``: :class:`GridCNN`, three small strided convolutions for the grid
+  (84 x 84 -> 6 x 6), concatenated with the flat ``ego`` and ``route`` vectors,
+  then one linear layer (cheap on a 2-core CPU);
+* ``combined``: stable-baselines3's own ``MultiInputPolicy`` extractor (NatureCNN on
+  the grid), out of the box.
 
-Outputs in ``--out``: ``model.zip`` (written atomically, also every
-``--checkpoint-every`` steps), ``model.json`` (arguments, timesteps done, wall time,
-machine), ``progress.csv`` (stable-baselines3's training log) and ``episodes.csv``
-(one row per finished training episode). Run::
+Training uses several envs in parallel (``--n-envs``, ``SubprocVecEnv``) drawing
+their episodes from a pool of maps (``--map-pool``, the env's ``world.map.pool``);
+evaluation (``evaluate.py``) runs on fresh maps of held-out seeds. The budget is a
+number of env steps (``--total-timesteps``), never wall time.
+
+Outputs in ``--out``: ``model.pt`` (the policy's ``state_dict``, loaded back with
+``torch.load(weights_only=True)``: no pickled code), ``model.json`` (arguments,
+timesteps, wall time, machine), ``progress.csv`` (stable-baselines3's log),
+``episodes.csv`` (one row per finished training episode: the learning curve) and,
+with ``--tensorboard``, tensorboard event files. Run::
 
     python baselines/ppo_grid.py --total-timesteps 200000 --n-envs 2 --out runs/ppo_grid
 """
@@ -45,23 +52,21 @@ from torch import nn
 from rl_common import EnvArgs, atomic_write_bytes, atomic_write_text, machine_info, make_env, opt
 from rl_common import parse_args, to_argv
 
-EXTRACTORS = ("grid-cnn", "nature-cnn")
+EXTRACTORS = ("grid-cnn", "combined")
 
 
 @dataclass
 class Args(EnvArgs):
     """Train PPO on a DSTGrid env."""
 
-    obs: str = opt("pignistic", "observation type: pignistic | fcn10 | masses | image")
-    extractor: str = opt("grid-cnn", "grid-cnn (custom, float grids) | nature-cnn (SB3 "
-                                     "CnnPolicy, needs --obs image)")
-    ego_state: str = opt("speed+route", "ego vector beside the grid: none | speed | "
-                                        "speed+route (the route 5..40 m ahead)")
-    features_dim: int = opt(256, "size of the extracted feature vector")
-    total_timesteps: int = opt(100_000, "environment steps over all envs")
-    max_wall_time: float = opt(0.0, "[s] stop training (and save) after this; 0 = no limit")
+    extractor: str = opt("grid-cnn", "grid-cnn (small CNN + vectors) | combined (SB3's "
+                                     "MultiInputPolicy extractor, NatureCNN)")
+    features_dim: int = opt(128, "size of the extracted feature vector")
+    total_timesteps: int = opt(100_000, "environment steps over all envs (the budget)")
     n_envs: int = opt(2, "parallel environments")
     vec_env: str = opt("subproc", "subproc | dummy")
+    map_pool: int = opt(50, "training maps (the env's world.map.pool; 0 = a new map "
+                            "every episode)")
     seed: int = opt(0, "seed of torch, numpy and the training episodes")
     learning_rate: float = opt(3e-4, "Adam learning rate")
     n_steps: int = opt(256, "rollout steps per env and update")
@@ -73,14 +78,15 @@ class Args(EnvArgs):
     ent_coef: float = opt(0.01, "entropy bonus")
     vf_coef: float = opt(0.5, "value loss weight")
     torch_threads: int = opt(1, "torch CPU threads (envs use the other cores)")
-    checkpoint_every: int = opt(0, "save the model every this many steps; 0 = at the end only")
-    record_actions: int = opt(64, "keep the first this many training actions (env 0)")
+    checkpoint_every: int = opt(10_000, "save the model every this many steps; 0 = at "
+                                        "the end only")
+    tensorboard: bool = opt(False, "also log to tensorboard (needs the tensorboard extra)")
     out: str = opt("runs/ppo_grid", "output directory")
     verbose: int = opt(1, "0: quiet, 1: stable-baselines3 log table on stdout")
 
 
 class GridCNN(BaseFeaturesExtractor):
-    """A small CNN for ``(C, H, W)`` perception grids, optionally with extra vectors.
+    """A small CNN for ``(C, H, W)`` perception grids, with the observation's vectors.
 
     A 4x4 convolution of stride 4 first cuts the grid into 4 x 4-cell patches
     (84 -> 21; cheap enough for a 2-core CPU), two 3x3 convolutions of stride 2
@@ -126,35 +132,32 @@ class GridCNN(BaseFeaturesExtractor):
 
 
 class TrainingLog(BaseCallback):
-    """Episode rows to ``episodes.csv``, the first actions, checkpoints and the wall clock."""
+    """Episode rows to ``episodes.csv`` (the learning curve), checkpoints, wall clock."""
 
     def __init__(self, args: Args, out: Path) -> None:
         super().__init__()
         self.args, self.out = args, out
-        self.first_actions: list[int | list[float]] = []
         self.start = time.monotonic()
         self._last_ckpt = 0
         self._fh = open(out / "episodes.csv", "w", newline="")
         self._csv = csv.writer(self._fh)
-        self._csv.writerow(["timesteps", "wall_s", "env", "return", "length", "collision",
-                            "off_road", "progress_m"])
+        self._csv.writerow(["timesteps", "wall_s", "env", "return", "length", "success",
+                            "collision", "off_road", "progress_m"])
 
     def _on_step(self) -> bool:
-        if len(self.first_actions) < self.args.record_actions:
-            self.first_actions.append(np.asarray(self.locals["actions"][0]).tolist())
         for rank, info in enumerate(self.locals["infos"]):
             ep = info.get("episode")
             if ep is not None:
                 self._csv.writerow([self.num_timesteps, round(self.elapsed, 1), rank,
-                                    round(float(ep["r"]), 4), int(ep["l"]), int(ep["collision"]),
+                                    round(float(ep["r"]), 4), int(ep["l"]),
+                                    int(ep["is_success"]), int(ep["collision"]),
                                     int(ep["off_road"]), round(float(ep["route_progress"]), 2)])
                 self._fh.flush()
         every = self.args.checkpoint_every
         if every > 0 and self.num_timesteps - self._last_ckpt >= every:
             self._last_ckpt = self.num_timesteps
-            save(self.model, self.out, self.args, self.elapsed, self.first_actions)
-        limit = self.args.max_wall_time
-        return not (limit > 0 and self.elapsed >= limit)
+            save(self.model, self.out, self.args, self.elapsed)
+        return True
 
     @property
     def elapsed(self) -> float:
@@ -164,19 +167,24 @@ class TrainingLog(BaseCallback):
         self._fh.close()
 
 
+def train_config(args: Args) -> dict[str, Any]:
+    """What training sets on the env under ``--env-config``: the map pool."""
+    return {"world": {"map": {"pool": args.map_pool}}}
+
+
 def make_vec_env(args: Args) -> VecEnv:
     """``args.n_envs`` monitored envs in a Dummy/Subproc vector env (seeded at reset)."""
     if args.vec_env not in ("subproc", "dummy"):
         raise ValueError(f"--vec-env: expected subproc or dummy, got {args.vec_env!r}")
 
     def thunk() -> gym.Env:
-        return make_env(args, args.obs, args.ego_state, monitor=True)
+        return make_env(args, train_config(args), monitor=True)
 
     cls = SubprocVecEnv if args.vec_env == "subproc" and args.n_envs > 1 else DummyVecEnv
     return cls([thunk] * args.n_envs)
 
 
-def build_model(args: Args, env: VecEnv) -> PPO:
+def build_model(args: Args, env: VecEnv | gym.Env) -> PPO:
     """The PPO model for ``args`` on ``env`` (seeded with ``args.seed``)."""
     if args.extractor not in EXTRACTORS:
         raise ValueError(f"--extractor: expected one of {EXTRACTORS}, got {args.extractor!r}")
@@ -187,25 +195,24 @@ def build_model(args: Args, env: VecEnv) -> PPO:
                                          "features_extractor_kwargs":
                                              {"features_dim": args.features_dim}}
     else:
-        if args.obs != "image":
-            raise ValueError("--extractor nature-cnn needs --obs image (uint8 grids)")
         policy = "MultiInputPolicy" if dict_obs else "CnnPolicy"
         policy_kwargs = ({"features_extractor_kwargs": {"cnn_output_dim": args.features_dim}}
                          if dict_obs else {"features_extractor_kwargs":
                                            {"features_dim": args.features_dim}})
+    tb = str(Path(args.out) / "tb") if args.tensorboard else None
     return PPO(policy, env, learning_rate=args.learning_rate, n_steps=args.n_steps,
                batch_size=args.batch_size, n_epochs=args.n_epochs, gamma=args.gamma,
                gae_lambda=args.gae_lambda, clip_range=args.clip_range, ent_coef=args.ent_coef,
                vf_coef=args.vf_coef, policy_kwargs=policy_kwargs, seed=args.seed,
-               device="cpu", verbose=0)
+               device="cpu", verbose=0, tensorboard_log=tb)
 
 
-def save(model: PPO, out: Path, args: Args, wall_s: float,
-         first_actions: list[Any] | None = None) -> Path:
-    """Write ``model.zip`` and its ``model.json`` sidecar atomically; return the zip path."""
+def save(model: PPO, out: Path, args: Args, wall_s: float) -> Path:
+    """Write ``model.pt`` (the policy's state_dict) and its ``model.json`` sidecar
+    atomically; return the ``.pt`` path."""
     buf = io.BytesIO()
-    model.save(buf)
-    path = out / "model.zip"
+    torch.save(model.policy.state_dict(), buf)
+    path = out / "model.pt"
     atomic_write_bytes(path, buf.getvalue())
     meta = {
         "args": asdict(args),
@@ -214,10 +221,43 @@ def save(model: PPO, out: Path, args: Args, wall_s: float,
         "finished_utc": time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime()),
         "machine": machine_info(),
         "command": shlex.join(["python", "baselines/ppo_grid.py", *to_argv(args)]),
-        "first_actions": first_actions or [],
+        "observation_space": str(model.observation_space),
+        "action_space": str(model.action_space),
     }
     atomic_write_text(out / "model.json", json.dumps(meta, indent=2) + "\n")
     return path
+
+
+def load(path: str | Path, env: gym.Env) -> tuple[PPO, dict[str, Any]]:
+    """A PPO model rebuilt from ``model.json`` with the weights of ``model.pt``.
+
+    Only tensors are read (``torch.load(weights_only=True)``): a checkpoint cannot
+    run code. ``env`` gives the spaces (it must match those of training).
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such checkpoint")
+    sidecar = path.with_suffix(".json")
+    if not sidecar.is_file():
+        raise FileNotFoundError(f"{path}: missing its sidecar {sidecar.name}")
+    meta = json.loads(sidecar.read_text())
+    spaces_now = (str(env.observation_space), str(env.action_space))
+    trained = (meta.get("observation_space", spaces_now[0]), meta.get("action_space",
+                                                                      spaces_now[1]))
+    if spaces_now != trained:
+        raise ValueError(f"{path}: trained on {meta['observation_space']} / "
+                         f"{meta['action_space']}, the env gives {spaces_now[0]} / "
+                         f"{spaces_now[1]} (grid size, observation or action type?)")
+    known = {f for f in Args.__dataclass_fields__}
+    args = Args(**{k: v for k, v in meta["args"].items() if k in known})
+    model = build_model(args, env)
+    state = torch.load(path, map_location="cpu", weights_only=True)
+    try:
+        model.policy.load_state_dict(state)
+    except RuntimeError as exc:
+        raise ValueError(f"{path}: weights do not fit the env's spaces {env.observation_space}"
+                         f" / {env.action_space} ({str(exc).splitlines()[0]})") from None
+    return model, meta
 
 
 def train(args: Args) -> tuple[PPO, dict[str, Any]]:
@@ -229,14 +269,15 @@ def train(args: Args) -> tuple[PPO, dict[str, Any]]:
     try:
         model = build_model(args, env)
         formats = ["stdout", "csv"] if args.verbose else ["csv"]
-        model.set_logger(configure(str(out), formats))
+        model.set_logger(configure(str(out), formats + (["tensorboard"] if args.tensorboard
+                                                        else [])))
         log = TrainingLog(args, out)
         model.learn(total_timesteps=args.total_timesteps, callback=log, progress_bar=False)
-        save(model, out, args, log.elapsed, log.first_actions)
+        save(model, out, args, log.elapsed)
     finally:
         env.close()
     meta = json.loads((out / "model.json").read_text())
-    print(f"saved {out / 'model.zip'}: {meta['timesteps']} steps in {meta['wall_time_s']} s "
+    print(f"saved {out / 'model.pt'}: {meta['timesteps']} steps in {meta['wall_time_s']} s "
           f"({meta['timesteps'] / max(meta['wall_time_s'], 1e-9):.1f} steps/s)")
     return model, meta
 

@@ -24,7 +24,6 @@ class Args(EnvArgs):
 
     episodes: int = opt(10, "episodes, one per seed")
     seed: int = opt(10_000, "first seed (episode k uses seed + k)")
-    success_distance: float = opt(100.0, "[m] route progress that counts as success")
     csv: str = opt("", "write per-episode results to this CSV file")
 
 
@@ -46,8 +45,7 @@ def run(args: Args) -> tuple[str, list[EpisodeResult]]:
     env = make_env(args)
     try:
         seeds = range(args.seed, args.seed + args.episodes)
-        return RandomPolicy.name, evaluate_policy(env, RandomPolicy(), seeds,
-                                                  args.success_distance, log=print)
+        return RandomPolicy.name, evaluate_policy(env, RandomPolicy(), seeds, log=print)
     finally:
         env.close()
 

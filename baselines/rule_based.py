@@ -1,19 +1,20 @@
 """Rule-based reference drivers for the DSTGrid envs, in one readable file.
 
-* ``autopilot`` (default): the world's own autopilot drives the ego, the rule every
-  traffic agent follows: route following (pure pursuit), IDM car following, right
-  of way at junctions (signals, stop signs, yield) and crosswalks. It reads the
-  simulator's ground truth, not the grid, so hidden cross traffic is no surprise
-  to it: a privileged reference, not a perception-based one.
-* ``constant``: one fixed action every step (default ``2`` = FASTER on the city),
-  a grid-blind driver: what ignoring the perception grid costs.
+* ``grid`` (default): :class:`GridRuleDriver`, a hand-written driver that sees only
+  the observation PPO sees (grid, ego vector, route; the grid's geometry from the
+  env config): it slows for bends and junctions, stops for a red light and for
+  obstacles the grid shows on its route. Not privileged: what it cannot see (cars
+  hidden behind a corner building) surprises it as much as a learner.
+* ``autopilot``: the world's own autopilot drives (the env's ``action.type =
+  "autopilot"``): route following, IDM car following, right of way at junctions
+  and crosswalks, all from the simulator's ground truth, so hidden cross traffic is
+  no surprise to it: a *privileged* upper reference, not a perception baseline.
+* ``constant``: one fixed action every step (default ``2`` = FASTER), a grid-blind
+  driver: what ignoring the perception grid costs.
 
-How the autopilot drives: the env takes a world source (``DSTGridEnv(world=...)``);
-:class:`AutopilotWorld` wraps the world the env would build and calls its
-``step(None)`` (autopilot) whatever action the env passes on, so rewards, info,
-episode end and observations are the env's own. Run::
+Run::
 
-    python baselines/rule_based.py --episodes 20
+    python baselines/rule_based.py --driver grid --episodes 20
 """
 
 from __future__ import annotations
@@ -23,77 +24,139 @@ from dataclasses import dataclass
 from typing import Any
 
 import gymnasium as gym
-
 import numpy as np
-from gymnasium import spaces
 
-from rl_common import EnvArgs, EpisodeResult, env_config, evaluate_policy, make_env, opt
-from rl_common import parse_args, report_run
+from rl_common import EnvArgs, EpisodeResult, evaluate_policy, make_env, opt, parse_args
+from rl_common import report_run
 
-DRIVERS = ("autopilot", "constant")
+DRIVERS = ("grid", "autopilot", "constant")
+#: ``--env-config`` the autopilot driver adds: the world's own driver.
+AUTOPILOT_CONFIG: dict[str, Any] = {"action": {"type": "autopilot"}}
 
 
 @dataclass
 class Args(EnvArgs):
     """Run a rule-based driver on a DSTGrid env."""
 
-    driver: str = opt("autopilot", "autopilot | constant")
-    constant_action: int = opt(2, "the action of the constant driver (city: 0 SLOWER, "
-                                  "1 IDLE, 2 FASTER)")
+    driver: str = opt("grid", "grid | autopilot | constant")
+    constant_action: int = opt(2, "the action of the constant driver (2 = FASTER)")
     episodes: int = opt(10, "episodes, one per seed")
     seed: int = opt(10_000, "first seed (episode k uses seed + k)")
-    success_distance: float = opt(100.0, "[m] route progress that counts as success")
     csv: str = opt("", "write per-episode results to this CSV file")
 
 
-class AutopilotWorld:
-    """A world source whose ego ignores the actions it is given: its autopilot drives.
+class GridRuleDriver:
+    """Speed rules on the ``"dict"`` observation of the speed / discrete meta-actions.
 
-    Everything else (map, agents, ego pose, flags, route) is the wrapped world's.
+    Each step it picks a wanted speed among the env's ``target_speeds`` and steps the
+    target speed towards it (SLOWER / IDLE / FASTER):
+
+    * obstacle: the first grid cell within ``corridor`` m of the route ahead whose
+      BetP(static) + BetP(moving) exceeds ``occupied`` sets the distance to stop in;
+      the wanted speed is the fastest whose braking distance at ``brake`` m/s^2 plus
+      ``margin`` m fits before it;
+    * bend: the route turns by more than ``bend_angle`` rad within ``bend_range`` m:
+      at most the middle speed;
+    * junction within ``junction_range`` m: at most the middle speed unless its
+      signal shows green; a red light closer than the braking distance: stop.
 
     Args:
-        world: a world source (``dstenv.sim.World`` or a highway-env adapter) whose
-            ``step(None)`` means autopilot.
+        corridor, occupied, margin, brake, bend_angle, bend_range, junction_range: as above.
     """
 
-    def __init__(self, world: Any) -> None:
-        self._inner = world
+    name = "rule-based (grid)"
 
-    def step(self, ego_action: Any = None) -> Any:
-        return self._inner.step(None)
+    def __init__(self, corridor: float = 1.4, occupied: float = 0.5, margin: float = 4.0,
+                 brake: float = 2.4, bend_angle: float = 0.35, bend_range: float = 25.0,
+                 junction_range: float = 20.0) -> None:
+        self.corridor, self.occupied, self.margin, self.brake = corridor, occupied, margin, brake
+        self.bend_angle, self.bend_range = bend_angle, bend_range
+        self.junction_range = junction_range
 
-    def __getattr__(self, name: str) -> Any:
-        if name == "_inner":  # not set yet (e.g. while unpickling)
-            raise AttributeError(name)
-        return getattr(self._inner, name)
+    def reset(self, env: gym.Env, seed: int) -> None:
+        from dstenv.envs.navigation import EGO_FEATURES, JUNCTION_RANGE, SPEED_SCALE
 
+        cfg = env.unwrapped.config
+        obs_cfg = cfg["observation"]
+        if obs_cfg["type"] != "dict" or obs_cfg["grid"] != "image":
+            raise ValueError("GridRuleDriver: needs observation.type 'dict' with grid 'image'")
+        if env.unwrapped.get_action_meanings()[:3] != ["SLOWER", "IDLE", "FASTER"]:
+            raise ValueError("GridRuleDriver: needs the speed or discrete meta-actions")
+        self.speeds = np.asarray(cfg["action"]["target_speeds"], np.float64)
+        self.cell = float(cfg["grid"]["cell_size"])
+        self.shape = (int(cfg["grid"]["height"]), int(cfg["grid"]["width"]))
+        self.route_scale = obs_cfg["route_points"] * obs_cfg["route_spacing"]
+        self.ego_index = {name: i for i, name in enumerate(EGO_FEATURES)}
+        self.speed_scale, self.junction_scale = SPEED_SCALE, JUNCTION_RANGE
 
-def make_autopilot_env(args: EnvArgs, observation: str | None = None) -> gym.Env:
-    """The env of ``args`` (:func:`rl_common.make_env`) driven by its world's autopilot:
-    the actions it is given are ignored."""
-    from dstenv.pipeline import WORLD_SOURCES
+    def _route_path(self, route: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Route from the ego, 0.5 m apart: ego-frame points ``(M, 2)`` and their
+        distances along the route ``(M,)``."""
+        pts = np.vstack([[0.0, 0.0], route.reshape(-1, 2) * self.route_scale])
+        seg = np.hypot(*np.diff(pts, axis=0).T)
+        s = np.concatenate([[0.0], np.cumsum(seg)])
+        d = np.arange(0.0, s[-1], 0.5)
+        return np.stack([np.interp(d, s, pts[:, 0]), np.interp(d, s, pts[:, 1])], 1), d
 
-    probe = gym.make(args.env_id, config=env_config(args, observation))
-    merged = probe.unwrapped.config  # scenario + variant preset + --env-config
-    probe.close()
-    world = AutopilotWorld(WORLD_SOURCES[merged["source"]](merged, 0))
-    return make_env(args, observation, world=world)
+    def _obstacle_distance(self, grid: np.ndarray, path: np.ndarray, dist: np.ndarray) -> float:
+        """Route distance [m] to the first occupied cell near the route (inf: none)."""
+        occ = (grid[2].astype(np.float32) + grid[3]) / 255.0 > self.occupied
+        i0, j0 = self.shape[0] // 2, self.shape[1] // 2
+        rows, cols = np.nonzero(occ)
+        if len(rows) == 0:
+            return float("inf")
+        cells = np.stack([(i0 - rows) * self.cell, (j0 - cols) * self.cell], 1)
+        ahead = cells[:, 0] > 2.0  # not the ego's own footprint
+        cells = cells[ahead]
+        if len(cells) == 0:
+            return float("inf")
+        d2 = ((path[:, None, :] - cells[None, :, :]) ** 2).sum(-1)  # (M, N)
+        near = (d2 < self.corridor ** 2).any(1)
+        return float(dist[np.argmax(near)]) if near.any() else float("inf")
+
+    def _bend_ahead(self, path: np.ndarray, dist: np.ndarray) -> bool:
+        ahead = path[dist <= self.bend_range]
+        if len(ahead) < 3:
+            return False
+        heading = np.arctan2(*np.diff(ahead, axis=0)[:, ::-1].T)
+        return bool(np.abs(np.unwrap(heading) - heading[0]).max() > self.bend_angle)
+
+    def act(self, obs: Any, info: dict[str, Any]) -> int:
+        ego, k = obs["ego"], self.ego_index
+        v = float(ego[k["speed"]]) * self.speed_scale
+        target = float(ego[k["target_speed"]]) * self.speed_scale
+        path, dist = self._route_path(obs["route"])
+        room = self._obstacle_distance(obs["grid"], path, dist) - self.margin
+        stop_dist = self.speeds ** 2 / (2 * self.brake)
+        fits = self.speeds[stop_dist <= max(room, 0.0)]
+        want = float(fits.max()) if len(fits) else float(self.speeds.min())
+        middle = float(self.speeds[len(self.speeds) // 2])
+        if self._bend_ahead(path, dist):
+            want = min(want, middle)
+        junction = float(ego[k["junction_dist"]]) * self.junction_scale
+        green = ego[k["signal_green"]] > 0.5
+        if junction <= self.junction_range and not green:
+            want = min(want, middle)
+            if ego[k["control_signal"]] > 0.5 and junction <= v * v / (2 * self.brake) + 3.0:
+                want = float(self.speeds.min())  # a red light
+        if want < target - 1e-6:
+            return 0  # SLOWER
+        if want > target + 1e-6:
+            return 2  # FASTER
+        return 1  # IDLE
 
 
 class AutopilotPolicy:
-    """The world's autopilot; needs an env from :func:`make_autopilot_env`."""
+    """The world's autopilot; needs an env with ``action.type = "autopilot"``."""
 
-    name = "rule-based (autopilot)"
+    name = "autopilot (privileged)"
 
     def reset(self, env: gym.Env, seed: int) -> None:
-        if not isinstance(env.unwrapped.pipeline.world, AutopilotWorld):
-            raise ValueError("AutopilotPolicy: build the env with make_autopilot_env()")
-        space = env.action_space  # any valid action will do: the world ignores it
-        self._action = (int(space.start) if isinstance(space, spaces.Discrete)
-                        else np.zeros(space.shape, space.dtype))
+        if env.unwrapped.get_action_meanings() != ["AUTOPILOT"]:
+            raise ValueError("AutopilotPolicy: build the env with AUTOPILOT_CONFIG")
 
-    def act(self, obs: Any, info: dict[str, Any]) -> Any:
-        return self._action
+    def act(self, obs: Any, info: dict[str, Any]) -> int:
+        return 0
 
 
 class ConstantPolicy:
@@ -111,19 +174,25 @@ class ConstantPolicy:
         return self.action
 
 
+def reference_driver(name: str, args: EnvArgs, constant_action: int = 2) -> tuple[Any, gym.Env]:
+    """A reference driver by name and the env it drives."""
+    if name == "grid":
+        return GridRuleDriver(), make_env(args)
+    if name == "autopilot":
+        return AutopilotPolicy(), make_env(args, AUTOPILOT_CONFIG)
+    if name == "constant":
+        return ConstantPolicy(constant_action), make_env(args)
+    raise ValueError(f"unknown driver {name!r}; known: {', '.join(DRIVERS)}")
+
+
 def run(args: Args) -> tuple[str, list[EpisodeResult]]:
     """Evaluate the driver of ``args``; returns its name and the episodes."""
     if args.driver not in DRIVERS:
         raise ValueError(f"--driver: expected one of {DRIVERS}, got {args.driver!r}")
+    policy, env = reference_driver(args.driver, args, args.constant_action)
     seeds = range(args.seed, args.seed + args.episodes)
-    if args.driver == "autopilot":
-        policy: Any = AutopilotPolicy()
-        env = make_autopilot_env(args)
-    else:
-        policy = ConstantPolicy(args.constant_action)
-        env = make_env(args)
     try:
-        results = evaluate_policy(env, policy, seeds, args.success_distance, log=print)
+        results = evaluate_policy(env, policy, seeds, log=print)
     finally:
         env.close()
     return policy.name, results

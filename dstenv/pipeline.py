@@ -262,16 +262,16 @@ class Pipeline:
         self.step_index += 1
         return self._observe()
 
-    def _advance(self, action: Any = None) -> None:
+    def advance(self, action: Any = None) -> None:
         """:meth:`step` without building a :class:`Frame` (no labels, no masses copy).
 
         The world and filter advance exactly as in :meth:`step`, so the frames of later
         steps are identical; data generation calls this for the steps between kept
-        frames. Steps that are not fused (``protocol.update_every``) only step the
-        world: no sweep, no grids.
+        frames, an RL frame-skip for the skipped steps. Steps that are not fused
+        (``protocol.update_every``) only step the world: no sweep, no grids.
         """
         if self._last is None:
-            raise RuntimeError("Pipeline.step: call reset(seed) first")
+            raise RuntimeError("Pipeline.advance: call reset(seed) first")
         self.world.step(action)
         self.step_index += 1
         if self.fuse and self.step_index % self.config["protocol"]["update_every"]:
@@ -285,7 +285,7 @@ class Pipeline:
 
     def _sweep_rng(self) -> np.random.Generator:
         """The LIDAR noise of this step: keyed by (episode seed, step), so a sweep does not
-        depend on which earlier steps were swept (skipped steps, see :meth:`_advance`)."""
+        depend on which earlier steps were swept (skipped steps, see :meth:`advance`)."""
         return np.random.default_rng([self.seed, 0x5E45, 0x5EE9, self.step_index])
 
     def _sense(self, want_masses: bool) -> tuple[np.ndarray, Agents, np.ndarray, np.ndarray,

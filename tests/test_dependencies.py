@@ -23,7 +23,7 @@ from dstenv.config import tomllib
 ROOT = Path(__file__).resolve().parents[1]
 PYPROJECT = tomllib.loads((ROOT / "pyproject.toml").read_text())
 FIRST_PARTY = {"dstenv", "tests", "baselines", "scenarios", "conftest", "rl_common",
-               "fcn_dst", "evaluate", "ppo_grid", "random_policy", "rule_based"}
+               "fcn_dst", "evaluate", "ppo_grid", "random_policy", "rule_based", "curves"}
 
 
 def _canonical(name: str) -> str:

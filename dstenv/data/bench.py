@@ -5,7 +5,7 @@ hold on any machine:
 
 * **pipeline step alone** (world + LIDAR + grids + DST + labels, no storage): the
   ceiling of single-process generation at stride 1; and the step without a
-  :class:`~dstenv.frame.Frame` (``Pipeline._advance``) that generation uses between
+  :class:`~dstenv.frame.Frame` (``Pipeline.advance``) that generation uses between
   kept frames;
 * **generate**: ``dstenv generate`` end to end (simulation, quantisation,
   compression, checksums, atomic shard files, manifest) with every step kept
@@ -62,7 +62,7 @@ def _pipeline_rate(config: dict[str, Any], steps: int, frame: bool = True) -> fl
     p = Pipeline(config)
     p.reset(12345)
     p.step()  # numba compilation and caches out of the timing
-    step = p.step if frame else p._advance
+    step = p.step if frame else p.advance
     t0 = time.perf_counter()
     for _ in range(steps):
         step()

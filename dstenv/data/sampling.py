@@ -158,8 +158,8 @@ def iter_frames(
 
 def _episode(pipeline: Any, frame: Frame, seed: int, keep: set[int], last: int
              ) -> Iterator[Frame]:
-    # steps between kept frames need no Frame (labels...): Pipeline._advance skips it
-    advance = getattr(pipeline, "_advance", None)
+    # steps between kept frames need no Frame (labels...): Pipeline.advance skips it
+    advance = getattr(pipeline, "advance", None)
     for step in range(last + 1):
         if step > 0:
             if step in keep or advance is None:

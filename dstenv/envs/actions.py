@@ -1,20 +1,28 @@
 """Action modes of :class:`~dstenv.envs.DSTGridEnv`: a dict registry.
 
-A mode declares its space and builds a *controller* per episode that turns the
-agent's action into what the world source's ``step`` takes:
+A mode declares its space and the meaning of each discrete action, and builds a
+*controller* per episode that turns the agent's action into what the world
+source's ``step`` takes:
 
-* ``"discrete"``: meta-actions. On a highway-env scene, ``Discrete(5)``
-  :data:`META_ACTIONS` = highway-env's own (its route-following ``MDPVehicle``;
-  LEFT / RIGHT change lane). On the city, ``Discrete(5)`` with the same names:
-  SLOWER / IDLE / FASTER step a target speed through ``target_speeds`` (a
-  P-controller with gain ``speed_gain`` tracks it), LEFT / RIGHT choose the turn at
-  the next junction (``World.set_turn``; ignored where the junction has no such
-  turn), and the autopilot's route-following steering drives the planned route: the
-  agent decides where to go and when to slow, e.g. before a blind junction.
-  ``turns = false`` keeps only the first three (``Discrete(3)``: speed only).
+* ``"discrete"``: ``Discrete(5)`` meta-actions :data:`META_ACTIONS`, whatever the
+  world. On a highway-env scene they are highway-env's own (its route-following
+  ``MDPVehicle``; LEFT / RIGHT change lane; its speed controller brakes at most
+  ``brake_decel``). On the city, SLOWER / IDLE / FASTER step a target speed through
+  ``target_speeds`` (a P-controller with gain ``speed_gain`` tracks it, braking at
+  most ``brake_decel``), LEFT / RIGHT choose the turn at the next junction
+  (``World.set_turn``; like IDLE where the junction has no such turn), and the
+  world's route-following steering (:meth:`dstenv.sim.World.route_steer`, the
+  autopilot's rule) drives the planned route.
+* ``"speed"``: ``Discrete(3)`` = SLOWER, IDLE, FASTER: the first three meta-actions
+  alone, for tasks where the route fixes the turns (``DSTGrid-Occluded-v0``).
 * ``"continuous"``: ``Box(-1, 1, (2,), float32)`` = (acceleration, steering) as
   fractions of ``max_accel`` [m/s^2] and ``max_steer`` [rad], positive steering to
   the left.
+* ``"autopilot"``: ``Discrete(1)``: the world's own autopilot drives (route
+  following, IDM, right of way; it reads ground truth: a privileged reference).
+
+The space depends on ``type`` alone, never on another key: ``get_action_meanings()``
+of the env names every action.
 """
 
 from __future__ import annotations
@@ -28,13 +36,13 @@ from gymnasium import spaces
 from dstenv.config import ConfigError, Section, between
 from dstenv.registry import Registry
 
-__all__ = ["META_ACTIONS", "CITY_META_ACTIONS", "ActionMode", "ACTIONS", "action_mode",
+__all__ = ["META_ACTIONS", "SPEED_ACTIONS", "ActionMode", "ACTIONS", "action_mode",
            "default_action_config", "SECTION"]
 
-#: Discrete action index -> meta-action name (highway-env scenes: all five).
+#: ``"discrete"`` action index -> meta-action name (city and highway-env scenes).
 META_ACTIONS: tuple[str, ...] = ("SLOWER", "IDLE", "FASTER", "LEFT", "RIGHT")
-#: The city's discrete actions: the same names; LEFT / RIGHT pick the next junction's turn.
-CITY_META_ACTIONS: tuple[str, ...] = META_ACTIONS
+#: ``"speed"`` action index -> name: the longitudinal meta-actions alone.
+SPEED_ACTIONS: tuple[str, ...] = META_ACTIONS[:3]
 _HIGHWAY_NAMES = {"SLOWER": "SLOWER", "IDLE": "IDLE", "FASTER": "FASTER",
                   "LEFT": "LANE_LEFT", "RIGHT": "LANE_RIGHT"}
 
@@ -42,8 +50,9 @@ _HIGHWAY_NAMES = {"SLOWER": "SLOWER", "IDLE": "IDLE", "FASTER": "FASTER",
 def default_action_config() -> dict[str, Any]:
     """The ``action`` config section (units in comments)."""
     return {
-        "type": "discrete",  # "discrete" (meta-actions) | "continuous" (accel, steer)
-        "turns": True,  # city: LEFT / RIGHT choose the next junction's turn; false: speed only
+        # "discrete" (5 meta-actions) | "speed" (SLOWER, IDLE, FASTER) | "continuous"
+        # (accel, steer) | "autopilot" (the world's own driver, privileged)
+        "type": "discrete",
         "target_speeds": [0.0, 4.5, 9.0],  # [m/s] speeds SLOWER / FASTER step through
         "initial_speed_index": 2,  # index into target_speeds at reset
         "speed_gain": 1.0,  # [1/s] accel = gain * (target - speed), clipped
@@ -62,17 +71,17 @@ class Controller(Protocol):
 class _HighwayMeta:
     """Discrete meta-actions passed to highway-env by name."""
 
-    def __init__(self, cfg: dict[str, Any], world: Any) -> None:
-        pass
+    def __init__(self, cfg: dict[str, Any], world: Any, names: tuple[str, ...]) -> None:
+        self.names = names
 
     def world_action(self, action: Any) -> str:
-        return _HIGHWAY_NAMES[META_ACTIONS[int(action)]]
+        return _HIGHWAY_NAMES[self.names[int(action)]]
 
 
 class _Continuous:
     """(accel, steer) fractions -> physical units."""
 
-    def __init__(self, cfg: dict[str, Any], world: Any) -> None:
+    def __init__(self, cfg: dict[str, Any], world: Any, names: tuple[str, ...]) -> None:
         self.scale = np.array([cfg["max_accel"], cfg["max_steer"]], np.float64)
 
     def world_action(self, action: Any) -> tuple[float, float]:
@@ -80,14 +89,26 @@ class _Continuous:
         return float(a[0]), float(a[1])
 
 
+class _Autopilot:
+    """The world's autopilot: every world source takes ``None`` as "drive yourself"."""
+
+    def __init__(self, cfg: dict[str, Any], world: Any, names: tuple[str, ...]) -> None:
+        pass
+
+    def world_action(self, action: Any) -> None:
+        return None
+
+
 class _CityMeta:
     """Longitudinal meta-actions on the city: a target speed; the route steers.
 
-    Steering is the autopilot's rule (pure pursuit of the route point
-    ``clip(2.5 + 0.6 v, 4, 15)`` m ahead), so the agent decides only how fast to go.
+    Steering is the world's route-following rule (:meth:`dstenv.sim.World.route_steer`,
+    the autopilot's), so the agent decides how fast to go (and, with LEFT / RIGHT,
+    which way at the next junction).
     """
 
-    def __init__(self, cfg: dict[str, Any], world: Any) -> None:
+    def __init__(self, cfg: dict[str, Any], world: Any, names: tuple[str, ...]) -> None:
+        self.names = names
         self.speeds = [float(v) for v in cfg["target_speeds"]]
         self.index = int(np.clip(cfg["initial_speed_index"], 0, len(self.speeds) - 1))
         self.gain = float(cfg["speed_gain"])
@@ -95,45 +116,48 @@ class _CityMeta:
         self.brake = min(float(cfg["brake_decel"]), self.max_accel)
         self.world = world
 
+    @property
+    def target_speed(self) -> float:
+        """The target speed the meta-actions have set [m/s]."""
+        return self.speeds[self.index]
+
     def world_action(self, action: Any) -> tuple[float, float]:
-        from dstenv.sim.ego import pure_pursuit
         from dstenv.sim.lanes import Turn
 
-        name = CITY_META_ACTIONS[int(action)]
+        name = self.names[int(action)]
         if name in ("LEFT", "RIGHT"):
             self.world.set_turn(Turn[name])
         elif name == "SLOWER":
             self.index = max(self.index - 1, 0)
         elif name == "FASTER":
             self.index = min(self.index + 1, len(self.speeds) - 1)
-        w = self.world
-        v = w.ego_speed
+        v = self.world.ego_speed
         accel = float(np.clip(self.gain * (self.speeds[self.index] - v), -self.brake,
                               self.max_accel))
-        look = float(np.clip(2.5 + 0.6 * v, 4.0, 15.0))
-        target = w.route_polyline(ahead=look, spacing=look)[-1]
-        x, y, yaw = w.ego_pose
-        ego = w.config["ego"]
-        steer = pure_pursuit(x, y, yaw, (float(target[0]), float(target[1])),
-                             ego["wheelbase"], ego["max_steer"])
-        return accel, steer
+        return accel, self.world.route_steer()
 
 
 @dataclass(frozen=True)
 class ActionMode:
-    """One action mode: its space and its controllers per world source."""
+    """One action mode: its space, the names of its discrete actions and its
+    controllers per world source.
+
+    Attributes:
+        name: the ``action.type`` value.
+        names: discrete action index -> meaning; empty for continuous modes.
+        controllers: world source -> controller class ``(cfg, world, names)``.
+    """
 
     name: str
+    names: tuple[str, ...]
     controllers: dict[str, type]
 
     def space(self, cfg: dict[str, Any], source: str) -> spaces.Space:
-        """The action space for a ``source`` world."""
-        if self.name == "discrete":
-            if len(cfg["target_speeds"]) < 1:
+        """The action space (the same for every ``source``)."""
+        if self.names:
+            if self.name != "autopilot" and len(cfg["target_speeds"]) < 1:
                 raise ConfigError("config.action.target_speeds: needs at least one speed")
-            if source == "city":
-                return spaces.Discrete(len(CITY_META_ACTIONS) if cfg["turns"] else 3)
-            return spaces.Discrete(len(META_ACTIONS))
+            return spaces.Discrete(len(self.names))
         return spaces.Box(-1.0, 1.0, (2,), dtype=np.float32)
 
     def controller(self, cfg: dict[str, Any], world: Any, source: str) -> Controller:
@@ -141,13 +165,16 @@ class ActionMode:
         if source not in self.controllers:
             raise ConfigError(f"config.action.type: {self.name!r} has no controller for "
                               f"source {source!r}; known: {', '.join(self.controllers)}")
-        return self.controllers[source](cfg, world)
+        return self.controllers[source](cfg, world, self.names)
 
 
 #: mode name -> :class:`ActionMode`
 ACTIONS: Registry[ActionMode] = Registry("mode", "action.type", {
-    "discrete": ActionMode("discrete", {"city": _CityMeta, "highway": _HighwayMeta}),
-    "continuous": ActionMode("continuous", {"city": _Continuous, "highway": _Continuous}),
+    "discrete": ActionMode("discrete", META_ACTIONS, {"city": _CityMeta, "highway": _HighwayMeta}),
+    "speed": ActionMode("speed", SPEED_ACTIONS, {"city": _CityMeta, "highway": _HighwayMeta}),
+    "continuous": ActionMode("continuous", (), {"city": _Continuous, "highway": _Continuous}),
+    "autopilot": ActionMode("autopilot", ("AUTOPILOT",),
+                            {"city": _Autopilot, "highway": _Autopilot}),
 })
 
 

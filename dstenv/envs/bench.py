@@ -17,6 +17,8 @@ and reports each as a ratio to the ``presence, vx, vy`` reference, so the figure
 travel across machines. Actions are random (seeded); resets are not timed (a
 terminated episode is reset outside the timer) unless ``resets=True``
 (:func:`time_env`), as in the goal row of ``dstenv bench data``.
+:func:`time_resets` times ``DSTGrid-RL-v0`` resets apart: with a fresh map per
+episode and with a map pool (``world.map.pool``, maps generated before the timer).
 """
 
 from __future__ import annotations
@@ -27,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["REFERENCE_FEATURES", "run", "time_env", "highway_reference"]
+__all__ = ["REFERENCE_FEATURES", "run", "time_env", "time_resets", "highway_reference"]
 
 #: highway-env OccupancyGrid feature sets of the reference (name -> features)
 REFERENCE_FEATURES: dict[str, list[str]] = {
@@ -64,6 +66,24 @@ def time_env(env: Any, steps: int, action: Any = None, seed: int = 0,
         if t0 is not None:
             elapsed += time.perf_counter() - t0
     return steps / elapsed
+
+
+def time_resets(env: Any, resets: int, pool: int = 0) -> float:
+    """Mean wall time [ms] of ``env.reset(seed=k)``; with ``pool`` > 0, seeds that
+    cover every pool map run first, untimed (the maps exist, as after warm-up)."""
+    if pool > 0:
+        seen: set[int] = set()
+        k = 10_000
+        while len(seen) < pool and k < 10_000 + 50 * pool:
+            env.reset(seed=k)
+            seen.add(env.unwrapped.pipeline.world.map_index)
+            k += 1
+    else:
+        env.reset(seed=10_000)
+    t0 = time.perf_counter()
+    for k in range(resets):
+        env.reset(seed=k)
+    return 1000.0 * (time.perf_counter() - t0) / resets
 
 
 def highway_reference(spec_hw: tuple[int, int], cell: float,
@@ -118,11 +138,20 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         results[label] = time_env(env, steps)
         env.close()
 
+    n_resets = 5 if quick else 20
+    for label, pool in (("DSTGrid-RL-v0 reset ms, fresh map", 0),
+                        ("DSTGrid-RL-v0 reset ms, map pool 10", 10)):
+        env = gym.make("DSTGrid-RL-v0", config={"world": {"map": {"pool": pool}}})
+        results[label] = time_resets(env, n_resets, pool)
+        env.close()
+
     print(f"{'environment':76s} {'steps/s':>9s} {'x highway-env':>14s}")
     for key, sps in results.items():
-        if key == "steps":
+        if key == "steps" or "reset ms" in key:
             continue
         print(f"{key:76s} {sps:9.1f} {sps / ref_sps:14.1f}")
+    for key in [k for k in results if "reset ms" in k]:
+        print(f"{key:76s} {results[key]:9.1f} ms")
     results["ratio_256_vs_highway"] = results["DSTGrid-v0 256x256"] / ref_sps
     results["ratio_rl_vs_highway"] = results["DSTGrid-RL-v0 84x84"] / ref_sps
     results["goal_met"] = bool(results["DSTGrid-v0 256x256"] >= 300

@@ -8,9 +8,12 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from gymnasium import spaces
 
-from dstenv.config import ConfigError, Section, Validated, build_config
+from dstenv.config import ConfigError, Section, Validated, between, build_config
 from dstenv.envs.actions import action_mode, default_action_config
+from dstenv.envs.navigation import ego_vector, navigation_spaces, route_points
+from dstenv.envs.observation import SECTION as OBSERVATION_SECTION
 from dstenv.envs.observation import observation_mode
 from dstenv.envs.render import HumanWindow, render_frame
 from dstenv.envs.rewards import StepOutcome, default_reward_config, reward_terms
@@ -29,7 +32,10 @@ INFO_SECTION = Section(lambda: {
     # computed every step (label_grid), ~15 % of a 256 x 256 step
     "labels": False,
     "lidar_points": False,  # add info["lidar_points"] (B, 2) float32 [m]
-}, {})
+    # [m] route progress that makes an episode without collision, off-road or arrival a
+    # success (info["is_success"])
+    "success_distance": 100.0,
+}, {"success_distance": between(0.0, 1e5, "m")})
 
 
 class DSTGridEnv(gym.Env):
@@ -55,26 +61,36 @@ class DSTGridEnv(gym.Env):
     ``config["observation"]["type"]`` (:mod:`dstenv.envs.observation`), for an
     ``H x W`` grid (``config["grid"]``: default 256 x 256 cells of 0.33 m):
 
-    * ``"image"`` (default): ``Box(0, 255, (4, H, W), uint8)``, ``round(255 * BetP)``
-      of navigable, building, static, moving (non_navigable = the rest). Ready for
-      stable-baselines3 ``CnnPolicy`` (needs H, W >= 36).
+    * ``"image"`` (default of the paper-size ids): ``Box(0, 255, (4, H, W), uint8)``,
+      ``round(255 * BetP)`` of navigable, building, static, moving (non_navigable =
+      the rest). Ready for stable-baselines3 ``CnnPolicy`` (needs H, W >= 36).
     * ``"pignistic"``: ``Box(0, 1, (5, H, W), float32)``, BetP over the 5 classes.
     * ``"fcn10"``: ``Box(0, 1, (10, H, W), float32)``, BetP at t and t-1.
     * ``"masses"``: ``Box(0, 1, (32, H, W), float32)``, the raw masses.
+    * ``"dict"`` (default of the RL ids): ``Dict(grid=<the "grid" mode, default
+      image>, ego=Box(-1, 1, (10,)), route=Box(-1, 1, (2 K,)))``: the ego's speed,
+      acceleration, steering, target speed, distance to the next junction, its
+      control (one-hot) and signal state, and the next ``route_points`` route points
+      ``route_spacing`` m apart in the ego frame (:mod:`dstenv.envs.navigation`).
+      stable-baselines3's ``MultiInputPolicy`` takes it as is.
 
     ## Action Space
 
-    ``config["action"]["type"]`` (:mod:`dstenv.envs.actions`):
+    ``config["action"]["type"]`` (:mod:`dstenv.envs.actions`); the space depends on
+    the type alone, ``get_action_meanings()`` names the actions:
 
-    * ``"discrete"`` (default): meta-actions, ``Discrete(5)`` = ``0 SLOWER, 1 IDLE,
-      2 FASTER, 3 LEFT, 4 RIGHT``. SLOWER / FASTER step a target speed through
-      ``target_speeds`` (default 0, 4.5, 9 m/s). City: LEFT / RIGHT choose the turn
-      at the next junction (no effect where it has none) while the autopilot's
-      route-following steering drives the planned route; ``turns = false`` gives
-      ``Discrete(3)``, speed only. highway-env scenes: LEFT / RIGHT change lane
-      (highway-env's ``DiscreteMetaAction``).
+    * ``"discrete"`` (default): ``Discrete(5)`` = ``0 SLOWER, 1 IDLE, 2 FASTER,
+      3 LEFT, 4 RIGHT``. SLOWER / FASTER step a target speed through
+      ``target_speeds`` (default 0, 4.5, 9 m/s), braking at most ``brake_decel``.
+      City: LEFT / RIGHT choose the turn at the next junction (no effect where it has
+      none) while the world's route-following steering (the autopilot's rule) drives
+      the planned route. highway-env scenes: LEFT / RIGHT change lane.
+    * ``"speed"``: ``Discrete(3)`` = SLOWER, IDLE, FASTER (the route fixes the turns;
+      ``DSTGrid-Occluded-v0``).
     * ``"continuous"``: ``Box(-1, 1, (2,), float32)``, (acceleration, steering)
       scaled by ``max_accel`` [m/s^2] and ``max_steer`` [rad], positive = left.
+    * ``"autopilot"``: ``Discrete(1)``: the world's own driver (privileged: it reads
+      the ground truth), a reference for baselines.
 
     ## Rewards
 
@@ -87,7 +103,9 @@ class DSTGridEnv(gym.Env):
     ## Starting State
 
     A new world from the episode seed (drawn from ``self.np_random``): new city or
-    scene, traffic and ego start. The filter starts from total ignorance, so the first
+    scene, traffic and ego start. With ``world.map.pool = N`` the city is one of N
+    maps generated once (Procgen's ``num_levels``), for fast resets and to measure
+    generalisation to unseen maps. The filter starts from total ignorance, so the first
     observation holds one sweep.
 
     ## Episode End
@@ -101,10 +119,14 @@ class DSTGridEnv(gym.Env):
     ``sensor`` (H, W) uint8 (0 unknown, 1 free, 2 occupied), ``gis`` (H, W) uint8
     (``MapClass``), ``ego_pose`` (3,) float64, ``ego_speed`` [m/s], ``time`` [s],
     ``seed``, ``collision``, ``off_road``, ``arrived``, ``rewards`` (dict); these are
-    the step's own arrays, not copies. With ``config["info"]["labels"]``: ``labels``
-    (H, W) uint8 ground truth (``dstenv.dst.CLASSES`` order, occluded cells too) and
-    ``visible`` (H, W) bool (computed only then: ~15 % of a 256 x 256 step). With
-    ``config["info"]["lidar_points"]``, ``lidar_points`` (B, 2) float32 ego-frame
+    the step's own arrays, not copies. ``route_progress`` [m] along the route since
+    reset, ``is_success`` (no collision, on the road, and arrived or
+    ``info.success_distance`` m of progress) and ``termination_reason``
+    (``"collision"``, ``"off_road"``, ``"arrived"``; ``"timeout"`` on a step that does
+    not terminate: read it at the episode's last step). With ``config["info"]["labels"]``:
+    ``labels`` (H, W) uint8 ground truth (``dstenv.dst.CLASSES`` order, occluded cells
+    too) and ``visible`` (H, W) bool (computed only then: ~15 % of a 256 x 256 step).
+    With ``config["info"]["lidar_points"]``, ``lidar_points`` (B, 2) float32 ego-frame
     returns [m] (NaN rows: no return).
 
     ## Arguments
@@ -126,11 +148,12 @@ class DSTGridEnv(gym.Env):
     ``DSTGrid-Suburb-v0``       scenario ``suburb``
     ``DSTGrid-Parking-v0``      scenario ``parking`` (parked cars everywhere)
     ``DSTGrid-OSM-v0``          scenario ``osm`` (a real OpenStreetMap extract)
-    ``DSTGrid-RL-v0``           default city, RL-sized grid 84 x 84 x 1.0 m (same 84 m view)
+    ``DSTGrid-RL-v0``           default city, RL-sized grid 84 x 84 x 1.0 m (same 84 m
+                                view), ``"dict"`` observation (as every id below)
     ``DSTGrid-Continuous-v0``   as ``DSTGrid-RL-v0`` with (acceleration, steering) actions
-    ``DSTGrid-Occluded-v0``     occlusion task, RL-sized: junctions with cross traffic
-                                hidden by buildings, parked cars along the route and
-                                pedestrians stepping out; see below
+    ``DSTGrid-Occluded-v0``     occlusion task, RL-sized, speed actions: junctions with
+                                cross traffic hidden by buildings, parked cars along
+                                the route and pedestrians stepping out; see below
     ``DSTGrid-Highway-v0``      highway-env ``intersection-v1`` scene with buildings,
                                 RL-sized grid, highway-env meta-actions
     =========================== ==========================================================
@@ -144,8 +167,10 @@ class DSTGridEnv(gym.Env):
 
     ## Version History
 
-    * v0: initial version. ``info["labels"]``/``info["visible"]`` became opt-in
-      (``info.labels``) to keep the step cost to what the observation needs.
+    * v0: initial version; ``"dict"`` observation default on the RL ids, ``"speed"``
+      actions on ``DSTGrid-Occluded-v0`` (``action.turns`` removed), episode outcome
+      in ``info``; ``info["labels"]``/``info["visible"]`` opt-in (``info.labels``) to
+      keep the step cost to what the observation needs.
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
@@ -178,9 +203,7 @@ class DSTGridEnv(gym.Env):
         ``observation``, ``action``, ``reward`` and ``info``."""
         cfg = pipeline_config()
         cfg.update({
-            "observation": {
-                "type": "image",  # "image" | "pignistic" | "fcn10" | "masses"
-            },
+            "observation": OBSERVATION_SECTION.defaults(),
             "action": default_action_config(),
             "reward": default_reward_config(),
             "info": INFO_SECTION.defaults(),
@@ -188,30 +211,49 @@ class DSTGridEnv(gym.Env):
         return cfg
 
     # -- configuration ------------------------------------------------------------------
-    _STATE = ("config", "_obs_name", "_action", "pipeline", "observation_space",
+    _STATE = ("config", "_obs_name", "_grid_mode", "_action", "pipeline", "observation_space",
               "action_space", "_world")
 
     def _configure(self, cfg: Mapping[str, Any] | None = None) -> None:
         """Build the pipeline and spaces for ``cfg`` (default ``self.config``); every
         attribute is assigned only after everything was built."""
         cfg = self.config if cfg is None else cfg
-        obs_name = cfg["observation"]["type"]
-        mode = observation_mode(obs_name)
+        obs_cfg = cfg["observation"]
+        obs_name = obs_cfg["type"]
+        grid_mode = observation_mode(obs_cfg["grid"] if obs_name == "dict" else obs_name)
         action = action_mode(cfg["action"]["type"])
+        mode = grid_mode
         pipe_cfg = {k: copy.deepcopy(v) for k, v in cfg.items() if k not in _ENV_SECTIONS}
-        pipe_cfg["highway"]["action_mode"] = ("meta" if cfg["action"]["type"] == "discrete"
-                                              else "continuous")
+        pipe_cfg["highway"]["action_mode"] = ("continuous" if cfg["action"]["type"] == "continuous"
+                                              else "meta")
+        # one braking limit for the meta-actions, whichever world runs them
+        pipe_cfg["highway"]["brake_decel"] = min(cfg["action"]["brake_decel"],
+                                                 cfg["action"]["max_accel"])
         pipe_cfg["frame"]["masses"] = pipe_cfg["frame"]["masses"] or mode.needs_masses
         # ground truth only when shown (info.labels) or drawn (render)
         pipe_cfg["frame"]["labels"] = bool(cfg["info"]["labels"] or self.render_mode)
         pipe_cfg["frame"]["lidar_points"] = (pipe_cfg["frame"]["lidar_points"]
                                              or cfg["info"]["lidar_points"])
         pipeline = Pipeline(Validated(pipe_cfg), world=self._user_world)
-        observation_space = mode.space(pipeline.spec.shape)
+        grid_space = mode.space(pipeline.spec.shape)
+        observation_space: gym.Space = (
+            spaces.Dict({"grid": grid_space, **navigation_spaces(obs_cfg["route_points"])})
+            if obs_name == "dict" else grid_space)
         action_space = action.space(cfg["action"], cfg["source"])
-        self.config, self._obs_name, self._action = cfg, obs_name, action
+        self.config, self._obs_name, self._grid_mode, self._action = cfg, obs_name, mode, action
         self.pipeline, self._world = pipeline, self._user_world
         self.observation_space, self.action_space = observation_space, action_space
+
+    def get_action_meanings(self) -> list[str]:
+        """The meaning of each discrete action, by index (Atari's convention).
+
+        Raises:
+            TypeError: the action space is continuous.
+        """
+        if not self._action.names:
+            raise TypeError(f"get_action_meanings: action type {self._action.name!r} is "
+                            "continuous (acceleration, steering)")
+        return list(self._action.names)
 
     # -- gymnasium API ------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None
@@ -230,6 +272,17 @@ class DSTGridEnv(gym.Env):
                                    defaults=self.config)
                 saved = {k: getattr(self, k) for k in self._STATE}
                 self._configure(cfg)
+                if (self.observation_space, self.action_space) != (
+                        saved["observation_space"], saved["action_space"]):
+                    new = (self.observation_space, self.action_space)
+                    for k, v in saved.items():
+                        setattr(self, k, v)
+                    raise ConfigError(
+                        "reset(options={'config': ...}): the change alters the observation or "
+                        f"action space ({self.observation_space} -> {new[0]}, "
+                        f"{self.action_space} -> {new[1]}); spaces are fixed once an env "
+                        "exists (vector envs and policies rely on them): build a new env "
+                        "with gym.make(id, config=...) instead")
         episode_seed = int(self.np_random.integers(2**31 - 1))
         try:
             self._frame = self.pipeline.reset(episode_seed)
@@ -241,11 +294,13 @@ class DSTGridEnv(gym.Env):
         self._world = self.pipeline.world
         self._controller = self._action.controller(self.config["action"], self._world,
                                                    self.config["source"])
+        self._accel = 0.0
+        self._progress = 0.0
         zero = StepOutcome(0.0, self._world.ego_speed, 0.0, False, False)
-        info = self._info(reward_terms(zero, self.config["reward"]))
+        info = self._info(reward_terms(zero, self.config["reward"]), False)
         if self.render_mode == "human":
             self.render()
-        return observation_mode(self._obs_name).build(self._frame), info
+        return self._observation(), info
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         if self._frame is None:
@@ -265,13 +320,26 @@ class DSTGridEnv(gym.Env):
                           bool(w.collision), bool(w.off_road), arrived)
         terms = reward_terms(out, self.config["reward"])
         terminated = out.collision or out.off_road or arrived
-        info = self._info(terms)
+        self._accel = (w.ego_speed - prev_speed) / dt
+        self._progress += float(progress)
+        info = self._info(terms, terminated)
         if self.render_mode == "human":
             self.render()
-        obs = observation_mode(self._obs_name).build(self._frame)
-        return obs, float(sum(terms.values())), terminated, False, info
+        return self._observation(), float(sum(terms.values())), terminated, False, info
 
-    def _info(self, terms: dict[str, float]) -> dict[str, Any]:
+    def _observation(self) -> np.ndarray | dict[str, np.ndarray]:
+        assert self._frame is not None
+        grid = self._grid_mode.build(self._frame)
+        if self._obs_name != "dict":
+            return grid
+        cfg = self.config["observation"]
+        target = getattr(self._controller, "target_speed", 0.0)
+        return {"grid": grid,
+                "ego": ego_vector(self._world, self._accel, target),
+                "route": route_points(self._world, self._frame.ego_pose, cfg["route_points"],
+                                      cfg["route_spacing"])}
+
+    def _info(self, terms: dict[str, float], terminated: bool) -> dict[str, Any]:
         f, w = self._frame, self._world
         assert f is not None and w is not None
         info: dict[str, Any] = {
@@ -285,9 +353,15 @@ class DSTGridEnv(gym.Env):
             "off_road": bool(w.off_road),
             "arrived": bool(getattr(w, "route_done", False)),
             "rewards": terms,
+            "route_progress": self._progress,
         }
         if self.config["info"]["labels"]:
             info["labels"], info["visible"] = f.labels, f.visible
+        crash, off, arrived = info["collision"], info["off_road"], info["arrived"]
+        info["is_success"] = not (crash or off) and (
+            arrived or self._progress >= self.config["info"]["success_distance"])
+        info["termination_reason"] = (("collision" if crash else "off_road" if off else "arrived")
+                                      if terminated else "timeout")
         if self.config["info"]["lidar_points"]:
             info["lidar_points"] = f.extras["lidar_points"]
         self._last_info = info

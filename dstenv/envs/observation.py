@@ -22,6 +22,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numba
 import numpy as np
@@ -115,9 +116,28 @@ def observation_mode(name: str) -> ObservationMode:
 def _section() -> "object":
     from dstenv.config import Section
 
+    from dstenv.config import between
+
     # choices read at validation time, so a mode added to OBSERVATIONS is accepted
-    return Section(lambda: {"type": "image"}, {}, (
-        ("type", lambda c: observation_mode(c["type"]) is not None, "unknown mode"),))
+    return Section(default_observation_config, {
+        "route_points": between(0, 64),
+        "route_spacing": between(0.0, 100.0, "m", lo_open=True),
+    }, (
+        ("type", lambda c: c["type"] == "dict" or observation_mode(c["type"]) is not None,
+         "unknown mode"),
+        ("grid", lambda c: observation_mode(c["grid"]) is not None, "unknown grid mode"),))
+
+
+def default_observation_config() -> dict[str, Any]:
+    """The ``observation`` section (units in comments)."""
+    return {
+        # "image" | "pignistic" | "fcn10" | "masses" | "dict" (grid + ego + route,
+        # dstenv.envs.navigation)
+        "type": "image",
+        "grid": "image",  # the grid mode inside "dict" (any mode above but dict)
+        "route_points": 8,  # "dict": K route points ahead ...
+        "route_spacing": 5.0,  # [m] ... this far apart
+    }
 
 
 #: The ``observation`` section of the env configuration.

@@ -10,13 +10,17 @@ from __future__ import annotations
 
 from typing import Any
 
-__all__ = ["ENTRY_POINT", "RL_GRID", "OCCLUDED_WORLD", "VARIANTS", "register_envs"]
+__all__ = ["ENTRY_POINT", "RL_GRID", "RL_OBSERVATION", "OCCLUDED_WORLD", "VARIANTS",
+           "register_envs"]
 
 ENTRY_POINT = "dstenv.envs.dstgrid:DSTGridEnv"
 
 #: The RL-sized grid: 84 x 84 cells of 1.0 m, the same ~84 m view as the paper's
 #: 256 x 256 x 0.33 m grid at 1/9 of the cells (and NatureCNN's native 84 x 84).
 RL_GRID: dict[str, Any] = {"height": 84, "width": 84, "cell_size": 1.0}
+
+#: The RL ids' observation: the grid plus the ego state and the route ahead.
+RL_OBSERVATION: dict[str, Any] = {"type": "dict"}
 
 #: World settings of the occlusion task: traffic hidden around the ego's route by
 #: buildings flush with the sidewalk (few gaps) and parked cars.
@@ -36,10 +40,15 @@ VARIANTS: dict[str, tuple[dict[str, Any], int]] = {
     "DSTGrid-Suburb-v0": ({"scenario": "suburb"}, 600),
     "DSTGrid-Parking-v0": ({"scenario": "parking"}, 600),
     "DSTGrid-OSM-v0": ({"scenario": "osm"}, 600),
-    "DSTGrid-RL-v0": ({"preset": {"grid": RL_GRID}}, 400),
-    "DSTGrid-Continuous-v0": ({"preset": {"grid": RL_GRID, "action": {"type": "continuous"}}}, 400),
-    "DSTGrid-Occluded-v0": ({"preset": {"grid": RL_GRID, "world": OCCLUDED_WORLD}}, 400),
-    "DSTGrid-Highway-v0": ({"preset": {"source": "highway", "grid": RL_GRID}}, 200),
+    "DSTGrid-RL-v0": ({"preset": {"grid": RL_GRID, "observation": RL_OBSERVATION}}, 400),
+    "DSTGrid-Continuous-v0": ({"preset": {"grid": RL_GRID, "observation": RL_OBSERVATION,
+                                          "action": {"type": "continuous"}}}, 400),
+    # the route fixes the turns: speed-only meta-actions, Discrete(3)
+    "DSTGrid-Occluded-v0": ({"preset": {"grid": RL_GRID, "observation": RL_OBSERVATION,
+                                        "world": OCCLUDED_WORLD, "action": {"type": "speed"}}},
+                            400),
+    "DSTGrid-Highway-v0": ({"preset": {"source": "highway", "grid": RL_GRID,
+                                       "observation": RL_OBSERVATION}}, 200),
 }
 
 

@@ -129,7 +129,9 @@ class HumanWindow:
         import pygame
 
         if self._screen is None:
-            pygame.init()
+            # the display alone: pygame.init() would also open the audio mixer, which
+            # prints ALSA errors on headless machines
+            pygame.display.init()
             pygame.display.set_caption(self.title)
             self._screen = pygame.display.set_mode((img.shape[1], img.shape[0]))
         pygame.event.pump()

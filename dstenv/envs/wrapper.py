@@ -18,7 +18,7 @@ from dstenv.pipeline import Pipeline
 __all__ = ["DSTGridObservation"]
 
 
-class DSTGridObservation(gym.Wrapper):
+class DSTGridObservation(gym.Wrapper, gym.utils.RecordConstructorArgs):
     """Replace a highway-env env's observation with a DST perception grid.
 
     The wrapped env keeps its own actions, reward, termination and info; the
@@ -49,8 +49,17 @@ class DSTGridObservation(gym.Wrapper):
     """
 
     def __init__(self, env: gym.Env, config: Mapping[str, Any] | None = None) -> None:
-        super().__init__(env)
         from dstenv.sim.highway import HighwayWorld
+
+        base = env.unwrapped
+        if not (hasattr(base, "road") and hasattr(base, "vehicle")
+                and type(base).__module__.startswith("highway_env")):
+            raise TypeError(f"DSTGridObservation wraps highway-env environments (e.g. "
+                            f"gym.make('intersection-v1')), got {type(base).__name__} from "
+                            f"{type(base).__module__}; for dstenv's city use "
+                            "gym.make('DSTGrid-v0')")
+        gym.utils.RecordConstructorArgs.__init__(self, config=config)
+        gym.Wrapper.__init__(self, env)
 
         self.config = build_config(None, ("config", config), defaults=self.default_config())
         cfg = self.config

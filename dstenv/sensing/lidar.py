@@ -47,6 +47,7 @@ HIT_OBSTACLE: int = -3
 _NONE_F = np.zeros(0)
 _NONE_B = np.zeros(0, dtype=bool)
 _NO_IDS = np.zeros(0, dtype=np.int32)  # box hit ids = box index
+_EDGE_CACHE = 64  # maps whose building edges a Lidar keeps (a map pool reuses them)
 
 
 @dataclass
@@ -111,6 +112,7 @@ class Lidar:
         self._cos = np.cos(self.angles)  # ego-frame beam directions
         self._sin = np.sin(self.angles)
         self._map: WorldMap | None = None
+        self._edge_cache: dict[int, tuple] = {}  # id(map) -> (map, edges, starts, boxes)
         self._edges = np.zeros((0, 4))
         self._starts = np.zeros(1, np.int64)
         self._boxes = np.zeros((0, 4))
@@ -188,8 +190,14 @@ class Lidar:
                      self.max_range)
 
     def _load_polygons(self, world_map: WorldMap) -> None:
-        """Flatten the building polygons into an edge list once per map."""
+        """Flatten the building polygons into an edge list once per map (the last
+        :data:`_EDGE_CACHE` maps are kept: a map pool cycles through a few)."""
         if self._map is world_map and len(self._starts) == len(world_map.buildings) + 1:
+            return
+        cached = self._edge_cache.get(id(world_map))
+        if cached is not None and cached[0] is world_map:
+            _, self._edges, self._starts, self._boxes = cached
+            self._map = world_map
             return
         edges, starts, boxes = [], [0], []
         for b, poly in enumerate(world_map.buildings):
@@ -206,6 +214,9 @@ class Lidar:
         self._starts = np.asarray(starts, dtype=np.int64)
         self._boxes = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)
         self._map = world_map
+        if len(self._edge_cache) >= _EDGE_CACHE:
+            self._edge_cache.pop(next(iter(self._edge_cache)))
+        self._edge_cache[id(world_map)] = (world_map, self._edges, self._starts, self._boxes)
 
 
 @numba.njit(cache=True, inline="always")

@@ -20,7 +20,7 @@ MAP_KINDS = ("procedural", "osm")
 
 def default_config() -> dict[str, Any]:
     """The complete default world configuration (a new dict on each call)."""
-    return {
+    cfg: dict[str, Any] = {
         "dt": 0.1,  # [s] simulation step (the Velodyne's 10 Hz)
         "map": {
             "kind": "procedural",  # "procedural" city generator | "osm" file
@@ -110,6 +110,12 @@ def default_config() -> dict[str, Any]:
             "crossing_pedestrians": 0,  # pedestrians about to cross near the ego's route
         },
     }
+    # map reuse across episodes (kept apart from the generator's keys above)
+    cfg["map"].update({
+        "pool": 0,  # [maps] episodes draw from this many maps generated once (Procgen's
+        #             num_levels); 0 = a new map from every episode seed
+    })
+    return cfg
 
 
 _M, _MS, _MS2 = "m", "m/s", "m/s^2"
@@ -157,6 +163,7 @@ RULES: dict[str, Any] = {
         "building_depth_min": between(2.0, 200.0, _M),
         "building_depth_max": between(2.0, 200.0, _M),
         "gap_prob": PROB,
+        "pool": between(0, 100_000),
         "gap_min": between(0.0, 100.0, _M),
         "gap_max": between(0.0, 100.0, _M),
         "osm_lane_width": between(2.0, 6.0, _M),

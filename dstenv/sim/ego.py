@@ -12,8 +12,8 @@ from dstenv.sim.types import MapClass, WorldMap
 
 BUILDING, ROAD = int(MapClass.BUILDING), int(MapClass.ROAD)
 
-__all__ = ["bicycle_step", "pure_pursuit", "box_corners", "boxes_overlap", "box_overlap",
-           "footprint_classes", "hits"]
+__all__ = ["bicycle_step", "pure_pursuit", "pursuit_lookahead", "box_corners", "boxes_overlap",
+           "box_overlap", "footprint_classes", "hits"]
 
 
 def bicycle_step(x: float, y: float, yaw: float, v: float, accel: float, steer: float,
@@ -65,6 +65,17 @@ def pure_pursuit(x: float, y: float, yaw: float, target: tuple[float, float],
     alpha = math.atan2(dy, dx) - yaw
     steer = math.atan2(2.0 * wheelbase * math.sin(alpha), ld)
     return float(min(max(steer, -max_steer), max_steer))
+
+
+def pursuit_lookahead(v: float) -> float:
+    """Look-ahead [m] of the route-following steering rule at speed ``v`` [m/s].
+
+    ``clip(2.5 + 0.4 v, 3.5, 12)``, measured from the rear axle: the one rule of the
+    autopilot and of the env's meta-actions (:meth:`dstenv.sim.World.route_steer`).
+    Short enough at 9-10 m/s (~6.5 m) that the rear axle tracks junction turns of
+    ~8 m radius without cutting the corner off the road.
+    """
+    return float(min(max(2.5 + 0.4 * v, 3.5), 12.0))
 
 
 def box_corners(x: float, y: float, yaw: float, length: float, width: float) -> np.ndarray:

@@ -25,6 +25,7 @@ One step is 0.1 s: the scene runs with ``simulation_frequency`` and
 from __future__ import annotations
 
 import copy
+import functools
 import importlib
 from typing import Any
 
@@ -61,6 +62,8 @@ def default_config() -> dict[str, Any]:
         "scene": "intersection-v1",  # key of SCENES
         "action_mode": "meta",  # "meta": META_ACTIONS; "continuous": (accel, steer)
         "target_speeds": [0.0, 4.5, 9.0],  # [m/s] speeds of the meta-actions
+        "brake_decel": 0.0,  # [m/s^2] meta mode: braking limit of the ego's speed controller
+        #                      (DSTGridEnv passes action.brake_decel); 0 = highway-env's own
         "resolution": 0.25,  # [m] map raster cell
         "margin": 40.0,  # [m] intermediate border around the lanes' bounding box
         "max_extent": 1000.0,  # [m] half-size cap of the map around the ego start
@@ -122,6 +125,7 @@ SECTION = Section(default_config, {
     "scene": one_of(*SCENES, what="scene"),
     "action_mode": one_of("meta", "continuous"),
     "target_speeds": between(0.0, 60.0, "m/s"),
+    "brake_decel": between(0.0, 20.0, "m/s^2"),
     "resolution": between(0.05, 2.0, "m"),
     "margin": between(0.0, 500.0, "m"),
     "max_extent": between(10.0, 5000.0, "m"),
@@ -135,6 +139,10 @@ SECTION = Section(default_config, {
 }, (("env_config", _env_config_ok, "invalid highway-env key"),
     ("buildings.size_max", lambda c: c["buildings"]["size_min"] <= c["buildings"]["size_max"],
      "must be >= buildings.size_min")))
+def _limited_speed_control(control: Any, vehicle: Any, limit: float, target_speed: float
+                           ) -> float:
+    """highway-env's speed controller with its braking capped at ``limit`` [m/s^2]."""
+    return max(float(control(vehicle, target_speed)), -limit)
 
 
 class _NullObservation:
@@ -353,9 +361,20 @@ class HighwayWorld:
                 steer [rad])`` with positive steering to the left.
         """
         if not self.external:
+            self._limit_brakes()
             self.env.step(self._to_env_action(ego_action))
         self.time += self.dt
         self.route_progress += self._lane_progress(self.ego_vehicle, self.dt)
+
+    def _limit_brakes(self) -> None:
+        """Cap the ego's meta-action braking at ``brake_decel`` (highway-env's speed
+        controller brakes at up to ``KP_A * DELTA_SPEED``, ~8 m/s^2 for one SLOWER)."""
+        limit = float(self.config["brake_decel"])
+        ego = self.ego_vehicle
+        if limit <= 0 or not hasattr(ego, "speed_control") or "speed_control" in vars(ego):
+            return
+        ego.speed_control = functools.partial(_limited_speed_control, type(ego).speed_control,
+                                              ego, limit)
 
     def _to_env_action(self, ego_action: Any) -> Any:
         base = self.env.unwrapped

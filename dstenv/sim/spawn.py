@@ -147,6 +147,12 @@ def _add_parked(st: dict[str, np.ndarray], slots: np.ndarray, rng: np.random.Gen
         st[f] = np.concatenate([st[f], rows[f].astype(st[f].dtype)])
 
 
+def _weighted(items: np.ndarray, cdf: np.ndarray, rng: np.random.Generator) -> int:
+    """``rng.choice(items, p=p)`` given ``cdf = p.cumsum() / p.sum()`` (the same draw,
+    without validating ``p`` on every call)."""
+    return int(items[cdf.searchsorted(rng.random(), side="right")])
+
+
 def _free(st, xy, yaw, length, width, gap) -> bool:
     if len(st["v"]) == 0:
         return True
@@ -165,7 +171,7 @@ def _free(st, xy, yaw, length, width, gap) -> bool:
     return not boxes_overlap(box, others).any()
 
 
-def _mobile(world_map, st, rng, cfg, kind, lanes, weights, k, *, lane=None, s=None, fixed=(),
+def _mobile(world_map, st, rng, cfg, kind, lanes, cdf, k, *, lane=None, s=None, fixed=(),
             at=None, min_ego_dist=0.0) -> int | None:
     """Place one moving agent on a random (or the given) lane, clear of others."""
     net, tr = world_map.lanes, cfg["traffic"]
@@ -182,7 +188,7 @@ def _mobile(world_map, st, rng, cfg, kind, lanes, weights, k, *, lane=None, s=No
           AgentKind.PEDESTRIAN: tr["pedestrian_speed"] * rng.uniform(0.75, 1.25)}[kind]
     lat = -(net.lane_width / 2 - 0.8) if kind == AgentKind.CYCLIST else 0.0
     for _ in range(30):
-        ln = int(rng.choice(lanes, p=weights)) if lane is None else lane
+        ln = _weighted(lanes, cdf, rng) if lane is None else lane
         lo, hi = length / 2 + 0.5, net.length[ln] - length / 2 - 0.5
         if hi <= lo:
             continue
@@ -234,8 +240,10 @@ def populate(world_map: WorldMap, cfg: dict[str, Any], rng: np.random.Generator,
         if count == 0 or len(lanes) == 0:
             continue
         w = net.length[lanes] / net.length[lanes].sum()
+        cdf = w.cumsum()
+        cdf /= cdf[-1]
         for _ in range(count):
-            _mobile(world_map, st, rng, cfg, kind, lanes, w, k, at=len(st["v"]) - 1)
+            _mobile(world_map, st, rng, cfg, kind, lanes, cdf, k, at=len(st["v"]) - 1)
     return st
 
 
@@ -270,8 +278,10 @@ def _task(world_map, st, rng, cfg, k, slots, taken) -> None:
             if _free(st, (x, y), yaw, 4.5, 1.8, 0.3):
                 add_row(st, AgentKind.CAR, (x, y), yaw, rng.uniform(3.9, 4.9),
                         rng.uniform(1.7, 1.95), parked=True, at=0)
-    crossings = [c for c in np.flatnonzero(net.kind == LaneKind.CROSSING)
-                 if np.hypot(*(pts - net.polyline(c)[0]).T).min() < 15.0]
+    cross = np.flatnonzero(net.kind == LaneKind.CROSSING)
+    first = net.pts[net.start[cross]]  # (C, 2) first point of each crossing
+    near = (((first[:, None, :] - pts[None, :, :]) ** 2).sum(-1) < 15.0 ** 2).any(1)
+    crossings = [int(c) for c in cross[near]] if len(cross) else []
     placed = 0
     for c in rng.permutation(crossings) if crossings else []:
         if placed >= task["crossing_pedestrians"]:

@@ -32,7 +32,8 @@ import numpy as np
 from dstenv.sim.ego import box_overlap
 from dstenv.sim.lanes import lane_pose
 
-__all__ = ["traffic_step", "choose_successor", "route_point", "CAR", "CYCLIST", "PEDESTRIAN"]
+__all__ = ["traffic_step", "choose_successor", "route_point", "signal_green", "CAR", "CYCLIST",
+           "PEDESTRIAN"]
 
 CAR, CYCLIST, PEDESTRIAN = 0, 1, 2  # AgentKind codes (kept numeric for numba)
 K_ROAD, K_CONN, K_WALK, K_CROSS = 0, 1, 2, 3  # LaneKind codes
@@ -91,6 +92,13 @@ def _green(group, t, phase, green):
     if group == 0:
         return tt < open_for
     return cycle / 2 <= tt < cycle / 2 + open_for
+
+
+def signal_green(group: int, t: float, phase: float, green: float) -> bool:
+    """Whether signal group ``group`` (0/1) of a junction with offset ``phase`` [s]
+    lets vehicles in at time ``t`` [s] (``green`` [s] per phase, amber and all-red
+    included as in :func:`traffic_step`)."""
+    return bool(_green(group, t, phase, green))
 
 
 @nb.njit(cache=True)

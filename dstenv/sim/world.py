@@ -13,14 +13,15 @@ from dstenv.config import ConfigError, section
 from dstenv.sim import spawn
 from dstenv.sim.citygen import generate_city
 from dstenv.sim.clutter import street_clutter
-from dstenv.sim.ego import bicycle_step, hits, pure_pursuit
-from dstenv.sim.lanes import LaneKind, LaneNetwork, Turn, lane_pose, project_on_lane
-from dstenv.sim.traffic import choose_successor, route_point, traffic_step
+from dstenv.sim.ego import bicycle_step, hits, pure_pursuit, pursuit_lookahead
+from dstenv.sim.lanes import Control, LaneKind, LaneNetwork, Turn, lane_pose, project_on_lane
+from dstenv.sim.traffic import choose_successor, route_point, signal_green, traffic_step
 from dstenv.sim.types import AgentKind, Agents, WorldMap
 
 __all__ = ["World"]
 
 ROUTE_LEN = 8  # lanes planned ahead of every agent
+_POOL_SALT = 0x4D4150  # seeds map k of a map pool: default_rng([k, _POOL_SALT])
 
 
 class World:
@@ -56,18 +57,42 @@ class World:
         self.config = section("world", config)
         self._fixed_map = world_map
         self._base_dir = Path(base_dir) if base_dir is not None else None
+        self._pool: dict[int, WorldMap] = {}  # map pool: index -> map (map.pool > 0)
+        self.map_index = -1  # index of the episode's map in the pool (-1: no pool)
+        self._map: WorldMap | None = None
         if world_map is None and self.config["map"]["kind"] == "osm":
             self._fixed_map = self._load_osm()
         self.reset(seed)
 
     # ------------------------------------------------------------------ episode
-    def reset(self, seed: int | None = None) -> None:
-        """Start an episode: new map (procedural kind), agents and ego from ``seed``."""
+    def reset(self, seed: int | None = None, keep_map: bool = False) -> None:
+        """Start an episode from ``seed``: agents and ego, and the map.
+
+        Args:
+            seed: the episode seed (all randomness of the episode derives from it).
+            keep_map: keep the current map (a fixed ``world_map`` or OSM map is always
+                kept). Otherwise ``map.pool = 0`` generates a new city from ``seed``;
+                ``map.pool = N > 0`` draws map ``k`` in ``0..N-1`` from ``seed`` and
+                generates it once (from ``default_rng([k, salt])``, so map ``k`` is the
+                same in every process), Procgen's ``num_levels``.
+        """
         self.seed = seed
         self.rng = np.random.default_rng(seed)
+        pool = int(self.config["map"]["pool"])
+        self.map_index = -1
         if self._fixed_map is not None:
             self._map = self._fixed_map
             self._map.kerb_height = self.config["map"]["kerb_height"]
+        elif keep_map and self._map is not None:
+            pass
+        elif pool > 0:
+            k = int(self.rng.integers(pool))
+            if k not in self._pool:
+                self._pool[k] = generate_city(self.config["map"], self.config["traffic"],
+                                              np.random.default_rng([k, _POOL_SALT]),
+                                              self.config["clutter"])
+            self._map = self._pool[k]
+            self.map_index = k
         else:
             self._map = generate_city(self.config["map"], self.config["traffic"], self.rng,
                                       self.config["clutter"])
@@ -106,13 +131,7 @@ class World:
             else:  # has to stop within the step
                 limit = -v * v / (2.0 * room) if room > 0 else -1e9
             accel = float(min(acc, limit))
-            # pure pursuit of the rear axle, which then stays on the lane in turns
-            look = float(np.clip(2.5 + 0.4 * v, 3.5, 12.0))
-            half_wb = ego_cfg["wheelbase"] / 2
-            tx, ty, _ = route_point(st["route"][e], st["s"][e], look - half_wb, net.pts, net.hdg,
-                                    net.start, net.npts, net.ds, net.length)
-            steer = pure_pursuit(x - half_wb * np.cos(yaw), y - half_wb * np.sin(yaw), yaw,
-                                 (tx, ty), ego_cfg["wheelbase"], ego_cfg["max_steer"])
+            steer = self.route_steer()
         else:
             a = np.asarray(ego_action, np.float64).reshape(-1)
             if a.shape != (2,) or not np.isfinite(a).all():
@@ -264,6 +283,48 @@ class World:
         d = np.arange(0.0, ahead + 1e-9, spacing)
         return np.array([route_point(st["route"][-1], st["s"][-1], float(k), net.pts, net.hdg,
                                      net.start, net.npts, net.ds, net.length)[:2] for k in d])
+
+    def route_steer(self) -> float:
+        """Steering angle [rad] that follows the ego's route: pure pursuit of the rear
+        axle onto the route point :func:`~dstenv.sim.ego.pursuit_lookahead` ahead.
+
+        The autopilot's rule, also used by the env's meta-actions: one rule, one home.
+        """
+        st, net, ego_cfg = self._state, self._map.lanes, self.config["ego"]
+        x, y, yaw, v = st["xy"][-1, 0], st["xy"][-1, 1], st["yaw"][-1], st["v"][-1]
+        half_wb = ego_cfg["wheelbase"] / 2
+        # pure pursuit of the rear axle, which then stays on the lane in turns
+        tx, ty, _ = route_point(st["route"][-1], st["s"][-1], pursuit_lookahead(v) - half_wb,
+                                net.pts, net.hdg, net.start, net.npts, net.ds, net.length)
+        return pure_pursuit(x - half_wb * np.cos(yaw), y - half_wb * np.sin(yaw), yaw,
+                            (tx, ty), ego_cfg["wheelbase"], ego_cfg["max_steer"])
+
+    def next_junction(self) -> tuple[float, Control, bool]:
+        """The next junction on the ego's route, as a navigation system and the road
+        signs tell it.
+
+        Returns:
+            ``(distance [m], control, green)``: route distance from the ego to the
+            entry of the next junction connector (0 inside one; ``inf`` when the
+            planned route holds none), its :class:`~dstenv.sim.lanes.Control`
+            (``NONE`` when there is none), and whether a signal shows green for the
+            ego's connector now (False for other controls).
+        """
+        st, net = self._state, self._map.lanes
+        route = st["route"][-1]
+        dist = -float(st["s"][-1])
+        for lane in route:
+            if lane < 0:
+                break
+            if net.kind[lane] == LaneKind.CONNECTOR:
+                n = int(net.node[lane])
+                control = Control(int(net.node_control[n]))
+                green = control == Control.SIGNAL and signal_green(
+                    int(net.group[lane]), self.time, float(net.node_phase[n]),
+                    float(self.config["traffic"]["signal_green"]))
+                return max(dist, 0.0), control, bool(green)
+            dist += float(net.length[lane])
+        return float("inf"), Control.NONE, False
 
     # ------------------------------------------------------------------ internals
     def _localise(self, u: float) -> None:

@@ -14,8 +14,7 @@ import ppo_grid
 from ppo_grid import Args, GridCNN, build_model, make_vec_env
 
 TINY = ["--n-envs", "2", "--vec-env", "dummy", "--n-steps", "32", "--batch-size", "32",
-        "--n-epochs", "1", "--total-timesteps", "64", "--record-actions", "30",
-        "--verbose", "0"]
+        "--n-epochs", "1", "--total-timesteps", "64", "--map-pool", "2", "--verbose", "0"]
 
 
 @pytest.fixture(scope="module")
@@ -49,18 +48,19 @@ def test_grid_cnn_shapes() -> None:
 
 
 def test_extractor_choice(env_flags: list[str]) -> None:
+    from stable_baselines3.common.torch_layers import CombinedExtractor
+
     from rl_common import parse_args
 
-    args = parse_args(Args, [*env_flags, "--obs", "image", "--extractor", "nature-cnn",
-                             "--ego-state", "none", "--n-envs", "1", "--vec-env", "dummy"])
+    args = parse_args(Args, [*env_flags, "--extractor", "combined", "--n-envs", "1",
+                             "--vec-env", "dummy"])
     env = make_vec_env(args)
     try:
         model = build_model(args, env)
-        assert isinstance(model.policy.features_extractor, NatureCNN)
-        assert model.observation_space.dtype == np.uint8
-        args.obs = "pignistic"
-        with pytest.raises(ValueError, match="needs --obs image"):
-            build_model(args, env)
+        assert isinstance(model.policy.features_extractor, CombinedExtractor)
+        assert isinstance(model.policy.features_extractor.extractors["grid"], NatureCNN)
+        args.extractor = "grid-cnn"
+        assert isinstance(build_model(args, env).policy.features_extractor, GridCNN)
         args.extractor = "resnet"
         with pytest.raises(ValueError, match="--extractor"):
             build_model(args, env)
@@ -68,27 +68,42 @@ def test_extractor_choice(env_flags: list[str]) -> None:
         env.close()
 
 
-def test_training_writes_model_and_log(trained: dict) -> None:
+def test_training_writes_state_dict_and_log(trained: dict) -> None:
     out, meta = trained["a"]
-    assert (out / "model.zip").is_file() and (out / "model.json").is_file()
+    assert (out / "model.pt").is_file() and (out / "model.json").is_file()
     assert meta["timesteps"] == 64 and meta["args"]["seed"] == 0
     assert meta["command"].startswith("python baselines/ppo_grid.py")
     assert "--total-timesteps 64" in meta["command"]
     rows = (out / "episodes.csv").read_text().splitlines()
-    assert rows[0].startswith("timesteps,wall_s,env,return")
+    assert rows[0] == "timesteps,wall_s,env,return,length,success,collision,off_road,progress_m"
     assert len(rows) >= 2  # 64 steps of 30-step episodes finish at least two
+    # only tensors inside: loads with weights_only=True
+    state = torch.load(out / "model.pt", weights_only=True)
+    assert all(isinstance(v, torch.Tensor) for v in state.values())
 
 
-def test_same_seed_same_actions_and_weights(trained: dict) -> None:
-    from stable_baselines3 import PPO
-
-    (out_a, a), (out_b, b), (_, c) = trained["a"], trained["b"], trained["c"]
-    assert len(a["first_actions"]) == 30
-    assert a["first_actions"] == b["first_actions"]
-    assert a["first_actions"] != c["first_actions"]
-    pa = PPO.load(out_a / "model.zip").policy.state_dict()
-    pb = PPO.load(out_b / "model.zip").policy.state_dict()
+def test_same_seed_same_weights(trained: dict) -> None:
+    (out_a, _), (out_b, _), (out_c, _) = trained["a"], trained["b"], trained["c"]
+    pa, pb, pc = (torch.load(o / "model.pt", weights_only=True) for o in (out_a, out_b, out_c))
     assert all(torch.equal(pa[k], pb[k]) for k in pa)
+    assert not all(torch.equal(pa[k], pc[k]) for k in pa)
+
+
+def test_load_rebuilds_the_policy_and_rejects_other_spaces(trained: dict, small_config) -> None:
+    import gymnasium as gym
+
+    out, _ = trained["a"]
+    env = gym.make("DSTGrid-Occluded-v0", config=small_config)
+    model, meta = ppo_grid.load(out / "model.pt", env)
+    saved = torch.load(out / "model.pt", weights_only=True)
+    assert all(torch.equal(model.policy.state_dict()[k], saved[k]) for k in saved)
+    env.close()
+    bigger = gym.make("DSTGrid-Occluded-v0", config={**small_config,
+                                                     "grid": {"height": 48, "width": 48}})
+    msg = r"trained on .*\(4, 40, 40\).* the env gives .*\(4, 48, 48\)"
+    with pytest.raises(ValueError, match=msg):
+        ppo_grid.load(out / "model.pt", bigger)
+    bigger.close()
 
 
 @pytest.mark.slow
@@ -97,4 +112,4 @@ def test_subprocess_envs_train(tmp_path, env_flags: list[str]) -> None:
     meta = ppo_grid.main([*env_flags, "--n-envs", "2", "--vec-env", "subproc", "--n-steps",
                           "32", "--batch-size", "32", "--n-epochs", "1", "--total-timesteps",
                           "64", "--verbose", "0", "--out", str(tmp_path)])
-    assert meta["timesteps"] == 64 and (tmp_path / "model.zip").is_file()
+    assert meta["timesteps"] == 64 and (tmp_path / "model.pt").is_file()

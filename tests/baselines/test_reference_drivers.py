@@ -1,4 +1,4 @@
-"""Reference drivers: the random policy and the rule-based ones (autopilot, constant)."""
+"""Reference drivers: random, the grid rule driver, the autopilot, constant."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import pytest
 import random_policy
 import rule_based
 from rl_common import EnvArgs
-from rule_based import AutopilotWorld, make_autopilot_env
+from rule_based import AUTOPILOT_CONFIG, GridRuleDriver
 
 
 def test_random_policy_runs_and_is_reproducible(env_flags: list[str]) -> None:
@@ -21,15 +21,18 @@ def test_random_policy_runs_and_is_reproducible(env_flags: list[str]) -> None:
     assert random_policy.main(argv) == first
 
 
-def test_autopilot_env_drives_like_the_world_autopilot(small_config: dict) -> None:
+def test_autopilot_driver_drives_like_the_world_autopilot(small_config: dict) -> None:
     from dstenv.sim import World
 
-    env = make_autopilot_env(EnvArgs(env_config=json.dumps(small_config)))
+    policy, env = rule_based.reference_driver(
+        "autopilot", EnvArgs(env_config=json.dumps(small_config)))
+    assert env.unwrapped.config["action"] == {**env.unwrapped.config["action"],
+                                              **AUTOPILOT_CONFIG["action"]}
     _, info = env.reset(seed=5)
-    assert isinstance(env.unwrapped.pipeline.world, AutopilotWorld)
+    policy.reset(env, 5)
     poses = []
     for _ in range(20):
-        _, _, terminated, truncated, info = env.step(0)  # SLOWER, ignored
+        _, _, terminated, truncated, info = env.step(policy.act(None, info))
         poses.append(info["ego_pose"])
         if terminated or truncated:
             break
@@ -37,16 +40,55 @@ def test_autopilot_env_drives_like_the_world_autopilot(small_config: dict) -> No
     for pose in poses:
         world.step(None)
         np.testing.assert_array_equal(world.ego_pose, pose)
-    assert info["ego_speed"] > 0.5  # SLOWER would have kept the ego still
+    assert info["ego_speed"] > 0.5
     env.close()
 
 
+def _obs(junction: float = 1.0, speed: float = 9.0, target: float = 9.0,
+         route_y: float = 0.0) -> dict:
+    from dstenv.envs.navigation import EGO_FEATURES, SPEED_SCALE
+
+    ego = np.zeros(len(EGO_FEATURES), np.float32)
+    ego[EGO_FEATURES.index("speed")] = speed / SPEED_SCALE
+    ego[EGO_FEATURES.index("target_speed")] = target / SPEED_SCALE
+    ego[EGO_FEATURES.index("junction_dist")] = junction
+    ego[EGO_FEATURES.index("control_none")] = 1.0
+    k = np.arange(1, 9)
+    route = np.stack([k * 5.0 / 40.0, np.full(8, route_y)], 1).reshape(-1).astype(np.float32)
+    grid = np.zeros((4, 40, 40), np.uint8)
+    grid[0] = 255  # all navigable
+    return {"grid": grid, "ego": ego, "route": route}
+
+
+def test_grid_rule_driver_reads_only_the_observation(small_config: dict) -> None:
+    policy, env = rule_based.reference_driver("grid", EnvArgs(env_config=json.dumps(small_config)))
+    assert isinstance(policy, GridRuleDriver)
+    env.reset(seed=0)
+    policy.reset(env, 0)
+    env.close()
+    assert policy.act(_obs(), {}) == 1  # a clear straight road at the top speed: keep it
+    assert policy.act(_obs(target=4.5), {}) == 2  # ... and speed up to it
+    blocked = _obs()
+    blocked["grid"][3, 20 - 12, 19:21] = 255  # a moving object 12 m ahead on the route
+    assert policy.act(blocked, {}) == 0  # brake
+    # 12 m ahead - 4 m margin = 8 m: 4.5 m/s stops in 4.2 m at 2.4 m/s^2, 9 m/s does not
+    assert policy.act({**blocked, "ego": _obs(target=4.5)["ego"]}, {}) == 1
+    beside = _obs()
+    beside["grid"][3, 20 - 12, 2:4] = 255  # 17 m to the left of the route: ignored
+    assert policy.act(beside, {}) == 1
+    bend = _obs()
+    route = bend["route"].reshape(8, 2)
+    route[2:, 1] = np.linspace(0.1, 0.6, 6)  # the route turns left after 10 m
+    assert policy.act(bend, {}) == 0
+    assert policy.act(_obs(junction=10.0 / 60.0), {}) == 0  # a junction 10 m ahead
+
+
 def test_rule_based_main(env_flags: list[str]) -> None:
-    auto = rule_based.main([*env_flags, "--episodes", "2"])
-    assert auto["episodes"] == 2 and auto["progress"] > 0.0
+    grid = rule_based.main([*env_flags, "--episodes", "2"])
+    assert grid["episodes"] == 2 and grid["progress"] > 0.0
     const = rule_based.main([*env_flags, "--episodes", "1", "--driver", "constant",
                              "--constant-action", "0"])
-    assert const["progress"] == pytest.approx(0.0, abs=0.5)  # SLOWER from standstill
+    assert const["progress"] < 10.0  # SLOWER from the start: 9 -> 4.5 m/s target, ...
     with pytest.raises(ValueError, match="--constant-action 7"):
         rule_based.main([*env_flags, "--episodes", "1", "--driver", "constant",
                          "--constant-action", "7"])

@@ -26,7 +26,7 @@ def _same(a, b):
 
 
 def test_skipped_steps_give_the_frames_of_a_full_step_loop():
-    # iter_frames advances without building frames between kept steps (Pipeline._advance)
+    # iter_frames advances without building frames between kept steps (Pipeline.advance)
     got = list(iter_frames(lambda: Pipeline(CONFIG), iter([11]), 9, 4, 2))
     p = Pipeline(CONFIG)
     full = [p.reset(11)] + [p.step() for _ in range(8)]

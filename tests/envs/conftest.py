@@ -16,9 +16,10 @@ SMALL_CITY: dict[str, Any] = {
               "traffic": {"cars": 8, "cyclists": 1, "pedestrians": 6}},
 }
 
-#: Small highway-env backend: coarse map raster, fewer beams.
+#: Small highway-env backend: coarse map raster, fewer beams, the plain image grid.
 SMALL_HIGHWAY: dict[str, Any] = {
     "source": "highway",
+    "observation": {"type": "image"},
     "grid": SMALL_GRID,
     "lidar": {"beams": 360},
     "highway": {"resolution": 0.5},

@@ -45,7 +45,7 @@ def test_registration_is_idempotent_and_keeps_the_variant():
     env = gym.make("DSTGrid-Highway-v0", config={"grid": SMALL_GRID})
     # a user config merges over the variant's preset instead of replacing it
     assert env.unwrapped.config["source"] == "highway"
-    assert env.observation_space.shape == (4, 40, 40)
+    assert env.observation_space["grid"].shape == (4, 40, 40)
 
 
 @pytest.mark.parametrize("mode", ["pignistic", "fcn10", "masses"])

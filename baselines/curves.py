@@ -1,0 +1,110 @@
+"""Learning curves of PPO runs: success, collision and off-road rates against env steps.
+
+Reads the ``episodes.csv`` of each run directory given (one per training seed,
+written by :mod:`ppo_grid`), bins the finished training episodes by the env step at
+which they ended (``--bin`` steps per bin), and plots per rate the mean over seeds
+with the spread (min..max) as a band. Evaluation CSVs (``--reference``, from
+``evaluate.py --csv`` or the drivers' ``--csv``) add each reference driver's rate
+as a horizontal line. Run::
+
+    python baselines/curves.py --runs runs/ppo_s0 runs/ppo_s1 runs/ppo_s2 \\
+        --reference runs/eval.csv --out baselines/learning_curves.png
+"""
+
+from __future__ import annotations
+
+import csv
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from rl_common import opt, parse_args
+
+RATES = ("success", "collision", "off_road")
+
+
+@dataclass
+class Args:
+    """Plot learning curves of PPO runs."""
+
+    runs: list[str] = opt([], "run directories holding episodes.csv (one per seed)")
+    reference: list[str] = opt([], "evaluation CSVs: policy rates drawn as lines")
+    bin: int = opt(2000, "[env steps] width of a bin")
+    max_steps: int = opt(0, "[env steps] plot up to here; 0 = the shortest run")
+    out: str = opt("baselines/learning_curves.png", "output PNG")
+
+
+def binned_rates(path: str | Path, width: int, max_steps: int) -> dict[str, np.ndarray]:
+    """Per-bin rates of one run: ``{rate: (B,) float64}`` (NaN: no episode ended in the
+    bin) and ``"episodes"`` ``(B,)``; bin ``b`` covers steps ``(b w, (b + 1) w]``."""
+    rows = list(csv.DictReader(open(Path(path) / "episodes.csv")))
+    n_bins = max(int(np.ceil(max_steps / width)), 1)
+    steps = np.array([int(r["timesteps"]) for r in rows])
+    b = np.clip((steps - 1) // width, 0, None)
+    keep = b < n_bins
+    out = {"episodes": np.bincount(b[keep], minlength=n_bins).astype(float)}
+    for rate in RATES:
+        v = np.array([float(r[rate]) for r in rows])
+        total = np.bincount(b[keep], weights=v[keep], minlength=n_bins)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            out[rate] = np.where(out["episodes"] > 0, total / out["episodes"], np.nan)
+    return out
+
+
+def reference_rates(paths: list[str]) -> dict[str, dict[str, float]]:
+    """``{policy: {rate: value}}`` from evaluation CSVs (one row per episode)."""
+    acc: dict[str, dict[str, list[float]]] = {}
+    for p in paths:
+        for r in csv.DictReader(open(p)):
+            d = acc.setdefault(r["policy"], {k: [] for k in RATES})
+            for k in RATES:
+                d[k].append(float(r[k] in ("True", "1")))
+    return {name: {k: float(np.mean(v)) for k, v in d.items()} for name, d in acc.items()}
+
+
+def plot(args: Args) -> Path:
+    """Write the PNG; returns its path."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    if not args.runs:
+        raise ValueError("--runs: give at least one run directory")
+    last = [max(int(r["timesteps"]) for r in csv.DictReader(open(Path(d) / "episodes.csv")))
+            for d in args.runs]
+    max_steps = args.max_steps or min(last)
+    per_run = [binned_rates(d, args.bin, max_steps) for d in args.runs]
+    x = (np.arange(len(per_run[0]["episodes"])) + 1) * args.bin
+    refs = reference_rates(args.reference)
+    fig, axes = plt.subplots(1, len(RATES), figsize=(5 * len(RATES), 3.8), sharex=True)
+    for ax, rate in zip(axes, RATES):
+        y = np.stack([r[rate] for r in per_run])
+        with np.errstate(all="ignore"):
+            ax.fill_between(x, np.nanmin(y, 0), np.nanmax(y, 0), alpha=0.25,
+                            label=f"PPO min..max over {len(per_run)} seeds")
+            ax.plot(x, np.nanmean(y, 0), lw=2, label="PPO mean (training episodes)")
+        for k, (name, vals) in enumerate(refs.items()):
+            ax.axhline(vals[rate], ls="--", lw=1, color=f"C{k + 2}", label=name)
+        ax.set_title(rate.replace("_", "-") + " rate")
+        ax.set_xlabel("env steps")
+        ax.set_ylim(-0.02, 1.02)
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=7, loc="best")
+    fig.tight_layout()
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out
+
+
+def main(argv: list[str] | None = None) -> Path:
+    """Command-line entry point; returns the PNG path."""
+    return plot(parse_args(Args, argv))
+
+
+if __name__ == "__main__":
+    print(main(sys.argv[1:]))

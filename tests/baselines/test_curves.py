@@ -1,0 +1,46 @@
+"""Learning curves: binning of training episodes, reference lines, the PNG."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+import curves
+
+HEADER = "timesteps,wall_s,env,return,length,success,collision,off_road,progress_m\n"
+
+
+def _run(path, rows):
+    path.mkdir()
+    (path / "episodes.csv").write_text(HEADER + "".join(
+        f"{t},0,0,1.0,10,{s},{c},{o},5.0\n" for t, s, c, o in rows))
+    return path
+
+
+def test_binned_rates_by_hand(tmp_path) -> None:
+    run = _run(tmp_path / "a", [(50, 1, 0, 0), (100, 0, 1, 0), (150, 0, 0, 1), (250, 1, 0, 0),
+                                (400, 1, 0, 0)])
+    r = curves.binned_rates(run, 100, 300)
+    # bins (0, 100], (100, 200], (200, 300]; the episode at step 400 is past the end
+    assert r["episodes"].tolist() == [2, 1, 1]
+    assert r["success"].tolist() == [0.5, 0.0, 1.0]
+    assert r["collision"].tolist() == [0.5, 0.0, 0.0]
+    assert r["off_road"].tolist() == [0.0, 1.0, 0.0]
+    empty = curves.binned_rates(run, 100, 600)
+    assert math.isnan(empty["success"][4])  # no episode ended in (400, 500]
+
+
+def test_plot_writes_png_with_references(tmp_path) -> None:
+    a = _run(tmp_path / "a", [(t, t % 2, 0, 0) for t in range(10, 400, 10)])
+    b = _run(tmp_path / "b", [(t, 1, 0, 0) for t in range(10, 300, 15)])
+    ref = tmp_path / "eval.csv"
+    ref.write_text("policy,seed,episode_return,length,collision,off_road,arrived,progress,"
+                   "success\nrandom,1,0,1,True,False,False,0,False\n"
+                   "random,2,0,1,False,False,False,0,True\n")
+    assert curves.reference_rates([str(ref)]) == {
+        "random": {"success": 0.5, "collision": 0.5, "off_road": 0.0}}
+    out = curves.main(["--runs", str(a), str(b), "--reference", str(ref), "--bin", "100",
+                       "--out", str(tmp_path / "c.png")])
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert np.isfinite(curves.binned_rates(b, 100, 290)["success"]).all()

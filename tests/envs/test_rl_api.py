@@ -1,0 +1,167 @@
+"""What an RL user relies on: the dict observation, episode outcome in info, action
+meanings, fixed spaces, the autopilot action, wrapper and rendering conventions."""
+
+from __future__ import annotations
+
+import math
+
+import gymnasium as gym
+import highway_env  # noqa: F401  (registers intersection-v2)
+import numpy as np
+import pytest
+
+import dstenv  # noqa: F401
+from dstenv.config import ConfigError
+from dstenv.envs import DSTGridEnv, DSTGridObservation
+from dstenv.envs.navigation import EGO_FEATURES, JUNCTION_RANGE, SPEED_SCALE
+from dstenv.sim.types import AgentKind
+
+from .conftest import SMALL_CITY, SMALL_HIGHWAY
+
+F = {name: i for i, name in enumerate(EGO_FEATURES)}
+
+
+def test_dict_observation_holds_ego_state_and_route():
+    env = gym.make("DSTGrid-Occluded-v0", config=SMALL_CITY)
+    obs, info = env.reset(seed=4)
+    world = env.unwrapped.pipeline.world
+    assert env.observation_space.contains(obs) and set(obs) == {"grid", "ego", "route"}
+    assert obs["ego"][F["target_speed"]] == pytest.approx(9.0 / SPEED_SCALE)
+    prev_speed = 0.0
+    for t in range(12):
+        action = 2 if t < 8 else (0 if t == 8 else 1)  # FASTER, one SLOWER, IDLE
+        obs, _, terminated, truncated, info = env.step(action)
+        ego = obs["ego"]
+        assert ego[F["speed"]] == pytest.approx(info["ego_speed"] / SPEED_SCALE, abs=1e-6)
+        accel = (info["ego_speed"] - prev_speed) / 0.1
+        assert ego[F["accel"]] == pytest.approx(np.clip(accel / 5.0, -1, 1), abs=1e-5)
+        assert ego[F["steer"]] == pytest.approx(world.ego_steer / 0.6, abs=1e-6)
+        dist, control, green = world.next_junction()
+        if dist <= JUNCTION_RANGE:
+            assert ego[F["junction_dist"]] == pytest.approx(dist / JUNCTION_RANGE, abs=1e-6)
+            assert ego[F["control_none"] + int(control)] == 1.0
+            assert ego[F["signal_green"]] == float(green)
+        assert ego[F["control_none"]:F["control_signal"] + 1].sum() == 1.0
+        # route points 5, 10, ... 40 m ahead, in the ego frame, scaled by 40 m
+        pts = obs["route"].reshape(8, 2) * 40.0
+        x, y, yaw = info["ego_pose"]
+        ref = world.route_polyline(40.0, 5.0)[1:]
+        c, s = math.cos(yaw), math.sin(yaw)
+        d = ref - [x, y]
+        local = np.stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]], 1)
+        np.testing.assert_allclose(pts, local, atol=1e-3)
+        prev_speed = info["ego_speed"]
+        assert not (terminated or truncated)
+    assert obs["ego"][F["target_speed"]] == pytest.approx(4.5 / SPEED_SCALE)
+    env.close()
+
+
+def test_info_reports_progress_success_and_termination_reason():
+    env = gym.make("DSTGrid-RL-v0", config={**SMALL_CITY, "info": {"success_distance": 5.0}})
+    _, info = env.reset(seed=1)
+    assert info["route_progress"] == 0.0 and info["is_success"] is False
+    world = env.unwrapped.pipeline.world
+    for _ in range(40):
+        _, _, terminated, _, info = env.step(2)
+        assert info["route_progress"] == pytest.approx(world.route_progress, abs=1e-9)
+        if terminated:
+            break
+    assert info["route_progress"] > 5.0
+    assert info["is_success"] == (not terminated) and info["termination_reason"] in (
+        "timeout", "collision", "off_road")
+    # a car parked right in front of the ego: the next step is a collision
+    _, info = env.reset(seed=1)
+    lane, s = int(world.route[0]), float(world._state["s"][-1])
+    world.add_agent(AgentKind.CAR, lane, min(s + 3.0, world.map.lanes.length[lane]))
+    _, reward, terminated, _, info = env.step(1)
+    assert terminated and info["collision"]
+    assert info["termination_reason"] == "collision" and info["is_success"] is False
+    env.close()
+
+
+@pytest.mark.parametrize("kind,names", [
+    ("discrete", ["SLOWER", "IDLE", "FASTER", "LEFT", "RIGHT"]),
+    ("speed", ["SLOWER", "IDLE", "FASTER"]),
+    ("autopilot", ["AUTOPILOT"]),
+])
+def test_action_meanings_and_spaces_depend_on_the_type_only(kind, names):
+    for cfg in (SMALL_CITY, SMALL_HIGHWAY):
+        env = DSTGridEnv({**cfg, "action": {"type": kind}})
+        assert env.get_action_meanings() == names
+        assert env.action_space == gym.spaces.Discrete(len(names))
+
+
+def test_continuous_has_no_meanings_and_turns_is_gone():
+    env = DSTGridEnv({**SMALL_HIGHWAY, "action": {"type": "continuous"}})
+    with pytest.raises(TypeError, match="continuous"):
+        env.get_action_meanings()
+    with pytest.raises(ConfigError, match="config.action.turns: unknown key"):
+        DSTGridEnv({**SMALL_CITY, "action": {"turns": False}})
+    with pytest.raises(ConfigError, match="known: discrete, speed, continuous, autopilot"):
+        DSTGridEnv({**SMALL_CITY, "action": {"type": "meta"}})
+
+
+def test_autopilot_action_drives_like_the_world():
+    from dstenv.sim import World
+
+    env = gym.make("DSTGrid-RL-v0", config={**SMALL_CITY, "action": {"type": "autopilot"}})
+    _, info = env.reset(seed=5)
+    world = World(env.unwrapped.config["world"], info["seed"])
+    for _ in range(15):
+        _, _, _, _, info = env.step(0)
+        world.step(None)
+        np.testing.assert_array_equal(world.ego_pose, info["ego_pose"])
+    assert info["ego_speed"] > 0.5
+    env.close()
+
+
+def test_meta_actions_steer_with_the_world_rule():
+    env = gym.make("DSTGrid-RL-v0", config=SMALL_CITY)
+    env.reset(seed=2)
+    world = env.unwrapped.pipeline.world
+    for _ in range(30):
+        expected = world.route_steer()
+        env.step(1)
+        assert world.ego_steer == expected
+    env.close()
+
+
+def test_wrapper_records_its_arguments_and_rejects_other_envs():
+    from gymnasium.utils.env_checker import check_env
+
+    base = gym.make("intersection-v2", config={"simulation_frequency": 10, "policy_frequency": 10})
+    cfg = {"grid": {"height": 40, "width": 40, "cell_size": 1.0}, "lidar": {"beams": 360},
+           "highway": {"resolution": 0.5}}
+    env = DSTGridObservation(base, config=cfg)
+    assert isinstance(env, gym.utils.RecordConstructorArgs)
+    assert env._saved_kwargs == {"config": cfg}
+    check_env(env, skip_render_check=True)
+    with pytest.raises(TypeError, match="wraps highway-env environments.*CartPole"):
+        DSTGridObservation(gym.make("CartPole-v1"))
+
+
+def test_highway_slower_respects_brake_decel():
+    env = gym.make("DSTGrid-Highway-v0", config={**SMALL_HIGHWAY,
+                                                 "action": {"brake_decel": 2.0}})
+    _, info = env.reset(seed=0)
+    for _ in range(40):  # up to the top target speed
+        _, _, terminated, truncated, info = env.step(2)
+        assert not (terminated or truncated)
+    speeds = [info["ego_speed"]]
+    for t in range(15):
+        _, _, terminated, _, info = env.step(0 if t < 2 else 1)
+        speeds.append(info["ego_speed"])
+        if terminated:
+            break
+    decel = -np.diff(speeds) / 0.1
+    assert speeds[0] > 5.0 and decel.max() <= 2.0 + 1e-6 and decel.max() > 1.5
+    env.close()
+
+
+def test_human_render_does_not_start_the_audio_mixer(monkeypatch):
+    pygame = pytest.importorskip("pygame")
+    monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")
+    env = DSTGridEnv(SMALL_HIGHWAY, render_mode="human")
+    env.reset(seed=0)
+    assert pygame.display.get_init() and not pygame.mixer.get_init()
+    env.close()

@@ -327,6 +327,7 @@ def run_benchmark(
     preset: str = "custom",
     command: str | None = None,
     checkpoints: Sequence[str | Path] = (),
+    split: str = "test",
 ) -> dict[str, Any]:
     """Run the whole benchmark and write its report into ``out``.
 
@@ -340,6 +341,7 @@ def run_benchmark(
         command: command line recorded in the report.
         checkpoints: trained networks (``dstenv train``) scored besides ``models``; on
             evaluation-only data (module docstring) the only learned segmenters.
+        split: the split scored (``"test"``; a KITTI conversion may use another name).
 
     Returns:
         The JSON-compatible results (also in ``out/results.json``).
@@ -364,9 +366,9 @@ def run_benchmark(
     data_dir = Path(data_dir)
     timings["data_s"] = time.perf_counter() - t
 
-    test_ds = ShardDataset(data_dir, split="test", inputs="fcn10")
+    test_ds = ShardDataset(data_dir, split=split, inputs="fcn10")
     if len(test_ds) == 0:
-        raise ValueError(f"{data_dir}: no test frames (no shard of split 'test')")
+        raise ValueError(f"{data_dir}: no test frames (no shard of split {split!r})")
     datasets = {s: ShardDataset(data_dir, split=s, inputs="fcn10") for s in ("train", "val")}
     t = time.perf_counter()
     drives = test_drives(test_ds, len(datasets["train"]) == 0, progress, log)

@@ -90,7 +90,7 @@ def complete_frame(
     out = pred.copy()
     eight = np.ones((3, 3), dtype=bool)
     for k in (_STATIC, _MOVING):
-        comps, n = ndimage.label(pred == k, structure=eight)
+        comps, _ = ndimage.label(pred == k, structure=eight)
         for obj, sl in enumerate(ndimage.find_objects(comps), start=1):
             ci, cj = np.nonzero(comps[sl] == obj)
             if len(ci) < min_cells:
@@ -104,7 +104,7 @@ def complete_frame(
                 theta = normal + np.pi / 2
             elif len(ci) >= 2:  # own principal axis
                 cov = np.cov(np.stack([ci - mi, cj - mj]))
-                vals, vecs = np.linalg.eigh(cov)
+                vecs = np.linalg.eigh(cov)[1]
                 theta = float(np.arctan2(vecs[1, -1], vecs[0, -1]))
             else:
                 theta = 0.0

@@ -304,7 +304,7 @@ def plan_segmenters(cfg: Mapping[str, Any], drives: Drives, datasets: Mapping[st
     _dst_rows(cfg, drives, train_eps, plan, progress, log, timings)
     if not drives.evaluation_only:
         _networks(cfg, datasets, device, out, plan, progress, log, timings)
-    else:
+    elif not extra:
         for name in cfg["models"]:
             plan.unscored[name] = (
                 "not trained: evaluation-only data has no train split (give --checkpoint)")

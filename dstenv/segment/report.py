@@ -137,7 +137,9 @@ def _prf_table(segs: dict[str, Any], scope: str) -> list[str]:
 def _goal_lines(goal: dict[str, Any] | None, real: dict[str, Any] | None) -> list[str]:
     lines = []
     if goal:
-        met = lambda ok: "met" if ok else "NOT met"  # noqa: E731
+        def met(ok: bool) -> str:
+            return "met" if ok else "NOT met"
+
         lines += [
             "## Goal (simulated test maps, observed cells)",
             "",

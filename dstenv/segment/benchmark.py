@@ -347,7 +347,7 @@ def run_benchmark(
         The JSON-compatible results (also in ``out/results.json``).
     """
     from dstenv.data import ShardDataset
-    from dstenv.segment.plan import plan_segmenters, test_drives
+    from dstenv.segment.plan import plan_segmenters, split_drives
     from dstenv.segment.score import score
     from dstenv.segment.train import resolve_device
 
@@ -371,7 +371,7 @@ def run_benchmark(
         raise ValueError(f"{data_dir}: no test frames (no shard of split {split!r})")
     datasets = {s: ShardDataset(data_dir, split=s, inputs="fcn10") for s in ("train", "val")}
     t = time.perf_counter()
-    drives = test_drives(test_ds, len(datasets["train"]) == 0, progress, log)
+    drives = split_drives(test_ds, len(datasets["train"]) == 0, progress, log)
     timings["replay_test_s"] = time.perf_counter() - t
     plan = plan_segmenters(cfg, drives, datasets, checkpoints, device, out, progress, log,
                            timings)

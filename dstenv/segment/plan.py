@@ -1,6 +1,6 @@
 """What a benchmark scores: the test drives and the segmenters, tuned and trained.
 
-:func:`test_drives` turns a test split into :class:`~dstenv.segment.replay.Episode`
+:func:`split_drives` turns a test split into :class:`~dstenv.segment.replay.Episode`
 drives (replayed through the simulator and checked against the stored BetP, or
 rebuilt from the stored frames of evaluation-only data). :func:`plan_segmenters`
 builds every segmenter of a benchmark configuration: DST presets, ``dst-tuned``
@@ -36,7 +36,7 @@ from dstenv.segment.replay import (
 )
 from dstenv.segment.segmenters import DSTSegmenter, Segmenter
 
-__all__ = ["Drives", "Plan", "test_drives", "plan_segmenters", "fixed_params"]
+__all__ = ["Drives", "Plan", "split_drives", "plan_segmenters", "fixed_params"]
 
 #: stored frames of the first drives compared with a re-run of the filter
 _CHECK_FRAMES = 8
@@ -104,7 +104,7 @@ def _refilter_check(episodes: list[Episode], params: DSTParams) -> str | None:
     return None
 
 
-def test_drives(test_ds: Any, no_train: bool, progress: bool,
+def split_drives(test_ds: Any, no_train: bool, progress: bool,
                 log: Callable[[str], None]) -> Drives:
     """The test split as drives (module docstring).
 
@@ -134,11 +134,13 @@ def test_drives(test_ds: Any, no_train: bool, progress: bool,
             log(f"DST with other parameters than the stored ones cannot be scored: {reason}")
     else:
         episodes = record_episodes(config, episode_targets(frames), progress)
+        checked: set[int] = set()  # the first two drives and one per episode index
         for i, ep in enumerate(episodes):
             x, labels = stored_inputs(frames, ep.key, ep.steps)
             ep.stored_x = x
-            if i < 2:
+            if i < 2 or ep.episode not in checked:
                 check_replay(ep, x, labels, gen)
+                checked.add(ep.episode)
     return Drives(episodes, gen, config, source, evaluation_only, reason, channels)
 
 
@@ -281,7 +283,7 @@ def plan_segmenters(cfg: Mapping[str, Any], drives: Drives, datasets: Mapping[st
 
     Args:
         cfg: the full benchmark configuration.
-        drives: :func:`test_drives`.
+        drives: :func:`split_drives`.
         datasets: ``{"train", "val"}`` :class:`dstenv.data.ShardDataset` objects.
         checkpoints: trained networks to score as well.
         device: where networks train and run.

@@ -35,6 +35,12 @@ def _train(args: argparse.Namespace) -> int:
     for key in ("epochs", "batch_size", "lr", "loss", "crop", "num_workers", "weight_power"):
         if getattr(args, key) is not None:
             cfg[key] = getattr(args, key)
+    if args.init:
+        from dstenv.segment.checkpoint import load_checkpoint
+
+        spec = load_checkpoint(args.init)["spec"]  # one-line errors for a bad file
+        # fine-tuning continues the checkpoint's network, whatever --model says
+        cfg.update(init=str(args.init), model=spec["model"], model_kwargs=spec["model_kwargs"])
     if args.stream is not None:
         if not args.steps_per_epoch:
             raise CLIError("--stream needs --steps-per-epoch (a stream has no end)")
@@ -204,6 +210,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--num-workers", type=int, help="DataLoader workers")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--device", default="auto", help="cpu, cuda or auto (default)")
+    p.add_argument(
+        "--init",
+        metavar="CKPT",
+        help="start from this checkpoint's weights (fine-tuning, e.g. a simulated-data model "
+        "on a few labelled real frames); its model and builder options are used",
+    )
     p.add_argument("--no-resume", action="store_true", help="start over even if last.pt exists")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=_train)

@@ -104,6 +104,12 @@ def default_benchmark_config() -> dict[str, Any]:
             "frames": [],  # training-set sizes, e.g. [140, 1400, 14000]
             "model": "unet-light",
         },
+        "search": {
+            # one training option chosen on validation drives (headline scope) before the
+            # main training, e.g. key "weight_power", values [0.25, 0.5, 1.0]; [] = off
+            "key": "weight_power",
+            "values": [],
+        },
         "bootstrap": {"resamples": 1000, "seed": 0},
         "device": "auto",  # "cpu", "cuda" or "auto"
         "eval_batch_size": 8,
@@ -277,6 +283,13 @@ def _check(cfg: Mapping[str, Any]) -> None:
     seeds = cfg["train_seeds"]
     if not seeds or len(set(seeds)) != len(seeds):
         raise ConfigError(f"train_seeds: need distinct seeds, got {seeds}")
+    from dstenv.segment.train import default_train_config
+
+    if cfg["search"]["values"] and cfg["search"]["key"] not in default_train_config():
+        raise ConfigError(
+            f"search.key: {cfg['search']['key']!r} is not a training option; choose from "
+            + ", ".join(default_train_config())
+        )
     if any(int(n) < 1 for n in cfg["curve"]["frames"]):
         raise ConfigError(f"curve.frames: sizes must be >= 1, got {cfg['curve']['frames']}")
     from dstenv.segment.score import SCOPES
@@ -400,6 +413,7 @@ def run_benchmark(
         "segmenters": segs,
         "curve": [{"train_frames": plan.curve[label], "label": label, **curve[label]}
                   for label in sorted(curve, key=lambda k: plan.curve[k])],
+        "search": plan.search,
         "unscored": plan.unscored,
         "histories": plan.histories,
         "timings_s": timings,
@@ -415,4 +429,7 @@ def run_benchmark(
         results["goal"] = goal(segs, confusion, weights)
     report.write_report(results, out, drives.episodes, drives.generation_params,
                         scores.examples)
+    if plan.search:
+        report.write_json(out / "search.json", {"command": command, "date": results["date"],
+                                                "preset": preset, **plan.search})
     return results

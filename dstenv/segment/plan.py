@@ -82,6 +82,7 @@ class Plan:
     curve: dict[str, int] = field(default_factory=dict)
     unscored: dict[str, str] = field(default_factory=dict)
     histories: dict[str, Any] = field(default_factory=dict)
+    search: dict[str, Any] | None = None
 
     def add(self, seg: Segmenter, kind: str, describe: dict | None = None) -> None:
         if seg.label in self.kinds:
@@ -241,6 +242,38 @@ def _subset(ds: Any, n: int, seed: int) -> Any:
     return torch.utils.data.Subset(ds, sorted(int(i) for i in idx))
 
 
+def _search(cfg: Mapping[str, Any], datasets: Mapping[str, Any], device: torch.device,
+            out: Path, progress: bool, log: Callable[[str], None]) -> dict[str, Any]:
+    """Train one network per value of ``search.key``; pick the best on validation drives.
+
+    The score is the mIoU over the headline scope of the replayed validation drives
+    (never the test split), the same :func:`dstenv.segment.score.score` as the report.
+    """
+    from dstenv.segment.checkpoint import load_segmenter
+    from dstenv.segment.results import HEADLINE
+    from dstenv.segment.score import score
+    from dstenv.segment.stats import miou_batch
+    from dstenv.segment.train import train
+
+    if not len(datasets["val"]):
+        raise ConfigError("search: needs a validation split (raise data.frames)")
+    key, model, seed = cfg["search"]["key"], cfg["models"][0], cfg["train_seeds"][0]
+    val = split_drives(datasets["val"], False, progress, log)
+    rows = []
+    for value in cfg["search"]["values"]:
+        tcfg = {**cfg["train"], key: value, "model": model, "seed": seed, "device": str(device),
+                "model_kwargs": cfg["model_kwargs"].get(model, {})}
+        mdir = out / "search" / f"{model}-{key}-{value}"
+        train(tcfg, datasets["train"], datasets["val"], mdir, progress=progress, log=log)
+        seg = load_segmenter(mdir / "best.pt", device)
+        cm = score([seg], val.episodes, val.generation_params).confusion[seg.label][HEADLINE]
+        rows.append({"value": value, "val_miou": float(miou_batch(cm.sum(0)))})
+        log(f"search {key}={value}: validation mIoU ({HEADLINE}) {rows[-1]['val_miou']:.3f}")
+    best = max(rows, key=lambda r: r["val_miou"])
+    return {"key": f"train.{key}", "model": model, "seed": seed, "scope": HEADLINE,
+            "validation_drives": len(val.episodes), "evaluations": rows, "chosen": best["value"]}
+
+
 def _networks(cfg: Mapping[str, Any], datasets: Mapping[str, Any], device: torch.device,
               out: Path, plan: Plan, progress: bool, log: Callable[[str], None],
               timings: dict[str, float]) -> None:
@@ -249,6 +282,11 @@ def _networks(cfg: Mapping[str, Any], datasets: Mapping[str, Any], device: torch
 
     val = datasets["val"] if len(datasets["val"]) else None
     seeds = list(cfg["train_seeds"])
+    if cfg["search"]["values"] and cfg["models"]:
+        t = time.perf_counter()
+        plan.search = _search(cfg, datasets, device, out, progress, log)
+        cfg = {**cfg, "train": {**cfg["train"], cfg["search"]["key"]: plan.search["chosen"]}}
+        timings["search_s"] = time.perf_counter() - t
     runs = [(name, s, None) for name in cfg["models"] for s in seeds]
     runs += [(cfg["curve"]["model"], seeds[0], int(n)) for n in cfg["curve"]["frames"]]
     for name, seed, n in runs:

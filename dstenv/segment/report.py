@@ -215,6 +215,12 @@ def markdown_table(results: dict[str, Any]) -> str:
             lines.append(f"| {row['train_frames']} | {_ci(o['miou'], o['ci']['miou'])} | "
                          f"{_fmt(o['iou']['static'])} | {_fmt(o['iou']['moving'])} |")
         lines.append("")
+    search = results.get("search")
+    if search:
+        vals = ", ".join(f"{r['value']}: {r['val_miou']:.3f}" for r in search["evaluations"])
+        lines += [f"Chosen on {search['validation_drives']} validation drives ({search['scope']} "
+                  f"mIoU of {search['model']}): {search['key']} = {search['chosen']} ({vals}); "
+                  "the search is in search.json.", ""]
     ties = data.get("no_map_ties")
     if ties and ties.get("tied_cells"):
         lines += [f"BetP(building) = BetP(static) is the largest BetP in {ties['tied_cells']} "

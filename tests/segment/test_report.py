@@ -114,6 +114,12 @@ def test_presets_validate():
         preset_config("tpu")
     with pytest.raises(ConfigError, match="unknown key 'frame'"):
         preset_config("cpu", {"data": {"frame": 3}})
+    from dstenv.segment.benchmark import _check
+
+    with pytest.raises(ConfigError, match="search.key: 'speed' is not a training option"):
+        _check(preset_config("tiny", {"search": {"key": "speed", "values": [1]}}))
+    with pytest.raises(ConfigError, match="train_seeds"):
+        _check(preset_config("tiny", {"train_seeds": [1, 1]}))
 
 
 def test_paper_protocol_names_missing_pipeline_keys():

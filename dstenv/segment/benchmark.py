@@ -44,6 +44,7 @@ from pathlib import Path
 from typing import Any
 
 from dstenv.config import ConfigError, merge_config
+from dstenv.dst.frame import CLASSES
 from dstenv.segment import report
 from dstenv.segment.results import (
     SCHEMA_VERSION,
@@ -111,6 +112,9 @@ def default_benchmark_config() -> dict[str, Any]:
             "values": [],
         },
         "bootstrap": {"resamples": 1000, "seed": 0},
+        # score only frames whose step is >= this (earlier ones may serve fine-tuning;
+        # the filter and the observed cells still use every earlier sweep)
+        "score_from_step": 0,
         "device": "auto",  # "cpu", "cuda" or "auto"
         "eval_batch_size": 8,
         "examples": 3,  # example grids in the figure
@@ -384,7 +388,8 @@ def run_benchmark(
         raise ValueError(f"{data_dir}: no test frames (no shard of split {split!r})")
     datasets = {s: ShardDataset(data_dir, split=s, inputs="fcn10") for s in ("train", "val")}
     t = time.perf_counter()
-    drives = split_drives(test_ds, len(datasets["train"]) == 0, progress, log)
+    drives = split_drives(test_ds, len(datasets["train"]) == 0, progress, log,
+                          int(cfg["score_from_step"]))
     timings["replay_test_s"] = time.perf_counter() - t
     plan = plan_segmenters(cfg, drives, datasets, checkpoints, device, out, progress, log,
                            timings)
@@ -400,6 +405,11 @@ def run_benchmark(
         cfg["bootstrap"]["resamples"], cfg["bootstrap"]["seed"],
     )
     curve = {label: segs.pop(label) for label in plan.curve if label in segs}
+    first = next(iter(scores.confusion.values()), None)
+    shares = {} if first is None else {
+        sc: dict(zip(CLASSES, (first[sc].sum((0, 2)) / max(int(first[sc].sum()), 1)).tolist()))
+        for sc in first
+    }
     results: dict[str, Any] = {
         "schema": SCHEMA_VERSION,
         "preset": None if drives.evaluation_only else preset,
@@ -409,6 +419,7 @@ def run_benchmark(
         "data": {**drives.describe(), "dir": str(data_dir),
                  "train_frames": len(datasets["train"]), "val_frames": len(datasets["val"]),
                  "observed_definition": scores.observed_definition,
+                 "class_shares": shares,
                  "no_map_ties": tie_summary(scores)},
         "segmenters": segs,
         "curve": [{"train_frames": plan.curve[label], "label": label, **curve[label]}

@@ -21,6 +21,13 @@ def _json_arg(text: str) -> dict[str, Any]:
     return value
 
 
+def _sequence_list(text: str) -> list[str]:
+    names = [s.strip() for s in text.split(",") if s.strip()]
+    if not names:
+        raise argparse.ArgumentTypeError("expected a comma-separated list like 0003,0005")
+    return names
+
+
 def _train(args: argparse.Namespace) -> int:
     from dstenv.config import CLIError
     from dstenv.data import ShardDataset, StreamingDataset
@@ -113,6 +120,10 @@ def benchmark_command(args: argparse.Namespace) -> str:
     parts += ["--protocol", args.protocol] if getattr(args, "protocol", None) else []
     parts += ["--out", args.out]
     parts += ["--data", args.data] if args.data else []
+    if getattr(args, "kitti", None):
+        parts += ["--kitti", args.kitti, "--sequences", ",".join(args.sequences or [])]
+        parts += ["--osm", args.osm] if args.osm else []
+        parts += ["--finetune-frames", str(args.finetune_frames)] if args.finetune_frames else []
     for ckpt in args.checkpoint:
         parts += ["--checkpoint", ckpt]
     for item in args.set or []:
@@ -150,8 +161,37 @@ def run_cli_benchmark(args: argparse.Namespace, split: str = "test") -> dict[str
     return results
 
 
+def _with_real(args: argparse.Namespace, results: dict[str, Any]) -> dict[str, Any]:
+    """``--kitti``: score the run's segmenters on real drives, in the same report."""
+    from dstenv.cli import CLIError
+    from dstenv.segment import report
+    from dstenv.segment.real import real_benchmark
+
+    if not args.sequences:
+        raise CLIError("--kitti needs --sequences LIST (e.g. 0003)")
+    if results["data"].get("evaluation_only"):
+        raise CLIError("--kitti adds real drives to a simulated benchmark; --data is "
+                       "evaluation-only data already (score it with dstenv benchmark --data)")
+    out = Path(args.out)
+    real = real_benchmark(results, out, args.kitti, args.sequences, args.osm,
+                          args.finetune_frames, progress=not args.quiet,
+                          log=(lambda m: None) if args.quiet else print)
+    results["kitti"] = {k: real[k] for k in ("real", "data", "segmenters", "unscored",
+                                             "real_goal")}
+    report.write_json(out / "results.json", results)
+    section = report.markdown_table({**real, "command": None})
+    section = "\n".join(("#" + line) if line.startswith("#") else line
+                        for line in section.splitlines())
+    md = (out / "results.md").read_text()
+    (out / "results.md").write_text(md.rstrip("\n") + "\n\n" + section + "\n")
+    print(section)
+    return results
+
+
 def _benchmark(args: argparse.Namespace) -> int:
     results = run_cli_benchmark(args)
+    if args.kitti:
+        results = _with_real(args, results)
     goal = results.get("goal")
     ok = goal is None or (goal["margin_met"] and goal["moving_met"] and goal["static_met"])
     return 0 if ok or not args.check_goal else 1
@@ -261,6 +301,15 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="override a preset value, e.g. train.epochs=3 or data.frames=500; "
         "tune.params / complete.params also take JSON or @results.json (repeatable)",
     )
+    b.add_argument("--kitti", metavar="ROOT",
+                   help="also score the run's segmenters on these real KITTI tracking drives "
+                   "(converted into OUT/kitti; a section of the same report)")
+    b.add_argument("--sequences", type=_sequence_list, metavar="LIST",
+                   help="KITTI sequences for --kitti, e.g. 0003,0005")
+    b.add_argument("--osm", metavar="FILE", help="OpenStreetMap file for --kitti (default: no map)")
+    b.add_argument("--finetune-frames", type=int, default=0, metavar="N",
+                   help="with --kitti: fine-tune the best network on the first N labelled frames "
+                   "of each sequence and score every row from frame N+10 on")
     b.add_argument("--check-goal", action="store_true", help="exit 1 if the README goal is not met")
     b.add_argument("--quiet", action="store_true")
     b.set_defaults(func=_benchmark)

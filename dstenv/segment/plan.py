@@ -105,8 +105,22 @@ def _refilter_check(episodes: list[Episode], params: DSTParams) -> str | None:
     return None
 
 
+def _from_step(ep: Episode, first: int) -> Episode | None:
+    """``ep`` scored only at source steps ``>= first`` (its history kept)."""
+    steps = ep.steps if ep.stored_steps is None else ep.stored_steps
+    keep = steps >= first
+    if keep.all():
+        return ep
+    if not keep.any():
+        return None
+    return Episode(ep.seed, ep.sensor, ep.gis, ep.poses, ep.steps[keep], ep.labels[keep],
+                   ep.visible[keep], ep.cell_size, ep.episode,
+                   None if ep.stored_x is None else ep.stored_x[keep], ep.history, ep.period,
+                   None if ep.stored_steps is None else ep.stored_steps[keep])
+
+
 def split_drives(test_ds: Any, no_train: bool, progress: bool,
-                log: Callable[[str], None]) -> Drives:
+                 log: Callable[[str], None], from_step: int = 0) -> Drives:
     """The test split as drives (module docstring).
 
     Args:
@@ -114,6 +128,7 @@ def split_drives(test_ds: Any, no_train: bool, progress: bool,
         no_train: the data has no train split (evaluation only).
         progress: tqdm bars.
         log: one-line messages.
+        from_step: score only frames at source steps ``>= from_step``.
 
     Raises:
         RuntimeError: a replay that does not reproduce the stored frames.
@@ -142,6 +157,10 @@ def split_drives(test_ds: Any, no_train: bool, progress: bool,
             if i < 2 or ep.episode not in checked:
                 check_replay(ep, x, labels, gen)
                 checked.add(ep.episode)
+    if from_step:
+        episodes = [e for e in (_from_step(ep, from_step) for ep in episodes) if e is not None]
+        if not episodes:
+            raise ValueError(f"score_from_step {from_step}: no test frame at or after it")
     return Drives(episodes, gen, config, source, evaluation_only, reason, channels)
 
 
@@ -323,7 +342,7 @@ def plan_segmenters(cfg: Mapping[str, Any], drives: Drives, datasets: Mapping[st
         cfg: the full benchmark configuration.
         drives: :func:`split_drives`.
         datasets: ``{"train", "val"}`` :class:`dstenv.data.ShardDataset` objects.
-        checkpoints: trained networks to score as well.
+        checkpoints: trained networks to score as well: paths, or ``(label, path)``.
         device: where networks train and run.
         out: output directory (``models/``, ``curve/``).
         progress, log: tqdm bars, one-line messages.
@@ -332,7 +351,10 @@ def plan_segmenters(cfg: Mapping[str, Any], drives: Drives, datasets: Mapping[st
     from dstenv.segment.evaluate import load_checkpoints
 
     taken = () if drives.evaluation_only else cfg["models"]
-    extra = load_checkpoints(checkpoints, drives.channels, device=device, taken=taken)
+    pairs = [c if isinstance(c, tuple) else (None, c) for c in checkpoints]
+    extra = load_checkpoints([p for _, p in pairs], drives.channels, device=device, taken=taken)
+    for (label, _), seg in zip(pairs, extra):
+        seg.label = label or seg.label
     plan = Plan()
     cache: list[list[Episode]] = []
 

@@ -70,3 +70,14 @@ def test_tune_completion_finds_the_car_size():
     best, trace = tune_completion([ep], DSTParams.default(), "all", grid)
     assert best["length_m"] == 3.0 and len(trace["evaluations"]) == 2
     assert trace["evaluations"][1]["miou"] > trace["evaluations"][0]["miou"]
+
+
+def test_registry_builds_dst_complete():
+    from dstenv.segment.registry import create_segmenter
+
+    seg = create_segmenter("dst-complete", params={"alpha": 0.2}, cell_size=1.0,
+                           completion={"length_m": 9.0, "width_m": 3.0, "min_cells": 3})
+    assert seg.label == "dst-complete" and seg.params.alpha == 0.2
+    betp = _street()
+    np.testing.assert_array_equal(seg.predict(torch.from_numpy(betp[None]))[0].numpy(),
+                                  complete_frame(betp, 1.0, 9.0, 3.0, 3))

@@ -128,8 +128,8 @@ def test_paper_protocol_names_missing_pipeline_keys():
     assert protocol_overrides("sim") == {}
     with pytest.raises(ConfigError, match="choose from sim, paper"):
         protocol_overrides("kitti")
-    if "update_every" in default_config()["dst"]:
-        assert protocol_overrides("paper")["dst"]["update_every"] == 10
+    if "protocol" in default_config():
+        assert protocol_overrides("paper")["protocol"]["update_every"] == 10
     else:
-        with pytest.raises(ConfigError, match=r"dst\.update_every.*issue 13"):
+        with pytest.raises(ConfigError, match=r"protocol.*\(1 Hz fusion.*issue 13"):
             protocol_overrides("paper")

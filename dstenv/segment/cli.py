@@ -163,7 +163,7 @@ def run_cli_benchmark(args: argparse.Namespace, split: str = "test") -> dict[str
 
 def _with_real(args: argparse.Namespace, results: dict[str, Any]) -> dict[str, Any]:
     """``--kitti``: score the run's segmenters on real drives, in the same report."""
-    from dstenv.cli import CLIError
+    from dstenv.config import CLIError
     from dstenv.segment import report
     from dstenv.segment.real import real_benchmark
 

@@ -37,7 +37,8 @@ def sim_checkpoints(results: Mapping[str, Any]) -> dict[str, Path]:
 
 
 def _convert(root: str, sequences: Sequence[str], osm: str | None, data: Path) -> None:
-    from dstenv.cli import CLIError, main
+    from dstenv.cli import main
+    from dstenv.config import CLIError
 
     if (data / "manifest.json").is_file():
         return  # resumable: converted by an earlier run

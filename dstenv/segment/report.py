@@ -105,9 +105,8 @@ def _object_table(segs: dict[str, Any]) -> list[str]:
         o = seg["objects"]
         row = [_ci(o[c][k], o[c]["ci"][k]) for c in ("static", "moving")
                for k in ("recall", "precision")]
-        row = [row[0], row[1], row[2], row[3]]
         for b in range(len(names)):
-            row += [_fmt(o["static"]["bands"][b]["recall"]), _fmt(o["moving"]["bands"][b]["recall"])]
+            row += [_fmt(o[c]["bands"][b]["recall"]) for c in ("static", "moving")]
         lines.append(f"| {label} | " + " | ".join(row) + " |")
     counts = {c: first[c]["objects"] for c in ("static", "moving")}
     lines += ["", f"Objects with an observed cell: static {counts['static']}, "
@@ -174,8 +173,9 @@ def markdown_table(results: dict[str, Any]) -> str:
     """
     data = results.get("data", {})
     if data.get("evaluation_only"):
-        lines = [f"# Segmenter benchmark on {data.get('source', '?')} data", "",
-                 f"Evaluation-only data ({data.get('source', '?')}): {data.get('test_frames', '?')} "
+        src = data.get("source", "?")
+        lines = [f"# Segmenter benchmark on {src} data", "",
+                 f"Evaluation-only data ({src}): {data.get('test_frames', '?')} "
                  f"frames from {data.get('test_episodes', '?')} drive(s), no train split; grid "
                  f"{data.get('grid_shape', '?')} cells of {data.get('cell_size', '?')} m. DST "
                  "from the stored BetP (or the filter re-run over the stored inputs), networks "

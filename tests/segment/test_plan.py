@@ -56,7 +56,7 @@ def test_fixed_params_take_what_results_json_prints(tmp_path):
 def test_cli_params_from_results_json(tmp_path):
     import argparse
 
-    from dstenv.cli import CLIError
+    from dstenv.config import CLIError
     from dstenv.segment.cli import _params_value
 
     res = {"segmenters": {"dst-tuned": {"describe": {"params": {"alpha": 0.4}}}}}

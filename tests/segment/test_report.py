@@ -4,7 +4,6 @@ import numpy as np
 import pytest
 
 from dstenv.config import ConfigError
-from dstenv.dst import CLASSES
 from dstenv.segment import report
 from dstenv.segment.benchmark import preset_config, protocol_overrides
 from dstenv.segment.results import goal, segmenter_results

@@ -176,7 +176,8 @@ PRESETS: dict[str, dict[str, Any]] = {
         "examples": 1,
     },
     # <= 30 min on a 2-core CPU: the README's main job. Short episodes on many maps:
-    # 2500 frames = 500 maps of 5 frames, about 50 test maps for the bootstrap
+    # 2500 frames = 500 maps of 5 frames, about 50 test maps for the bootstrap; two
+    # generation workers, 8 epochs (estimate in docs/benchmark.md)
     "cpu": {
         "data": {
             "scenario": "dense",
@@ -185,12 +186,13 @@ PRESETS: dict[str, dict[str, Any]] = {
             "episode_length": 60,
             "stride": 10,
             "warmup": 10,
+            "workers": 2,
         },
         "tune": {"episodes": 16, "budget": 60},
         "models": ["unet-light"],
         # weight_power: chosen on validation, search in benchmarks/search/cpu-weight-power.json
         "train": {
-            "epochs": 10,
+            "epochs": 8,
             "batch_size": 8,
             "lr": 2e-3,
             "crop": 96,

@@ -129,6 +129,10 @@ def test_paper_protocol_names_missing_pipeline_keys():
         protocol_overrides("kitti")
     if "protocol" in default_config():
         assert protocol_overrides("paper")["protocol"]["update_every"] == 10
+        from dstenv.segment.benchmark import _check
+
+        with pytest.raises(ConfigError, match="data.stride = 4: the paper protocol fuses every 10"):
+            _check(preset_config("tiny", {"protocol": "paper"}))
     else:
         with pytest.raises(ConfigError, match=r"protocol.*\(1 Hz fusion.*issue 13"):
             protocol_overrides("paper")

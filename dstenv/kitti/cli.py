@@ -9,18 +9,15 @@
     dstenv kitti evaluate --data DIR [--checkpoint best.pt ...]
 
 ``convert`` writes one shard per sequence (``DIR/<split>/kitti-SSSS.h5``, the format
-of ``dstenv generate``) and ``DIR/manifest.json``. ``evaluate`` scores the DST
-baseline (argmax of the stored BetP) and any trained checkpoint on such a
-directory with the benchmark's metrics (:mod:`dstenv.segment.evaluate`);
-``dstenv benchmark --data DIR --checkpoint PT`` does the same and writes the
-benchmark's report.
+of ``dstenv generate``) and ``DIR/manifest.json``. ``evaluate`` is an alias of
+``dstenv benchmark --data DIR [--checkpoint PT]``: the same scoring
+(:func:`dstenv.segment.score.score`) and report.
 """
 
 from __future__ import annotations
 
 import argparse
 import re
-import json
 import logging
 from pathlib import Path
 from typing import Any
@@ -164,31 +161,26 @@ def _render(args: argparse.Namespace) -> int:
 
 
 def _evaluate(args: argparse.Namespace) -> int:
-    from dstenv.config import CLIError
-    from dstenv.data import ShardDataset
-    from dstenv.dst import CLASSES
-    from dstenv.segment.evaluate import load_checkpoints, score_segmenters, stored_dst_segmenter
-    from dstenv.segment.replay import split_index
+    """An alias of ``dstenv benchmark --data DIR``: the same scoring and report."""
+    import shutil
+    import tempfile
 
-    data = ShardDataset(args.data, inputs="fcn10")
-    if len(data) == 0:
-        raise CLIError(f"{args.data}: no frames")
-    segs = [stored_dst_segmenter(split_index(data.files)[1], label="dst (stored BetP)")]
-    segs += load_checkpoints(args.checkpoint, int(data[0]["x"].shape[0]), device="cpu")
-    results = {}
-    names = " ".join(f"{c[:8]:>8}" for c in CLASSES)
-    header = f"{'segmenter':<24} {'cells':<8} {'mIoU':>6} {names}"
-    print(f"{len(data)} frames from {args.data}\n{header}")
-    for label, meter in score_segmenters(segs, data, args.batch_size).items():
-        summary = results[label] = meter.summary(CLASSES)
-        for cells in ("all", "visible"):
-            s = summary[cells]
-            iou = " ".join(f"{'-' if v is None else f'{v:.3f}':>8}" for v in s["iou"].values())
-            miou = "-" if s["miou"] is None else f"{s['miou']:.3f}"
-            print(f"{label:<24} {cells:<8} {miou:>6} {iou}")
-    if args.json:
-        Path(args.json).write_text(json.dumps(results, indent=1, default=float) + "\n")
-        print(f"wrote {args.json}")
+    from dstenv.segment.cli import run_cli_benchmark
+
+    tmp = None if args.out else tempfile.mkdtemp(prefix="dstenv-kitti-eval-")
+    bench = argparse.Namespace(
+        preset=None, protocol=None, out=args.out or tmp, data=args.data,
+        checkpoint=args.checkpoint, quiet=True,
+        set=[f"eval_batch_size={args.batch_size}", "device=\"cpu\"", *(args.set or [])],
+    )
+    try:
+        run_cli_benchmark(bench, split=args.split)
+        if args.json:
+            shutil.copyfile(Path(bench.out) / "results.json", args.json)
+            print(f"wrote {args.json}")
+    finally:
+        if tmp:
+            shutil.rmtree(tmp, ignore_errors=True)
     return 0
 
 
@@ -259,6 +251,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     e.add_argument("--checkpoint", action="append", default=[], metavar="PT",
                    help="a checkpoint of dstenv train (repeatable)")
     e.add_argument("--batch-size", type=int, default=4)
-    e.add_argument("--json", metavar="FILE", help="also write the metrics as JSON")
+    e.add_argument("--split", default="test", help="split to score (default test)")
+    e.add_argument("--out", metavar="DIR", help="keep the benchmark report here")
+    e.add_argument("--set", action="append", metavar="KEY=VALUE",
+                   help="benchmark option, e.g. tune.params=@results.json (repeatable)")
+    e.add_argument("--json", metavar="FILE", help="also write results.json here")
     e.set_defaults(func=_evaluate)
     logging.getLogger("dstenv.kitti").addHandler(logging.NullHandler())

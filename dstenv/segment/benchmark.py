@@ -1,66 +1,71 @@
-"""``dstenv benchmark``: pure DST vs FCN-DST on held-out simulated maps.
+"""``dstenv benchmark``: DST, non-learned baselines and networks on held-out drives.
 
 Stages (each resumable: rerunning the same command reuses finished work):
 
 1. **data** -- ``dstenv.data.generate`` writes train/val/test shards whose splits
    come from disjoint map seeds (:mod:`dstenv.data.sampling`), so the test maps
-   are never seen in training or tuning.
-2. **learned models** -- each network of ``models`` is trained on the train split
-   (validation mIoU picks ``best.pt``) and scored on the stored test frames.
-3. **DST** -- the test episodes are replayed once (:mod:`dstenv.segment.replay`),
-   the replay is checked against the stored BetP, and every DST variant runs its
-   own filter over the same inputs: ``dst`` for each preset in ``dst_presets``, and
-   ``dst-tuned`` with parameters searched on replayed *training* episodes.
-4. **report** -- ``results.json``, ``results.md`` and PNG figures in ``out``.
-
-Every segmenter is scored on exactly the same frames (same episode seeds and
-steps), over all labelled cells and over visible cells.
+   are never seen in training, tuning or model selection.
+2. **drives** -- the test episodes are replayed (:mod:`dstenv.segment.replay`)
+   and checked against the stored BetP; frames are keyed by ``(seed, episode,
+   step)`` so several episodes per map work.
+3. **non-learned baselines, tuned on train only** -- ``dst`` for each preset of
+   ``dst_presets``; ``dst-tuned`` (:mod:`dstenv.segment.tune`, the objective is
+   the headline scope); ``dst-complete`` (:mod:`dstenv.segment.complete`, DST
+   with the ``dst-tuned`` parameters plus a vehicle-box completion searched on
+   training drives).
+4. **networks** -- each model of ``models`` is trained once per seed of
+   ``train_seeds`` (``best.pt`` picked on validation); ``curve.frames`` adds the
+   training-set-size curve (the same model trained on the first N training frames).
+5. **score** -- one call of :func:`dstenv.segment.score.score` scores every
+   segmenter on the same frames, over ``observed`` (headline), ``visible`` and
+   ``all`` (amodal) cells, with object-level counts, per drive.
+6. **report** -- ``results.json`` (schema in ``docs/benchmark.md``),
+   ``results.md`` and figures in ``out``; 95 % intervals are a cluster bootstrap
+   over maps (:mod:`dstenv.segment.stats`).
 
 **Evaluation-only data** (``source = "kitti"`` shards of ``dstenv kitti convert``,
-or shards without a train split) has no training split and cannot be replayed
-through the simulator: :func:`run_benchmark` then scores the ``dst`` variant of the
-generation parameters on the stored BetP, re-runs the filter over the stored
-``sensor``/``gis``/``ego_pose`` for the other presets and ``tune.params`` only when
+or shards without a train split) is scored by the same :func:`score`: DST with
+the generation parameters from the stored BetP, other DST parameters only when
 the shards hold every filtered frame (:func:`dstenv.segment.replay.stored_episodes`),
-lists the variants it cannot score with the reason, and scores the given
-checkpoints (e.g. trained on simulated data) instead of training models.
+fixed ``tune.params`` / ``complete.params``, and the given checkpoints.
+
+``protocol = "paper"`` applies :data:`PAPER_PROTOCOL` to the generated data (1 Hz
+fusion with t-1 the previous fused grid, camera field-of-view labels, KITTI's
+moving rule, an imperfect map); a key the simulator does not have is a
+:class:`~dstenv.config.ConfigError` naming it.
 """
 
 from __future__ import annotations
 
+import copy
 import time
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-import torch
-
 from dstenv.config import ConfigError, merge_config
 from dstenv.dst.frame import CLASSES
-from dstenv.dst.params import DSTParams
 from dstenv.segment import report
-from dstenv.segment.checkpoint import load_segmenter
-from dstenv.segment.evaluate import batches, evaluate, load_checkpoints
-from dstenv.segment.metrics import ConfusionMeter
-from dstenv.segment.registry import create_segmenter
-from dstenv.segment.replay import (
-    Episode,
-    check_replay,
-    episode_targets,
-    filter_episode,
-    record_episodes,
-    shard_attrs,
-    split_index,
-    stored_inputs,
+from dstenv.segment.results import (
+    SCHEMA_VERSION,
+    goal,
+    real_goal,
+    segmenter_results,
+    tie_summary,
 )
-from dstenv.segment.train import resolve_device, train
 
-__all__ = ["PRESETS", "default_benchmark_config", "preset_config", "run_benchmark"]
+__all__ = [
+    "PRESETS",
+    "PAPER_PROTOCOL",
+    "default_benchmark_config",
+    "preset_config",
+    "protocol_overrides",
+    "run_benchmark",
+]
 
 
 def default_benchmark_config() -> dict[str, Any]:
-    """Every benchmark option with its default (the ``cpu`` preset overrides some)."""
+    """Every benchmark option with its default (the presets override some)."""
     return {
         "data": {
             "scenario": "",  # scenario name or .toml file; "" = default configuration
@@ -70,26 +75,61 @@ def default_benchmark_config() -> dict[str, Any]:
             "episode_length": 200,  # [steps] of 0.1 s
             "stride": 10,  # keep one frame every `stride` steps
             "warmup": 10,  # [steps] first kept step
+            "episodes_per_map": 1,  # episodes driven on each map (new traffic each)
             "workers": 1,  # generation processes
             "frames_per_shard": 256,
+            "overrides": {},  # pipeline configuration overrides (any section)
         },
+        "protocol": "sim",  # "sim" or "paper" (PAPER_PROTOCOL)
         "dst_presets": ["default", "paper"],  # DSTParams presets scored as `dst`
         "tune": {
             "enabled": True,  # add `dst-tuned`
             "episodes": 8,  # training episodes replayed for the search
             "budget": 30,  # parameter sets scored
             "seed": 0,
-            # fixed dst-tuned parameters (DSTParams fields), e.g. those a simulated
-            # benchmark found; {} = search them on the train split
+            "scope": "observed",  # cells of the search objective (dstenv.segment.score)
+            # fixed dst-tuned parameters: DSTParams fields, or the "describe" entry of
+            # a results.json row (its "params" are used); {} = search on the train split
             "params": {},
+        },
+        "complete": {
+            "enabled": True,  # add `dst-complete`
+            "scope": "all",  # objective of the box search: completion is for hidden cells
+            "params": {},  # fixed completion settings (complete_frame kwargs) or a describe
         },
         "models": ["unet-light"],  # learned segmenters to train (dstenv.segment.models.MODELS)
         "model_kwargs": {},  # model name -> builder options
         "train": {},  # overrides of dstenv.segment.train.default_train_config()
+        "train_seeds": [0],  # one network per seed and model; rows pool the seeds
+        "curve": {
+            "frames": [],  # training-set sizes, e.g. [140, 1400, 14000]
+            "model": "unet-light",
+        },
+        "search": {
+            # one training option chosen on validation drives (headline scope) before the
+            # main training, e.g. key "weight_power", values [0.25, 0.5, 1.0]; [] = off
+            "key": "weight_power",
+            "values": [],
+        },
+        "bootstrap": {"resamples": 1000, "seed": 0},
+        # score only frames whose step is >= this (earlier ones may serve fine-tuning;
+        # the filter and the observed cells still use every earlier sweep)
+        "score_from_step": 0,
         "device": "auto",  # "cpu", "cuda" or "auto"
         "eval_batch_size": 8,
         "examples": 3,  # example grids in the figure
     }
+
+
+#: pipeline configuration of the paper's protocol (the ``protocol`` section of issue 13);
+#: the map is imperfect by default since issue 12 (``gis`` errors of the scenario)
+PAPER_PROTOCOL: dict[str, Any] = {
+    "protocol": {
+        "update_every": 10,  # [steps] fuse at 1 Hz; t-1 = the previous fused grid
+        "camera_fov": 81.0,  # [deg] labels only in KITTI's left colour camera's view
+        "moving_rule": "displacement",  # KITTI's rule: moved > 10 cm frame to frame
+    },
+}
 
 
 #: named overrides of :func:`default_benchmark_config`
@@ -105,14 +145,16 @@ PRESETS: dict[str, dict[str, Any]] = {
             "frames_per_shard": 16,
         },
         "tune": {"episodes": 2, "budget": 3},
+        "complete": {"params": {"length_m": 4.5, "width_m": 1.8}},
         "models": ["unet-light"],
         "model_kwargs": {"unet-light": {"base": 8, "depth": 2}},
         "train": {"epochs": 1, "batch_size": 4},
+        "bootstrap": {"resamples": 200},
         "device": "cpu",
         "examples": 1,
     },
     # about a minute on 2 cores: CI's proof that every stage of the main job runs in a
-    # fresh venv (generate, tune, train one short epoch, score, report)
+    # fresh venv (generate, tune, complete, train one short epoch, score, report)
     "smoke": {
         "data": {
             "scenario": "dense",
@@ -124,28 +166,32 @@ PRESETS: dict[str, dict[str, Any]] = {
             "frames_per_shard": 32,
         },
         "tune": {"episodes": 2, "budget": 4},
+        "complete": {"params": {"length_m": 4.5, "width_m": 1.8}},
         "models": ["unet-light"],
         "model_kwargs": {"unet-light": {"base": 8, "depth": 2}},
         "train": {"epochs": 1, "batch_size": 4},
+        "bootstrap": {"resamples": 200},
         "device": "cpu",
         "examples": 1,
     },
-    # <= 30 min on a 2-core CPU: the README's main job
+    # <= 30 min on a 2-core CPU: the README's main job. Short episodes on many maps:
+    # 2500 frames = 500 maps of 5 frames, about 50 test maps for the bootstrap; two
+    # generation workers, 8 epochs (estimate in docs/benchmark.md)
     "cpu": {
         "data": {
             "scenario": "dense",
-            "frames": 2000,
+            "frames": 2500,
             "grid": 128,
-            "episode_length": 200,
+            "episode_length": 60,
             "stride": 10,
             "warmup": 10,
+            "workers": 2,
         },
-        "tune": {"episodes": 8, "budget": 30},
+        "tune": {"episodes": 16, "budget": 60},
         "models": ["unet-light"],
-        # weight_power 0.5: full median-frequency weights (x58 for moving) over-predict the
-        # rare classes (moving recall 0.92, precision 0.53 in a trial run), which costs IoU
+        # weight_power: chosen on validation, search in benchmarks/search/cpu-weight-power.json
         "train": {
-            "epochs": 10,
+            "epochs": 8,
             "batch_size": 8,
             "lr": 2e-3,
             "crop": 96,
@@ -154,18 +200,19 @@ PRESETS: dict[str, dict[str, Any]] = {
         },
         "device": "cpu",
     },
-    # the full benchmark for a GPU: the paper's FCN-8s, more data, full-size grids
+    # the full benchmark for a GPU: the paper's FCN-8s, more data, full-size grids,
+    # three training seeds
     "gpu": {
         "data": {
             "scenario": "dense",
             "frames": 20000,
             "grid": 256,
-            "episode_length": 200,
+            "episode_length": 100,
             "stride": 10,
             "warmup": 10,
             "workers": 8,
         },
-        "tune": {"episodes": 32, "budget": 60},
+        "tune": {"episodes": 32, "budget": 120},
         "models": ["fcn8s-vgg16", "unet-light", "unet-temporal"],
         "model_kwargs": {"fcn8s-vgg16": {"dropout": 0.5}},
         "train": {
@@ -175,6 +222,24 @@ PRESETS: dict[str, dict[str, Any]] = {
             "loss": "wce+lovasz",
             "num_workers": 4,
         },
+        "train_seeds": [0, 1, 2],
+        "device": "auto",
+    },
+    # the training-set-size curve: the paper's 140 frames, x10, x100 (GPU-sized)
+    "curve": {
+        "data": {
+            "scenario": "dense",
+            "frames": 18000,
+            "grid": 128,
+            "episode_length": 60,
+            "stride": 10,
+            "warmup": 10,
+            "workers": 8,
+        },
+        "tune": {"episodes": 16, "budget": 60},
+        "models": [],
+        "curve": {"frames": [140, 1400, 14000], "model": "unet-light"},
+        "train": {"epochs": 10, "batch_size": 8, "lr": 2e-3, "crop": 96, "weight_power": 0.5},
         "device": "auto",
     },
 }
@@ -188,14 +253,80 @@ def preset_config(name: str, overrides: Mapping[str, Any] | None = None) -> dict
     return merge_config(cfg, overrides, "benchmark")
 
 
-def _generate(dcfg: dict[str, Any], out: Path, progress: bool) -> None:
+def _missing_keys(base: Mapping[str, Any], over: Mapping[str, Any], path: str = "") -> list[str]:
+    out = []
+    for k, v in over.items():
+        key = f"{path}{k}"
+        if k not in base:
+            out.append(key)
+        elif isinstance(v, Mapping) and isinstance(base[k], Mapping):
+            out += _missing_keys(base[k], v, f"{key}.")
+    return out
+
+
+def protocol_overrides(protocol: str) -> dict[str, Any]:
+    """Pipeline overrides of a protocol (``"sim"``: none; ``"paper"``: :data:`PAPER_PROTOCOL`).
+
+    Raises:
+        ConfigError: an unknown protocol, or a key of :data:`PAPER_PROTOCOL` the
+            pipeline configuration does not have (named, with where it comes from).
+    """
+    if protocol == "sim":
+        return {}
+    if protocol != "paper":
+        raise ConfigError(f"protocol: unknown {protocol!r}; choose from sim, paper")
+    from dstenv.pipeline import default_config
+
+    missing = _missing_keys(default_config(), PAPER_PROTOCOL)
+    if missing:
+        raise ConfigError(
+            "protocol paper needs the pipeline configuration keys "
+            + ", ".join(missing)
+            + " (1 Hz fusion, camera-FOV labels, KITTI moving rule of issue 13), which "
+            "this dstenv does not have; update dstenv or use --protocol sim"
+        )
+    return copy.deepcopy(PAPER_PROTOCOL)
+
+
+def _check(cfg: Mapping[str, Any]) -> None:
+    seeds = cfg["train_seeds"]
+    if not seeds or len(set(seeds)) != len(seeds):
+        raise ConfigError(f"train_seeds: need distinct seeds, got {seeds}")
+    from dstenv.segment.train import default_train_config
+
+    if cfg["search"]["values"] and cfg["search"]["key"] not in default_train_config():
+        raise ConfigError(
+            f"search.key: {cfg['search']['key']!r} is not a training option; choose from "
+            + ", ".join(default_train_config())
+        )
+    if any(int(n) < 1 for n in cfg["curve"]["frames"]):
+        raise ConfigError(f"curve.frames: sizes must be >= 1, got {cfg['curve']['frames']}")
+    from dstenv.segment.score import SCOPES
+
+    period = PAPER_PROTOCOL["protocol"]["update_every"] if cfg["protocol"] == "paper" else 1
+    for key in ("stride", "warmup"):
+        if int(cfg["data"][key]) % period:
+            raise ConfigError(
+                f"data.{key} = {cfg['data'][key]}: the paper protocol fuses every {period} "
+                f"steps and only fused frames are scored; use a multiple of {period}"
+            )
+    for key in ("tune", "complete"):
+        if cfg[key]["scope"] not in SCOPES:
+            raise ConfigError(
+                f"{key}.scope: unknown {cfg[key]['scope']!r}; choose from {', '.join(SCOPES)}"
+            )
+
+
+def _generate(dcfg: dict[str, Any], protocol: str, out: Path, progress: bool) -> None:
     from dstenv.data.generate import GenerateSpec, generate
     from dstenv.data.sampling import scenario_config
 
     g = int(dcfg["grid"])
-    overrides = {"grid": {"height": g, "width": g}} if g else None
+    overrides: dict[str, Any] = {"grid": {"height": g, "width": g}} if g else {}
+    overrides = _deep_update(overrides, protocol_overrides(protocol))
+    overrides = _deep_update(overrides, dcfg["overrides"])
     spec = GenerateSpec(
-        config=scenario_config(dcfg["scenario"] or None, overrides),
+        config=scenario_config(dcfg["scenario"] or None, overrides or None),
         frames=int(dcfg["frames"]),
         seed=int(dcfg["seed"]),
         scenario=dcfg["scenario"] or "default",
@@ -204,48 +335,16 @@ def _generate(dcfg: dict[str, Any], out: Path, progress: bool) -> None:
         episode_length=int(dcfg["episode_length"]),
         stride=int(dcfg["stride"]),
         warmup=int(dcfg["warmup"]),
+        episodes_per_map=int(dcfg["episodes_per_map"]),
     )
     generate(spec, out, workers=int(dcfg["workers"]), progress=progress)
 
 
-def _score_dst(
-    seg: Any, episodes: list[Episode]
-) -> tuple[ConfusionMeter, dict[tuple[int, int], np.ndarray]]:
-    meter = ConfusionMeter(len(CLASSES))
-    preds = {}
-    for ep in episodes:
-        pred = seg.predict(torch.from_numpy(filter_episode(ep, seg.params)))
-        meter.update(
-            pred, torch.from_numpy(ep.labels.astype(np.int64)), torch.from_numpy(ep.visible)
-        )
-        for k, s in enumerate(ep.steps):
-            preds[(ep.seed, int(s))] = pred[k].numpy()
-    return meter, preds
-
-
-def _goal(segs: dict[str, Any], kinds: dict[str, str]) -> dict[str, Any] | None:
-    def best(kind: str) -> str | None:
-        cands = [k for k in segs if kinds[k] == kind and segs[k]["all"]["miou"] is not None]
-        return max(cands, key=lambda k: segs[k]["all"]["miou"]) if cands else None
-
-    bl, bd = best("learned"), best("dst")
-    if bl is None or bd is None:
-        return None
-    m = segs[bl]["all"]
-    margin = m["miou"] - segs[bd]["all"]["miou"]
-    mov, sta = m["iou"]["moving"], m["iou"]["static"]
-    return {
-        "best_learned": bl,
-        "best_learned_miou": m["miou"],
-        "best_dst": bd,
-        "best_dst_miou": segs[bd]["all"]["miou"],
-        "margin": margin,
-        "margin_met": margin >= 0.15,
-        "moving_iou": mov,
-        "moving_met": mov is not None and mov >= 0.6,
-        "static_iou": sta,
-        "static_met": sta is not None and sta >= 0.5,
-    }
+def _deep_update(base: dict[str, Any], over: Mapping[str, Any]) -> dict[str, Any]:
+    out = dict(base)
+    for k, v in over.items():
+        out[k] = _deep_update(out.get(k, {}), v) if isinstance(v, Mapping) else v
+    return out
 
 
 def run_benchmark(
@@ -257,6 +356,7 @@ def run_benchmark(
     preset: str = "custom",
     command: str | None = None,
     checkpoints: Sequence[str | Path] = (),
+    split: str = "test",
 ) -> dict[str, Any]:
     """Run the whole benchmark and write its report into ``out``.
 
@@ -270,13 +370,19 @@ def run_benchmark(
         command: command line recorded in the report.
         checkpoints: trained networks (``dstenv train``) scored besides ``models``; on
             evaluation-only data (module docstring) the only learned segmenters.
+        split: the split scored (``"test"``; a KITTI conversion may use another name).
 
     Returns:
         The JSON-compatible results (also in ``out/results.json``).
     """
     from dstenv.data import ShardDataset
+    from dstenv.segment.plan import plan_segmenters, split_drives
+    from dstenv.segment.score import score
+    from dstenv.segment.train import resolve_device
 
     cfg = merge_config(default_benchmark_config(), dict(config), "benchmark")
+    _check(cfg)
+    protocol_overrides(cfg["protocol"])  # fail before any work
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     device = resolve_device(cfg["device"])
@@ -285,126 +391,68 @@ def run_benchmark(
     if data_dir is None:
         data_dir = out / "data"
         log(f"generating {cfg['data']['frames']} frames into {data_dir}")
-        _generate(cfg["data"], data_dir, progress)
+        _generate(cfg["data"], cfg["protocol"], data_dir, progress)
     data_dir = Path(data_dir)
     timings["data_s"] = time.perf_counter() - t
 
-    test_ds = ShardDataset(data_dir, split="test", inputs="fcn10")
+    test_ds = ShardDataset(data_dir, split=split, inputs="fcn10")
     if len(test_ds) == 0:
-        raise ValueError(f"{data_dir}: no test frames (no shard of split 'test')")
-    train_ds = ShardDataset(data_dir, split="train", inputs="fcn10")
-    val_ds = ShardDataset(data_dir, split="val", inputs="fcn10")
-    source = shard_attrs(test_ds.files).get("source", "sim")
-    if len(train_ds) == 0 or source == "kitti":
-        from dstenv.segment.stored import evaluate_stored
-
-        results, frames, preds = evaluate_stored(
-            cfg, test_ds, checkpoints, device, progress, log, source
-        )
-        results = {"preset": preset, "command": command, **results}
-        results["data"]["dir"] = str(data_dir)
-        results["timings_s"] = {**timings, **results["timings_s"]}
-        segs = results["segmenters"]
-        results["goal"] = _goal(segs, {k: v["kind"] for k, v in segs.items()})
-        report.write_report(results, out, frames, None, preds, cfg["examples"])
-        return results
-    extra = load_checkpoints(checkpoints, device=device, taken=cfg["models"])  # fail early
-    test_frames, gen_config = split_index(test_ds.files)
-    train_frames, train_config = split_index(train_ds.files)
-    if train_config != gen_config:
-        raise ValueError(
-            f"{data_dir}: train and test shards were generated with different configurations"
-        )
-    gen_params = DSTParams.from_dict(gen_config["dst"])
-    segs: dict[str, Any] = {}
-    kinds: dict[str, str] = {}
-    described: dict[str, Any] = {}
-    preds: dict[str, dict[tuple[int, int], np.ndarray]] = {}
-
-    # DST: replay the test episodes once, check, then one filter run per parameter set
+        raise ValueError(f"{data_dir}: no test frames (no shard of split {split!r})")
+    datasets = {s: ShardDataset(data_dir, split=s, inputs="fcn10") for s in ("train", "val")}
     t = time.perf_counter()
-    test_eps = record_episodes(gen_config, episode_targets(test_frames), progress)
-    for ep in test_eps[:2]:
-        check_replay(ep, *stored_inputs(test_frames, ep.seed, ep.steps), gen_params)
-    dst_segs = [create_segmenter("dst", preset=p) for p in cfg["dst_presets"]]
+    drives = split_drives(test_ds, len(datasets["train"]) == 0, progress, log,
+                          int(cfg["score_from_step"]))
     timings["replay_test_s"] = time.perf_counter() - t
-    if cfg["tune"]["params"]:
-        dst_segs.append(create_segmenter("dst-tuned", params=cfg["tune"]["params"]))
-    elif cfg["tune"]["enabled"]:
-        t = time.perf_counter()
-        train_eps = record_episodes(
-            gen_config, episode_targets(train_frames, cfg["tune"]["episodes"]), progress
-        )
-        dst_segs.append(
-            create_segmenter(
-                "dst-tuned",
-                episodes=train_eps,
-                budget=cfg["tune"]["budget"],
-                seed=cfg["tune"]["seed"],
-                progress=progress,
-            )
-        )
-        timings["tune_s"] = time.perf_counter() - t
-        log(
-            f"dst-tuned: train mIoU {dst_segs[-1].info['tuning']['start_miou']:.3f} (default) -> "
-            f"{dst_segs[-1].info['tuning']['best_miou']:.3f}"
-        )
+    plan = plan_segmenters(cfg, drives, datasets, checkpoints, device, out, progress, log,
+                           timings)
     t = time.perf_counter()
-    for seg in dst_segs:
-        meter, preds[seg.label] = _score_dst(seg, test_eps)
-        segs[seg.label], kinds[seg.label], described[seg.label] = (
-            meter.summary(CLASSES),
-            "dst",
-            seg.describe(),
-        )
-    timings["dst_eval_s"] = time.perf_counter() - t
-
-    # learned models: train on train, select on val, score on the stored test frames
-    histories, learned = {}, []
-    for name in cfg["models"]:
-        t = time.perf_counter()
-        tcfg = dict(cfg["train"])
-        tcfg.update(model=name, model_kwargs=cfg["model_kwargs"].get(name, {}), device=str(device))
-        mdir = out / "models" / name
-        _, histories[name] = train(
-            tcfg, train_ds, val_ds if len(val_ds) else None, mdir, progress=progress, log=log
-        )
-        timings[f"train_{name}_s"] = time.perf_counter() - t
-        learned.append(load_segmenter(mdir / "best.pt", device))
-    for seg in learned + extra:
-        meter = evaluate(seg, batches(test_ds, cfg["eval_batch_size"]), progress=progress)
-        segs[seg.label], kinds[seg.label], described[seg.label] = (
-            meter.summary(CLASSES),
-            "learned",
-            {**seg.describe(), **({"checkpoint": seg.checkpoint} if seg in extra else {})},
-        )
-        preds[seg.label] = {}
-        for k in sorted(report.example_ids(test_frames, cfg["examples"])):  # for the example figure
-            fr = test_frames[k]
-            x = torch.as_tensor(test_ds[k]["x"])[None]
-            preds[seg.label][(fr["seed"], fr["step"])] = seg.predict(x)[0].numpy()
-
-    results = {
-        "preset": preset,
+    example_keys = report.example_keys(drives.episodes, cfg["examples"])
+    scores = score(plan.segmenters, drives.episodes, drives.generation_params,
+                   cfg["eval_batch_size"], example_keys, progress)
+    timings["score_s"] = time.perf_counter() - t
+    for label, why in scores.unscored.items():
+        plan.unscored[label] = why
+    segs, confusion, weights = segmenter_results(
+        scores, plan.kinds, plan.described, plan.seed_groups,
+        cfg["bootstrap"]["resamples"], cfg["bootstrap"]["seed"],
+    )
+    curve = {label: segs.pop(label) for label in plan.curve if label in segs}
+    first = next(iter(scores.confusion.values()), None)
+    shares = {} if first is None else {
+        sc: dict(zip(CLASSES, (first[sc].sum((0, 2)) / max(int(first[sc].sum()), 1)).tolist()))
+        for sc in first
+    }
+    results: dict[str, Any] = {
+        "schema": SCHEMA_VERSION,
+        "preset": None if drives.evaluation_only else preset,
         "command": command,
+        "date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
         "config": cfg,
-        "data": {
-            "dir": str(data_dir),
-            "train_frames": len(train_frames),
-            "val_frames": len(val_ds),
-            "test_frames": len(test_frames),
-            "test_episodes": len(test_eps),
-            "train_episodes": len({f["seed"] for f in train_frames}),
-            "grid_shape": list(test_eps[0].sensor.shape[1:]),
-            "cell_size": test_eps[0].cell_size,
-            "generation_dst_params": gen_params.to_dict(),
-        },
-        "segmenters": {
-            k: {**v, "kind": kinds[k], "describe": described[k]} for k, v in segs.items()
-        },
-        "histories": histories,
+        "data": {**drives.describe(), "dir": str(data_dir),
+                 "train_frames": len(datasets["train"]), "val_frames": len(datasets["val"]),
+                 "observed_definition": scores.observed_definition,
+                 "class_shares": shares,
+                 "no_map_ties": tie_summary(scores)},
+        "segmenters": segs,
+        "curve": [{"train_frames": plan.curve[label], "label": label, **curve[label]}
+                  for label in sorted(curve, key=lambda k: plan.curve[k])],
+        "search": plan.search,
+        "unscored": plan.unscored,
+        "histories": plan.histories,
         "timings_s": timings,
     }
-    results["goal"] = _goal(segs, kinds)
-    report.write_report(results, out, test_frames, test_eps, preds, cfg["examples"])
+    if drives.evaluation_only:
+        ref = next((k for k in segs if segs[k]["kind"] == "dst"
+                    and segs[k]["describe"]["params"] == drives.generation_params.to_dict()),
+                   None)
+        results["goal"] = None
+        results["real_goal"] = (real_goal(segs, confusion, weights, ref)
+                                if drives.source == "kitti" and ref else None)
+    else:
+        results["goal"] = goal(segs, confusion, weights)
+    report.write_report(results, out, drives.episodes, drives.generation_params,
+                        scores.examples)
+    if plan.search:
+        report.write_json(out / "search.json", {"command": command, "date": results["date"],
+                                                "preset": preset, **plan.search})
     return results

@@ -21,6 +21,13 @@ def _json_arg(text: str) -> dict[str, Any]:
     return value
 
 
+def _sequence_list(text: str) -> list[str]:
+    names = [s.strip() for s in text.split(",") if s.strip()]
+    if not names:
+        raise argparse.ArgumentTypeError("expected a comma-separated list like 0003,0005")
+    return names
+
+
 def _train(args: argparse.Namespace) -> int:
     from dstenv.config import CLIError
     from dstenv.data import ShardDataset, StreamingDataset
@@ -35,6 +42,12 @@ def _train(args: argparse.Namespace) -> int:
     for key in ("epochs", "batch_size", "lr", "loss", "crop", "num_workers", "weight_power"):
         if getattr(args, key) is not None:
             cfg[key] = getattr(args, key)
+    if args.init:
+        from dstenv.segment.checkpoint import load_checkpoint
+
+        spec = load_checkpoint(args.init)["spec"]  # one-line errors for a bad file
+        # fine-tuning continues the checkpoint's network, whatever --model says
+        cfg.update(init=str(args.init), model=spec["model"], model_kwargs=spec["model_kwargs"])
     if args.stream is not None:
         if not args.steps_per_epoch:
             raise CLIError("--stream needs --steps-per-epoch (a stream has no end)")
@@ -73,40 +86,115 @@ def _train(args: argparse.Namespace) -> int:
     return 0
 
 
-def _benchmark(args: argparse.Namespace) -> int:
-    from dstenv.data.cli import parse_set
-    from dstenv.segment.benchmark import preset_config, run_benchmark
+def _params_value(text: Any, key: str, row: str) -> Any:
+    """``tune.params`` / ``complete.params`` given as JSON (as results.json prints it)
+    or ``@FILE``: a JSON file holding the parameters, a segmenter entry, or a whole
+    results.json (its ``row`` segmenter is used)."""
+    from dstenv.config import CLIError
 
-    overrides = parse_set(args.set or [])
-    cfg = preset_config(args.preset, overrides)
-    parts = ["dstenv", "benchmark", "--preset", args.preset, "--out", args.out]
+    if not isinstance(text, str):
+        return text
+    if text.startswith("@"):
+        path = Path(text[1:])
+        try:
+            value = json.loads(path.read_text())
+        except (OSError, json.JSONDecodeError) as exc:
+            raise CLIError(f"--set {key}=@{path}: cannot read JSON ({exc})") from None
+        if isinstance(value, dict) and "segmenters" in value:
+            if row not in value["segmenters"]:
+                raise CLIError(f"--set {key}=@{path}: results.json has no {row!r} row")
+            value = value["segmenters"][row]
+        return value
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError:
+        raise CLIError(
+            f"--set {key}={text!r}: expected a JSON object, a TOML inline table or @FILE"
+        ) from None
+
+
+def benchmark_command(args: argparse.Namespace) -> str:
+    """The command line of a benchmark run, as recorded in its report."""
+    parts = ["dstenv", "benchmark"]
+    parts += ["--preset", args.preset] if args.preset else []
+    parts += ["--protocol", args.protocol] if getattr(args, "protocol", None) else []
+    parts += ["--out", args.out]
     parts += ["--data", args.data] if args.data else []
+    if getattr(args, "kitti", None):
+        parts += ["--kitti", args.kitti, "--sequences", ",".join(args.sequences or [])]
+        parts += ["--osm", args.osm] if args.osm else []
+        parts += ["--finetune-frames", str(args.finetune_frames)] if args.finetune_frames else []
     for ckpt in args.checkpoint:
         parts += ["--checkpoint", ckpt]
     for item in args.set or []:
         parts += ["--set", item]
-    command = " ".join(shlex.quote(a) for a in parts)
+    return " ".join(shlex.quote(a) for a in parts)
+
+
+def run_cli_benchmark(args: argparse.Namespace, split: str = "test") -> dict[str, Any]:
+    """Shared by ``dstenv benchmark`` and ``dstenv kitti evaluate``: config, run, print."""
+    from dstenv.data.cli import parse_set
+    from dstenv.segment.benchmark import preset_config, run_benchmark
+
+    overrides = parse_set(args.set or [])
+    for section, row in (("tune", "dst-tuned"), ("complete", "dst-complete")):
+        node = overrides.get(section, {})
+        if "params" in node:
+            node["params"] = _params_value(node["params"], f"{section}.params", row)
+    if getattr(args, "protocol", None):
+        overrides["protocol"] = args.protocol
+    cfg = preset_config(args.preset or "cpu", overrides)
     results = run_benchmark(
         cfg,
         args.out,
         data_dir=args.data,
         progress=not args.quiet,
         log=(lambda m: None) if args.quiet else print,
-        preset=args.preset,
-        command=command,
+        preset=args.preset or "cpu",
+        command=benchmark_command(args),
         checkpoints=args.checkpoint,
+        split=split,
     )
     out = Path(args.out)
     print((out / "results.md").read_text())
     print(f"wrote {out / 'results.json'}, {out / 'results.md'}, {out / 'figures'}/*.png")
+    return results
+
+
+def _with_real(args: argparse.Namespace, results: dict[str, Any]) -> dict[str, Any]:
+    """``--kitti``: score the run's segmenters on real drives, in the same report."""
+    from dstenv.config import CLIError
+    from dstenv.segment import report
+    from dstenv.segment.real import real_benchmark
+
+    if not args.sequences:
+        raise CLIError("--kitti needs --sequences LIST (e.g. 0003)")
+    if results["data"].get("evaluation_only"):
+        raise CLIError("--kitti adds real drives to a simulated benchmark; --data is "
+                       "evaluation-only data already (score it with dstenv benchmark --data)")
+    out = Path(args.out)
+    real = real_benchmark(results, out, args.kitti, args.sequences, args.osm,
+                          args.finetune_frames, progress=not args.quiet,
+                          log=(lambda m: None) if args.quiet else print)
+    results["kitti"] = {k: real[k] for k in ("real", "data", "segmenters", "unscored",
+                                             "real_goal")}
+    report.write_json(out / "results.json", results)
+    section = report.markdown_table({**real, "command": None})
+    section = "\n".join(("#" + line) if line.startswith("#") else line
+                        for line in section.splitlines())
+    md = (out / "results.md").read_text()
+    (out / "results.md").write_text(md.rstrip("\n") + "\n\n" + section + "\n")
+    print(section)
+    return results
+
+
+def _benchmark(args: argparse.Namespace) -> int:
+    results = run_cli_benchmark(args)
+    if args.kitti:
+        results = _with_real(args, results)
     goal = results.get("goal")
-    return (
-        0
-        if goal is None
-        or not args.check_goal
-        or (goal["margin_met"] and goal["moving_met"] and goal["static_met"])
-        else 1
-    )
+    ok = goal is None or (goal["margin_met"] and goal["moving_met"] and goal["static_met"])
+    return 0 if ok or not args.check_goal else 1
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -162,6 +250,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--num-workers", type=int, help="DataLoader workers")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--device", default="auto", help="cpu, cuda or auto (default)")
+    p.add_argument(
+        "--init",
+        metavar="CKPT",
+        help="start from this checkpoint's weights (fine-tuning, e.g. a simulated-data model "
+        "on a few labelled real frames); its model and builder options are used",
+    )
     p.add_argument("--no-resume", action="store_true", help="start over even if last.pt exists")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=_train)
@@ -178,10 +272,18 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     b.add_argument(
         "--preset",
-        default="cpu",
+        default=None,
         choices=sorted(PRESETS),
-        help="cpu: <= 30 min on a 2-core CPU (default); gpu: the full benchmark; "
-        "smoke: every stage in about a minute (CI); tiny: the test suite's run",
+        help="cpu: <= 30 min on a 2-core CPU (default); gpu: the full benchmark (3 seeds); "
+        "curve: training-set sizes 140/1400/14000; smoke: every stage in about a minute "
+        "(CI); tiny: the test suite's run",
+    )
+    b.add_argument(
+        "--protocol",
+        choices=("sim", "paper"),
+        default=None,
+        help="paper: the paper's protocol for the generated data (1 Hz fusion, camera-FOV "
+        "labels, KITTI moving rule, imperfect map; docs/benchmark.md)",
     )
     b.add_argument("--out", default="benchmark-out", metavar="DIR", help="output directory")
     b.add_argument("--data", metavar="DIR", help="use existing shards instead of generating")
@@ -196,8 +298,18 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--set",
         action="append",
         metavar="KEY=VALUE",
-        help="override a preset value, e.g. train.epochs=3 or data.frames=500 (repeatable)",
+        help="override a preset value, e.g. train.epochs=3 or data.frames=500; "
+        "tune.params / complete.params also take JSON or @results.json (repeatable)",
     )
+    b.add_argument("--kitti", metavar="ROOT",
+                   help="also score the run's segmenters on these real KITTI tracking drives "
+                   "(converted into OUT/kitti; a section of the same report)")
+    b.add_argument("--sequences", type=_sequence_list, metavar="LIST",
+                   help="KITTI sequences for --kitti, e.g. 0003,0005")
+    b.add_argument("--osm", metavar="FILE", help="OpenStreetMap file for --kitti (default: no map)")
+    b.add_argument("--finetune-frames", type=int, default=0, metavar="N",
+                   help="with --kitti: fine-tune the best network on the first N labelled frames "
+                   "of each sequence and score every row from frame N+10 on")
     b.add_argument("--check-goal", action="store_true", help="exit 1 if the README goal is not met")
     b.add_argument("--quiet", action="store_true")
     b.set_defaults(func=_benchmark)

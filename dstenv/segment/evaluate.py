@@ -1,32 +1,27 @@
-"""Scoring segmenters on stored frames: confusion matrices over all and visible cells.
+"""Networks on stored frames: loading checkpoints, quick confusion matrices.
 
-Shared by ``dstenv benchmark`` and ``dstenv kitti evaluate``: :func:`load_checkpoints`
-(trained networks, checked against the data's input channels),
-:func:`stored_dst_segmenter` (argmax of the stored BetP, with the parameters the
-shards were made with) and :func:`score_segmenters`.
+:func:`load_checkpoints` loads trained networks checked against the data's input
+channels (used by the benchmark); :func:`evaluate` scores one segmenter on
+batches of a dataset (training scripts' quick check). Benchmark numbers come from
+:func:`dstenv.segment.score.score` only.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 from pathlib import Path
-from typing import Any
 
 import torch
 from tqdm import tqdm
 
 from dstenv.dst.frame import CLASSES
-from dstenv.dst.params import DSTParams
 from dstenv.segment.metrics import ConfusionMeter
-from dstenv.segment.segmenters import DSTSegmenter, Segmenter, TorchSegmenter
+from dstenv.segment.segmenters import Segmenter, TorchSegmenter
 
 __all__ = [
     "evaluate",
     "batches",
     "load_checkpoints",
-    "stored_dst_segmenter",
-    "score_segmenters",
-    "dst_preset_name",
 ]
 
 
@@ -61,27 +56,6 @@ def evaluate(
         pred = segmenter.predict(torch.as_tensor(batch["x"]))
         meter.update(pred, torch.as_tensor(batch["labels"]), torch.as_tensor(batch["visible"]))
     return meter
-
-
-def dst_preset_name(params: DSTParams) -> str | None:
-    """``"default"`` or ``"paper"`` if ``params`` equal that preset, else ``None``."""
-    for name in ("default", "paper"):
-        if DSTParams.preset(name) == params:
-            return name
-    return None
-
-
-def stored_dst_segmenter(config: dict[str, Any], label: str | None = None) -> DSTSegmenter:
-    """The DST baseline on stored BetP: its parameters are the shards' ``config["dst"]``.
-
-    Args:
-        config: the shards' configuration (``split_index(...)[1]``).
-        label: table label; default ``"dst (<preset>)"``, or ``"dst (stored)"`` when
-            the parameters match no preset.
-    """
-    params = DSTParams.from_dict(config.get("dst", {}))
-    name = dst_preset_name(params) or "stored"
-    return DSTSegmenter(params, "dst", label or f"dst ({name})")
 
 
 def load_checkpoints(
@@ -122,27 +96,3 @@ def load_checkpoints(
         if names.count(seg.label) > 1:
             seg.label = f"{seg.label} ({seg.checkpoint})"
     return segs
-
-
-def score_segmenters(
-    segmenters: Sequence[Segmenter],
-    dataset: Any,
-    batch_size: int = 8,
-    progress: bool = False,
-) -> dict[str, ConfusionMeter]:
-    """Score every segmenter on the same stored frames.
-
-    Args:
-        segmenters: each reads the dataset's ``x`` as is (stored BetP t / t-1).
-        dataset: a map-style dataset of ``{"x", "labels", "visible"}`` (e.g.
-            :class:`dstenv.data.ShardDataset` with ``inputs="fcn10"``).
-        batch_size: frames per batch.
-        progress: tqdm bars.
-
-    Returns:
-        label -> :class:`ConfusionMeter`, in ``segmenters`` order.
-    """
-    return {
-        seg.label: evaluate(seg, batches(dataset, batch_size), progress=progress)
-        for seg in segmenters
-    }

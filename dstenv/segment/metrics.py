@@ -5,9 +5,11 @@ Every metric here is a function of one ``(C, C) int64`` confusion matrix ``cm`` 
 ``p`` (rows: ground truth, columns: prediction, as in the paper's Fig. 7). Cells
 labelled :data:`dstenv.frame.IGNORE_INDEX` never enter the matrix.
 
-A class with an empty denominator (e.g. no true and no predicted cell for IoU) has
-the value ``nan`` and is left out of the mean, so a class absent from a test split
-neither helps nor hurts the mean.
+IoU and recall are defined only for classes present in the labels (``cm[t].sum() >
+0``); a class absent from the labels has IoU ``nan`` (``None`` in summaries) even
+when some segmenter predicts it, and mIoU is the mean over the classes present in
+the labels. Every segmenter scored on the same cells therefore averages over the
+same class set, and a class absent from a test split neither helps nor hurts.
 """
 
 from __future__ import annotations
@@ -88,13 +90,18 @@ def _safe_div(num: np.ndarray, den: np.ndarray) -> np.ndarray:
 
 
 def iou_per_class(cm: np.ndarray) -> np.ndarray:
-    """Intersection over union ``TP / (TP + FP + FN)`` per class: ``(C,) float64``."""
+    """Intersection over union ``TP / (TP + FP + FN)`` per class: ``(C,) float64``.
+
+    ``nan`` for a class absent from the labels (module docstring).
+    """
     tp = np.diag(cm)
-    return _safe_div(tp, cm.sum(0) + cm.sum(1) - tp)
+    iou = _safe_div(tp, cm.sum(0) + cm.sum(1) - tp)
+    iou[cm.sum(1) == 0] = np.nan
+    return iou
 
 
 def mean_iou(cm: np.ndarray) -> float:
-    """Mean of :func:`iou_per_class` over classes where it is defined (nan if none)."""
+    """Mean of :func:`iou_per_class` over the classes present in the labels (nan if none)."""
     iou = iou_per_class(cm)
     return float(np.nanmean(iou)) if np.isfinite(iou).any() else float("nan")
 

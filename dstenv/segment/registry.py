@@ -12,6 +12,7 @@ name               kind     what
 =================  =======  ==========================================================
 ``dst``            dst      argmax BetP; ``preset="default"|"paper"`` or ``params=``
 ``dst-tuned``      dst      DST parameters searched on training episodes for mIoU
+``dst-complete``   dst      DST + kerb-aligned vehicle boxes (:mod:`.complete`)
 ``unet-light``     learned  small U-Net (~0.48 M parameters), CPU-trainable
 ``unet-temporal``  learned  U-Net with separate t and t-1 streams (paper's future work)
 ``fcn8s-vgg16``    learned  the paper's FCN-8s (VGG-16 body, 10 -> 3 input conv)
@@ -70,6 +71,17 @@ def _make_dst_tuned(
     return DSTSegmenter(best, "dst-tuned", "dst-tuned", info={"tuning": trace})
 
 
+def _make_dst_complete(
+    params: DSTParams | dict | None = None, cell_size: float = 0.33,
+    completion: dict | None = None,
+) -> DSTSegmenter:
+    from dstenv.segment.complete import DSTCompleteSegmenter
+
+    p = DSTParams.default() if params is None else (
+        params if isinstance(params, DSTParams) else DSTParams.from_dict(params))
+    return DSTCompleteSegmenter(p, cell_size, completion)
+
+
 def _learned(model_name: str) -> Callable[..., TorchSegmenter]:
     def factory(
         in_channels: int = 10, num_classes: int = 5, device: str = "cpu", **model_kwargs: Any
@@ -89,6 +101,9 @@ SEGMENTERS: Registry[SegmenterEntry] = Registry("segmenter", "", {
     "dst": SegmenterEntry(_make_dst, "dst", "argmax of the pignistic probability (pure DST)"),
     "dst-tuned": SegmenterEntry(
         _make_dst_tuned, "dst", "DST parameters tuned on the training split"
+    ),
+    "dst-complete": SegmenterEntry(
+        _make_dst_complete, "dst", "DST plus kerb-aligned car-sized boxes (geometric completion)"
     ),
     **{name: SegmenterEntry(_learned(name), "learned", _describe(builder))
        for name, builder in MODELS.items()},

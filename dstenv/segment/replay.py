@@ -49,6 +49,8 @@ __all__ = [
     "episode_targets",
     "stored_inputs",
     "filter_period",
+    "generation_params",
+    "SCHEDULE_KEYS",
     "stored_episodes",
     "shard_attrs",
 ]
@@ -59,7 +61,7 @@ class Episode:
     """Raw inputs of one drive and its labels at the scored steps.
 
     Attributes:
-        seed: the episode (map) seed.
+        seed: the map seed of the drive.
         sensor: ``(T, H, W) uint8`` sensor grid at every step 0..T-1.
         gis: ``(T, H, W) uint8`` GIS grid at every step.
         poses: ``(T, 3) float64`` ego pose at every step.
@@ -67,6 +69,21 @@ class Episode:
         labels: ``(K, H, W) uint8`` labels at the scored steps.
         visible: ``(K, H, W) bool`` visible cells at the scored steps.
         cell_size: grid cell size [m].
+        episode: index of the episode on its map (``episodes_per_map > 1`` drives one
+            map several times, :mod:`dstenv.data.sampling`); a frame's key is
+            ``(seed, episode, step)``.
+        stored_x: optional ``(K, 10, H, W) float32`` stored BetP t / t-1 at the scored
+            steps (what the networks were trained on); ``None``: recompute it.
+        history: ``True`` when ``sensor``/``gis``/``poses`` hold every filtered step
+            from the first one on, so the filter can be re-run with other parameters
+            and the observed cells accumulated; ``False`` for stored frames only
+            (then ``stored_x`` is required and ``steps = arange(K)``).
+        period: the filter fuses steps ``0, period, 2 period, ...`` only (the paper's
+            1 Hz fusion: ``dst.update_every``); t-1 is then the previous fused grid.
+            Scored steps must be fused steps.
+        stored_steps: optional ``(K,) int64`` step numbers of the scored frames in
+            their source when ``steps`` index stored frames instead (``None``: the
+            same as ``steps``).
     """
 
     seed: int
@@ -77,6 +94,21 @@ class Episode:
     labels: np.ndarray
     visible: np.ndarray
     cell_size: float
+    episode: int = 0
+    stored_x: np.ndarray | None = None
+    history: bool = True
+    period: int = 1
+    stored_steps: np.ndarray | None = None
+
+    @property
+    def key(self) -> tuple[int, int]:
+        """``(seed, episode)``: identifies the drive among those of a split."""
+        return (self.seed, self.episode)
+
+    def frame_key(self, k: int) -> tuple[int, int, int]:
+        """``(seed, episode, step)`` of scored frame ``k`` (its step in the source)."""
+        steps = self.steps if self.stored_steps is None else self.stored_steps
+        return (self.seed, self.episode, int(steps[k]))
 
     def __post_init__(self) -> None:
         t = self.sensor.shape[0]
@@ -93,14 +125,24 @@ class Episode:
             raise ValueError(
                 f"episode {self.seed}: {len(self.steps)} steps but labels {self.labels.shape}"
             )
+        if self.period < 1 or (self.history and np.any(self.steps % self.period)):
+            raise ValueError(
+                f"episode {self.key}: scored steps must be multiples of the fusion period "
+                f"{self.period}"
+            )
+        if not self.history and self.stored_x is None:
+            raise ValueError(f"episode {self.key}: stored frames only need stored_x")
 
 
 def filter_episode(episode: Episode, params: DSTParams) -> np.ndarray:
     """Run the DST filter over an episode.
 
+    The filter fuses every ``episode.period``-th step (the motion is taken from the
+    previous fused pose), and t-1 is the previous fused grid.
+
     Returns:
         ``(K, 10, H, W) float32``: BetP at each scored step t and at t-1 (BetP at t
-        again on step 0), the layout of :meth:`dstenv.frame.Frame.fcn_input`.
+        again on the first fused step), the layout of :meth:`dstenv.frame.Frame.fcn_input`.
     """
     from dstenv.dst.tracker import GridTracker
 
@@ -109,7 +151,7 @@ def filter_episode(episode: Episode, params: DSTParams) -> np.ndarray:
     out = np.empty((len(episode.steps), 10, h, w), dtype=np.float32)
     wanted = {int(s): k for k, s in enumerate(episode.steps)}
     last = int(episode.steps[-1]) if len(episode.steps) else -1
-    for t in range(last + 1):
+    for t in range(0, last + 1, episode.period):  # the fused steps only
         step = tracker.step(episode.sensor[t], episode.gis[t], episode.poses[t])
         if t in wanted:
             out[wanted[t], :5] = step.betp
@@ -119,40 +161,49 @@ def filter_episode(episode: Episode, params: DSTParams) -> np.ndarray:
 
 def record_episodes(
     config: Mapping[str, Any],
-    targets: Mapping[int, Sequence[int]],
+    targets: Mapping[tuple[int, int], Sequence[int]],
     progress: bool = False,
 ) -> list[Episode]:
     """Replay episodes with :class:`dstenv.pipeline.Pipeline` and keep their raw inputs.
 
+    Episode ``k >= 1`` of a map drives the map of ``Pipeline.reset(seed)`` again with
+    traffic from :func:`dstenv.data.sampling.traffic_seed` ``(seed, k)``, as
+    :func:`dstenv.data.sampling.iter_frames` generated it.
+
     Args:
         config: the full pipeline configuration the shards were generated with
             (their ``config`` attribute).
-        targets: episode seed -> steps to score (labels and ``visible`` are kept there).
+        targets: ``(map seed, episode)`` -> steps to score (labels and ``visible`` are
+            kept there).
         progress: show a tqdm bar.
 
     Returns:
-        One :class:`Episode` per seed, in ``sorted(targets)`` order.
+        One :class:`Episode` per target, in ``sorted(targets)`` order.
     """
     from tqdm import tqdm
 
+    from dstenv.data.sampling import traffic_seed
     from dstenv.pipeline import Pipeline
+    from dstenv.sim.world import World
 
-    if filter_period(config) != 1:
-        raise ValueError(
-            f"record_episodes: the shards fused every {filter_period(config)} steps "
-            "(protocol.update_every); replay re-fuses every step, so it cannot reproduce "
-            "them: generate with protocol.update_every = 1 to tune or re-score DST variants"
-        )
     pipe = Pipeline(dict(config))
     episodes = []
-    for seed in tqdm(sorted(targets), desc="replay episodes", disable=not progress, leave=False):
-        steps = np.array(sorted(set(int(s) for s in targets[seed])), dtype=np.int64)
+    for seed, k in tqdm(sorted(targets), desc="replay episodes", disable=not progress,
+                        leave=False):
+        steps = np.array(sorted(set(int(s) for s in targets[seed, k])), dtype=np.int64)
         frames = [pipe.reset(seed=int(seed))]
+        if k > 0:  # same map, new traffic (dstenv.data.sampling.iter_frames)
+            world = World(pipe.config["world"], 0, world_map=pipe.world.map)
+            run = Pipeline(pipe.config, world=world)
+            frames = [run.reset(traffic_seed(seed, k))]
+        else:
+            run = pipe
         while len(frames) <= steps[-1]:
-            frames.append(pipe.step())
+            frames.append(run.step())
         episodes.append(
             Episode(
                 seed=int(seed),
+                episode=int(k),
                 sensor=np.stack([f.sensor for f in frames]),
                 gis=np.stack([f.gis for f in frames]),
                 poses=np.stack([np.asarray(f.ego_pose, dtype=np.float64) for f in frames]),
@@ -160,6 +211,7 @@ def record_episodes(
                 labels=np.stack([frames[s].labels for s in steps]),
                 visible=np.stack([frames[s].visible for s in steps]),
                 cell_size=float(config["grid"]["cell_size"]),
+                period=filter_period(config),
             )
         )
     return episodes
@@ -204,10 +256,14 @@ def check_replay(
 def split_index(files: list[Path]) -> tuple[list[dict[str, Any]], dict[str, Any]]:
     """Frames of a list of shards (e.g. ``ShardDataset.files``) with their origin.
 
+    A frame's drive is ``(seed, episode)``: with several episodes per map
+    (:mod:`dstenv.data.sampling`) the step restarts at every episode of one map seed,
+    so ``episode`` counts those restarts within a shard (episodes never span shards).
+
     Returns:
-        ``(frames, config)``: ``frames`` lists ``{"file", "index", "seed", "step",
-        "moving"}`` in dataset order (entry k is ``ShardDataset[k]``); ``config`` is
-        the pipeline configuration the shards were generated with.
+        ``(frames, config)``: ``frames`` lists ``{"file", "index", "seed", "episode",
+        "step", "moving"}`` in dataset order (entry k is ``ShardDataset[k]``);
+        ``config`` is the pipeline configuration the shards were generated with.
 
     Raises:
         FileNotFoundError: no shard.
@@ -224,14 +280,23 @@ def split_index(files: list[Path]) -> tuple[list[dict[str, Any]], dict[str, Any]
                 config = r.attrs["config"]
             elif r.attrs["config"] != config:
                 raise ValueError(f"{f}: generated with another configuration than {files[0]}")
+            last: tuple[int, int] | None = None  # (seed, step) of the previous frame
+            episode = 0
             for i in range(len(r)):
                 d = r.get(i, ["seed", "step", "class_counts"])
+                seed, step = int(d["seed"]), int(d["step"])
+                if last is not None and last[0] == seed and step <= last[1]:
+                    episode += 1
+                elif last is not None and last[0] != seed:
+                    episode = 0
+                last = (seed, step)
                 frames.append(
                     {
                         "file": str(f),
                         "index": i,
-                        "seed": int(d["seed"]),
-                        "step": int(d["step"]),
+                        "seed": seed,
+                        "episode": episode,
+                        "step": step,
                         "moving": int(d["class_counts"][CLASSES.index("moving")]),
                     }
                 )
@@ -240,28 +305,35 @@ def split_index(files: list[Path]) -> tuple[list[dict[str, Any]], dict[str, Any]
 
 def episode_targets(
     frames: list[dict[str, Any]], max_episodes: int | None = None
-) -> dict[int, list[int]]:
-    """Episode seed -> stored steps, from :func:`split_index` frames.
+) -> dict[tuple[int, int], list[int]]:
+    """``(seed, episode)`` -> stored steps, from :func:`split_index` frames.
 
     Args:
         frames: as returned by :func:`split_index`.
         max_episodes: keep only the first this many episodes (in frame order).
     """
-    targets: dict[int, list[int]] = {}
+    targets: dict[tuple[int, int], list[int]] = {}
     for fr in frames:
-        if fr["seed"] not in targets and max_episodes is not None and len(targets) >= max_episodes:
+        key = (fr["seed"], fr["episode"])
+        if key not in targets and max_episodes is not None and len(targets) >= max_episodes:
             continue
-        targets.setdefault(fr["seed"], []).append(fr["step"])
+        targets.setdefault(key, []).append(fr["step"])
     return targets
 
 
 def stored_inputs(
-    frames: list[dict[str, Any]], seed: int, steps: np.ndarray
+    frames: list[dict[str, Any]], key: tuple[int, int], steps: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Stored ``(K, 10, H, W) float32`` BetP t/t-1 and ``(K, H, W) uint8`` labels of an episode."""
+    """Stored ``(K, 10, H, W) float32`` BetP t/t-1 and ``(K, H, W) uint8`` labels of a drive.
+
+    Args:
+        frames: as returned by :func:`split_index`.
+        key: the drive ``(seed, episode)``.
+        steps: ``(K,)`` stored steps of that drive.
+    """
     from dstenv.data.shards import ShardReader
 
-    by_step = {fr["step"]: fr for fr in frames if fr["seed"] == seed}
+    by_step = {fr["step"]: fr for fr in frames if (fr["seed"], fr["episode"]) == tuple(key)}
     xs, labs = [], []
     for s in steps:
         fr = by_step[int(s)]
@@ -269,54 +341,78 @@ def stored_inputs(
             d = r.get(fr["index"], ["pignistic", "pignistic_prev", "labels"])
         xs.append(np.concatenate([d["pignistic"], d["pignistic_prev"]]))
         labs.append(d["labels"])
-    return np.stack(xs), np.stack(labs)
+    return np.stack(xs).astype(np.float32), np.stack(labs)
+
+
+#: keys of a producer's ``dst`` section that schedule the filter, not DSTParams fields
+SCHEDULE_KEYS: tuple[str, ...] = ("update_every",)
 
 
 def filter_period(config: Mapping[str, Any]) -> int:
     """Steps between two DST updates of a shard's producer.
 
-    ``update_every`` of a KITTI conversion (:func:`dstenv.kitti.sequence.default_config`)
-    or ``protocol.update_every`` of the simulator (default 1: every step).
+    ``protocol.update_every`` of the simulator (the paper's protocol fuses at 1 Hz:
+    every 10 steps; ``dst.update_every`` is read too), or the top-level
+    ``update_every`` of a KITTI conversion (:func:`dstenv.kitti.sequence.default_config`);
+    1 when none is set.
     """
-    protocol = config.get("protocol", {})  # simulated shards: protocol.update_every
-    return int(config.get("update_every", protocol.get("update_every", 1)))
+    for section in ("protocol", "dst"):
+        sec = config.get(section, {}) or {}
+        if "update_every" in sec:
+            return int(sec["update_every"])
+    return int(config.get("update_every", 1))
+
+
+def generation_params(config: Mapping[str, Any]) -> DSTParams:
+    """The :class:`DSTParams` a producer's configuration used (its ``dst`` section
+    without the scheduling keys :data:`SCHEDULE_KEYS`)."""
+    dst = {k: v for k, v in (config.get("dst", {}) or {}).items() if k not in SCHEDULE_KEYS}
+    return DSTParams.from_dict(dst)
 
 
 def stored_episodes(
-    frames: list[dict[str, Any]], config: Mapping[str, Any]
+    frames: list[dict[str, Any]], config: Mapping[str, Any], require_history: bool = True
 ) -> tuple[list[tuple[Episode, np.ndarray]], str | None]:
-    """Episodes rebuilt from the stored inputs, if the shards hold every filtered step.
+    """Episodes rebuilt from the stored frames of evaluation-only data.
 
     Args:
         frames: as returned by :func:`split_index`.
         config: the shards' configuration (its ``grid.cell_size`` and
             :func:`filter_period` are used).
+        require_history: when some drive's stored steps are not ``0, p, 2p, ...``
+            (``p`` = :func:`filter_period`), return ``([], reason)`` if true; if false,
+            return episodes of the stored frames only (``history=False``: scorable
+            from their stored BetP, not re-filterable) and the reason.
 
     Returns:
-        ``(episodes, None)``: per episode seed (sorted), an :class:`Episode` whose
-        time axis is the stored frames (``steps = arange(K)``) and the ``(K,) int64``
-        stored step numbers; or ``([], reason)`` when some episode's stored steps are
-        not ``0, p, 2p, ...`` (``p`` = :func:`filter_period`), naming it.
+        ``(episodes, reason)``: per drive ``(seed, episode)`` (sorted), an
+        :class:`Episode` whose time axis is the stored frames (``steps = arange(K)``,
+        ``stored_x`` set) and the ``(K,) int64`` stored step numbers; ``reason`` is
+        ``None`` when every drive holds every filtered step, else why not.
     """
     from dstenv.data.shards import ShardReader
 
     period = filter_period(config)
-    by_seed: dict[int, list[dict[str, Any]]] = {}
+    by_key: dict[tuple[int, int], list[dict[str, Any]]] = {}
     for fr in frames:
-        by_seed.setdefault(fr["seed"], []).append(fr)
-    for seed in sorted(by_seed):
-        steps = np.array(sorted(fr["step"] for fr in by_seed[seed]), dtype=np.int64)
+        by_key.setdefault((fr["seed"], fr["episode"]), []).append(fr)
+    reason = None
+    for key in sorted(by_key):
+        steps = np.array(sorted(fr["step"] for fr in by_key[key]), dtype=np.int64)
         if not np.array_equal(steps, period * np.arange(len(steps))):
-            return [], (
-                f"episode {seed} stores steps {', '.join(map(str, steps[:4]))}"
+            reason = (
+                f"episode {key[0]} stores steps {', '.join(map(str, steps[:4]))}"
                 f"{', ...' if len(steps) > 4 else ''} but the DST filter ran on every "
                 f"{period} step(s) from 0: the filter state between stored frames is lost "
                 "(store every filtered frame, e.g. kitti convert --stride 1 --warmup 0)"
             )
+            break
+    if reason is not None and require_history:
+        return [], reason
     episodes = []
-    names = ["sensor", "gis", "ego_pose", "labels", "visible"]
-    for seed in sorted(by_seed):
-        rows = sorted(by_seed[seed], key=lambda fr: fr["step"])
+    names = ["sensor", "gis", "ego_pose", "labels", "visible", "pignistic", "pignistic_prev"]
+    for key in sorted(by_key):
+        rows = sorted(by_key[key], key=lambda fr: fr["step"])
         got: dict[str, list[np.ndarray]] = {n: [] for n in names}
         for fr in rows:
             with ShardReader(fr["file"]) as r:
@@ -324,7 +420,8 @@ def stored_episodes(
             for n in names:
                 got[n].append(np.asarray(d[n]))
         ep = Episode(
-            seed=int(seed),
+            seed=int(key[0]),
+            episode=int(key[1]),
             sensor=np.stack(got["sensor"]).astype(np.uint8),
             gis=np.stack(got["gis"]).astype(np.uint8),
             poses=np.stack(got["ego_pose"]).astype(np.float64),
@@ -332,9 +429,15 @@ def stored_episodes(
             labels=np.stack(got["labels"]).astype(np.uint8),
             visible=np.stack(got["visible"]).astype(bool),
             cell_size=float(config["grid"]["cell_size"]),
+            stored_x=np.concatenate(
+                [np.stack(got["pignistic"]), np.stack(got["pignistic_prev"])], axis=1
+            ).astype(np.float32),
+            history=reason is None,
+            period=1,  # the time axis is the stored (= fused) frames
+            stored_steps=np.array([fr["step"] for fr in rows], dtype=np.int64),
         )
-        episodes.append((ep, np.array([fr["step"] for fr in rows], dtype=np.int64)))
-    return episodes, None
+        episodes.append((ep, ep.stored_steps))
+    return episodes, reason
 
 
 def shard_attrs(files: list[Path]) -> dict[str, Any]:

@@ -1,8 +1,9 @@
 """Benchmark outputs: a Markdown table, JSON, and PNG figures (the paper's Tables 2-3, Figs. 6-8).
 
 Everything here reads the JSON-compatible ``results`` dict built by
-:func:`dstenv.segment.benchmark.run_benchmark` (plus a few arrays for the
-example grids), so a report can be redrawn from ``results.json`` alone.
+:func:`dstenv.segment.benchmark.run_benchmark` (schema: ``docs/benchmark.md``),
+plus the example grids, so the tables can be redrawn from ``results.json`` alone
+(``markdown_table(json.load(...))``).
 """
 
 from __future__ import annotations
@@ -22,7 +23,8 @@ from dstenv.segment.replay import Episode, filter_episode
 
 __all__ = [
     "write_report",
-    "example_ids",
+    "example_keys",
+    "plot_size_curve",
     "write_json",
     "markdown_table",
     "plot_confusions",
@@ -46,85 +48,193 @@ def _fmt(x: float | None) -> str:
     return "-" if x is None else f"{x:.3f}"
 
 
-def markdown_table(results: dict[str, Any]) -> str:
-    """The benchmark's tables: per-class IoU and mIoU, then accuracy/precision/recall.
+def _ci(x: float | None, ci: list[float] | None) -> str:
+    if x is None:
+        return "-"
+    return f"{x:.3f}" if ci is None else f"{x:.3f} [{ci[0]:.3f}, {ci[1]:.3f}]"
 
-    One block for all labelled cells and one for visible cells; one row per segmenter.
-    """
-    lines = [f"# Segmenter benchmark ({results.get('preset', 'custom')} preset)", ""]
-    data = results.get("data", {})
-    if data.get("evaluation_only"):
+
+_SCOPE_TITLES = {
+    "observed": "IoU over observed cells (headline: cells observed so far in the drive)",
+    "visible": "IoU over visible cells (observed in the current sweep)",
+    "all": "IoU over all labelled cells (amodal: includes never-observed cells, "
+    "i.e. shape completion)",
+}
+
+
+def _iou_table(segs: dict[str, Any], scope: str) -> list[str]:
+    lines = [
+        f"## {_SCOPE_TITLES[scope]}",
+        "",
+        "| segmenter | kind | " + " | ".join(CLASSES) + " | mIoU [95 % CI] |",
+        "|---|---|" + "---:|" * (len(CLASSES) + 1),
+    ]
+    for label, seg in segs.items():
+        m = seg[scope]
+        cis = m.get("ci", {}).get("iou", {})
+        cells = []
+        for c in CLASSES:
+            cells.append(_ci(m["iou"][c], cis.get(c)) if c in ("static", "moving")
+                         else _fmt(m["iou"][c]))
+        lines.append(
+            f"| {label} | {seg['kind']} | " + " | ".join(cells)
+            + f" | **{_ci(m['miou'], m.get('ci', {}).get('miou'))}** |"
+        )
+    return lines + [""]
+
+
+def _object_table(segs: dict[str, Any]) -> list[str]:
+    first = next(iter(segs.values()), {}).get("objects")
+    if not first:
+        return []
+    bands = first["static"]["bands"]
+    names = [f"{b['range_m'][0]:g}-{b['range_m'][1]:g} m" if b["range_m"][1] is not None
+             else f">= {b['range_m'][0]:g} m" for b in bands]
+    lines = [
+        "## Objects (observed cells): recall / precision of static and moving objects",
+        "",
+        "An object is a connected component of static (moving) labels with an observed "
+        "cell; recovered when most of its observed static-or-moving predictions have its "
+        "class. Overall values with 95 % CI, then recall by distance to the ego.",
+        "",
+        "| segmenter | R static | P static | R moving | P moving | "
+        + " | ".join(f"R static {n} | R moving {n}" for n in names) + " |",
+        "|---|" + "---:|" * (4 + 2 * len(names)),
+    ]
+    for label, seg in segs.items():
+        o = seg["objects"]
+        row = [_ci(o[c][k], o[c]["ci"][k]) for c in ("static", "moving")
+               for k in ("recall", "precision")]
+        for b in range(len(names)):
+            row += [_fmt(o[c]["bands"][b]["recall"]) for c in ("static", "moving")]
+        lines.append(f"| {label} | " + " | ".join(row) + " |")
+    counts = {c: first[c]["objects"] for c in ("static", "moving")}
+    lines += ["", f"Objects with an observed cell: static {counts['static']}, "
+              f"moving {counts['moving']}.", ""]
+    return lines
+
+
+def _prf_table(segs: dict[str, Any], scope: str) -> list[str]:
+    lines = [
+        f"## Accuracy, precision, recall over {scope} cells (precision/recall: class means)",
+        "",
+        "| segmenter | accuracy | precision | recall | "
+        + " | ".join(f"P {c} | R {c}" for c in ("static", "moving")) + " |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for label, seg in segs.items():
+        m = seg[scope]
+        lines.append(
+            f"| {label} | {_fmt(m['accuracy'])} | {_fmt(m['mean_precision'])} | "
+            f"{_fmt(m['mean_recall'])} | "
+            + " | ".join(f"{_fmt(m['precision'][c])} | {_fmt(m['recall'][c])}"
+                         for c in ("static", "moving")) + " |"
+        )
+    return lines + [""]
+
+
+def _goal_lines(goal: dict[str, Any] | None, real: dict[str, Any] | None) -> list[str]:
+    lines = []
+    if goal:
+        def met(ok: bool) -> str:
+            return "met" if ok else "NOT met"
+
         lines += [
-            f"Evaluation-only data ({data.get('source', '?')}): {data.get('test_frames', '?')} "
-            f"test frames from {data.get('test_episodes', '?')} episode(s)/sequence(s), no train "
-            f"split; grid {data.get('grid_shape', '?')} cells of {data.get('cell_size', '?')} m. "
-            "DST from the stored BetP (or the filter re-run over the stored inputs), learned "
-            "models from the given checkpoints.",
+            "## Goal (simulated test maps, observed cells)",
+            "",
+            f"Best network **{goal['best_learned']}** mIoU {_fmt(goal['best_learned_miou'])} vs "
+            f"best non-learned **{goal['best_baseline']}** {_fmt(goal['best_baseline_miou'])}: "
+            f"margin {_ci(goal['margin'], goal['margin_ci'])} (goal >= "
+            f"{goal['margin_goal']:.2f} with the interval above 0: {met(goal['margin_met'])}); "
+            f"moving IoU difference {_ci(goal['moving_diff'], goal['moving_diff_ci'])} "
+            f"({met(goal['moving_met'])}); static IoU difference "
+            f"{_ci(goal['static_diff'], goal['static_diff_ci'])} ({met(goal['static_met'])}).",
             "",
         ]
-    elif data:
-        lines += [
-            f"Test split: {data.get('test_frames', '?')} frames from "
-            f"{data.get('test_episodes', '?')} held-out map seeds (never used in training); "
-            f"train {data.get('train_frames', '?')} frames, "
-            f"val {data.get('val_frames', '?')}; grid {data.get('grid_shape', '?')} cells of "
-            f"{data.get('cell_size', '?')} m.",
-            "",
-        ]
-    for scope, title in (("all", "all labelled cells"), ("visible", "visible cells only")):
-        lines += [
-            f"## IoU over {title}",
-            "",
-            "| segmenter | " + " | ".join(CLASSES) + " | mIoU |",
-            "|---|" + "---:|" * (len(CLASSES) + 1),
-        ]
-        for label, seg in results["segmenters"].items():
-            m = seg[scope]
+    if real:
+        lines += ["## Goal (real data): networks vs pure DST, "
+                  f"{real['scope']} cells, reference {real['reference']}", ""]
+        for label, row in real["networks"].items():
             lines.append(
-                f"| {label} | "
-                + " | ".join(_fmt(m["iou"][c]) for c in CLASSES)
-                + f" | **{_fmt(m['miou'])}** |"
-            )
-        lines += [
-            "",
-            f"## Accuracy, precision, recall over {title} (precision/recall: class means)",
-            "",
-            "| segmenter | accuracy | precision | recall | "
-            + " | ".join(f"P {c} | R {c}" for c in ("static", "moving"))
-            + " |",
-            "|---|---:|---:|---:|---:|---:|---:|---:|",
-        ]
-        for label, seg in results["segmenters"].items():
-            m = seg[scope]
-            lines.append(
-                f"| {label} | {_fmt(m['accuracy'])} | {_fmt(m['mean_precision'])} | "
-                f"{_fmt(m['mean_recall'])} | "
-                + " | ".join(
-                    f"{_fmt(m['precision'][c])} | {_fmt(m['recall'][c])}"
-                    for c in ("static", "moving")
-                )
-                + " |"
+                f"- **{label}**: moving {_ci(row['moving']['diff'], row['moving']['ci'])}, "
+                f"static {_ci(row['static']['diff'], row['static']['ci'])} "
+                f"(goal >= {real['margin_goal']:.2f}: "
+                + ("met" if row["moving"]["met"] and row["static"]["met"] else "NOT met") + ")"
             )
         lines.append("")
+    return lines
+
+
+def markdown_table(results: dict[str, Any]) -> str:
+    """The report: headline (observed) table, objects, visible, amodal, goal.
+
+    One row per segmenter; 95 % intervals are a bootstrap over maps
+    (:mod:`dstenv.segment.stats`).
+    """
+    data = results.get("data", {})
+    if data.get("evaluation_only"):
+        src = data.get("source", "?")
+        lines = [f"# Segmenter benchmark on {src} data", "",
+                 f"Evaluation-only data ({src}): {data.get('test_frames', '?')} "
+                 f"frames from {data.get('test_episodes', '?')} drive(s), no train split; grid "
+                 f"{data.get('grid_shape', '?')} cells of {data.get('cell_size', '?')} m. DST "
+                 "from the stored BetP (or the filter re-run over the stored inputs), networks "
+                 "from the given checkpoints.", ""]
+    else:
+        lines = [f"# Segmenter benchmark ({results.get('preset') or 'custom'} preset)", ""]
+        if data:
+            lines += [
+                f"Test split: {data.get('test_frames', '?')} frames of "
+                f"{data.get('test_episodes', '?')} drives on {data.get('test_maps', '?')} "
+                f"held-out maps (never used in training, tuning or model selection); train "
+                f"{data.get('train_frames', '?')} frames, val {data.get('val_frames', '?')}; "
+                f"grid {data.get('grid_shape', '?')} cells of {data.get('cell_size', '?')} m; "
+                f"DST fused every {data.get('filter_period', 1)} step(s).", ""]
+    if data.get("observed_definition") == "visible":
+        lines += ["Observed cells = visible cells here: the stored frames do not hold the "
+                  "filter history needed to accumulate earlier sweeps.", ""]
+    segs = results["segmenters"]
+    lines += _iou_table(segs, "observed")
+    lines += _object_table(segs)
+    lines += _prf_table(segs, "observed")
+    lines += _iou_table(segs, "visible")
+    lines += _iou_table(segs, "all")
+    seeded = {k: v["seeds"] for k, v in segs.items() if "seeds" in v}
+    if seeded:
+        lines += ["## Training seeds (observed mIoU per seed, mean, t-interval)", ""]
+        for k, sd in seeded.items():
+            o = sd["observed"]
+            lines.append(f"- **{k}**: " + ", ".join(_fmt(v) for v in o["miou"])
+                         + f"; mean {_ci(o['miou_mean'], o['miou_ci'])}")
+        lines.append("")
+    if results.get("curve"):
+        lines += ["## Training-set size (observed cells)", "",
+                  "| train frames | mIoU [95 % CI] | static | moving |", "|---:|---:|---:|---:|"]
+        for row in results["curve"]:
+            o = row["observed"]
+            lines.append(f"| {row['train_frames']} | {_ci(o['miou'], o['ci']['miou'])} | "
+                         f"{_fmt(o['iou']['static'])} | {_fmt(o['iou']['moving'])} |")
+        lines.append("")
+    search = results.get("search")
+    if search:
+        vals = ", ".join(f"{r['value']}: {r['val_miou']:.3f}" for r in search["evaluations"])
+        lines += [f"Chosen on {search['validation_drives']} validation drives ({search['scope']} "
+                  f"mIoU of {search['model']}): {search['key']} = {search['chosen']} ({vals}); "
+                  "the search is in search.json.", ""]
+    ties = data.get("no_map_ties")
+    if ties and ties.get("tied_cells"):
+        lines += [f"BetP(building) = BetP(static) is the largest BetP in {ties['tied_cells']} "
+                  f"of {ties['labelled_cells']} labelled cells ({100 * ties['share']:.1f} %): "
+                  "without a map the two classes get the same mass; argmax gives the tie to "
+                  "building, so DST never predicts static there.", ""]
     if results.get("unscored"):
         lines += ["## Not scored", ""]
         lines += [f"- **{k}**: {why}" for k, why in results["unscored"].items()]
         lines.append("")
-    goal = results.get("goal")
-    if goal:
-        met = {k: "met" if goal[f"{k}_met"] else "NOT met" for k in ("margin", "moving", "static")}
-        lines += [
-            "## Goal",
-            "",
-            f"Best learned: **{goal['best_learned']}** mIoU {_fmt(goal['best_learned_miou'])}; "
-            f"best DST: **{goal['best_dst']}** mIoU {_fmt(goal['best_dst_miou'])}; "
-            f"margin {_fmt(goal['margin'])} (goal >= 0.15: {met['margin']}); "
-            f"moving IoU {_fmt(goal['moving_iou'])} (goal >= 0.6: {met['moving']}); "
-            f"static IoU {_fmt(goal['static_iou'])} (goal >= 0.5: {met['static']}).",
-            "",
-        ]
+    lines += _goal_lines(results.get("goal"), results.get("real_goal"))
     if results.get("command"):
-        lines += ["Reproduce with:", "", "```", results["command"], "```", ""]
+        lines += [f"Reproduce with (run of {results.get('date', '?')}):", "", "```",
+                  results["command"], "```", ""]
     return "\n".join(lines)
 
 
@@ -243,92 +353,80 @@ def plot_examples(examples: list[dict[str, Any]], path: str | Path) -> Path:
     return _save(fig, Path(path))
 
 
-def example_ids(frames: list[dict[str, Any]], n: int) -> set[int]:
-    """Frames with the most moving cells, one per episode (deterministic)."""
-    order = sorted(range(len(frames)), key=lambda k: (-frames[k]["moving"], k))
-    chosen, seeds = [], set()
-    for k in order:
-        if frames[k]["seed"] not in seeds:
-            chosen.append(k)
-            seeds.add(frames[k]["seed"])
-        if len(chosen) >= n:
-            break
-    return set(chosen)
+def example_keys(episodes: list[Episode], n: int) -> list[tuple[int, int, int]]:
+    """Frame keys ``(seed, episode, step)`` with the most moving cells, one per drive."""
+    moving = CLASSES.index("moving")
+    cands = []
+    for ep in episodes:
+        counts = (ep.labels == moving).reshape(len(ep.steps), -1).sum(1)
+        if len(counts):
+            k = int(np.argmax(counts))
+            cands.append((-int(counts[k]), ep.frame_key(k)))
+    return [key for _, key in sorted(cands)[:n]]
+
+
+def plot_size_curve(results: dict[str, Any], path: str | Path) -> Path:
+    """Observed-cell IoU (moving, static, mIoU with 95 % CI) against training frames."""
+    plt = _plt()
+    rows = results["curve"]
+    n = [r["train_frames"] for r in rows]
+    fig, ax = plt.subplots(figsize=(5, 3.4))
+    for key, style in (("miou", "-o"), ("moving", "--s"), ("static", "--^")):
+        vals = [r["observed"]["miou"] if key == "miou" else r["observed"]["iou"][key]
+                for r in rows]
+        ax.plot(n, [np.nan if v is None else v for v in vals], style, ms=4,
+                label="mIoU" if key == "miou" else f"IoU {key}")
+    lo = [r["observed"]["ci"]["miou"][0] if r["observed"]["ci"]["miou"] else np.nan for r in rows]
+    hi = [r["observed"]["ci"]["miou"][1] if r["observed"]["ci"]["miou"] else np.nan for r in rows]
+    ax.fill_between(n, lo, hi, alpha=0.2)
+    ax.set_xscale("log")
+    ax.set_xlabel("training frames")
+    ax.set_ylabel("observed-cell IoU")
+    ax.legend(fontsize=7)
+    return _save(fig, Path(path))
 
 
 def write_report(
     results: dict[str, Any],
     out: Path,
-    frames: list[dict[str, Any]],
-    episodes: list[Episode] | None,
-    preds: dict[str, dict[tuple[int, int], np.ndarray]],
-    n_examples: int,
+    episodes: list[Episode],
+    generation_params: DSTParams,
+    preds: dict[str, dict[tuple[int, int, int], np.ndarray]],
 ) -> None:
     """Write ``results.json``, ``results.md`` and ``figures/*.png`` into ``out``.
 
     Args:
         results: the benchmark results.
         out: output directory.
-        frames: test frames (:func:`dstenv.segment.replay.split_index`).
-        episodes: the replayed test episodes (for the DST BetP(moving) panel), or
-            ``None`` to read the stored BetP and labels of the frames.
-        preds: segmenter label -> ``{(seed, step): (H, W) prediction}`` of the examples.
-        n_examples: example rows (frames chosen by :func:`example_ids`).
+        episodes: the scored drives (for the example grids).
+        generation_params: DST parameters of the stored BetP (the BetP(moving) panel).
+        preds: segmenter label -> ``{(seed, episode, step): (H, W) prediction}``.
     """
     figs = out / "figures"
     write_json(out / "results.json", results)
     (out / "results.md").write_text(markdown_table(results))
-    plot_confusions(results, figs / "confusion_all.png", "all")
-    plot_confusions(results, figs / "confusion_visible.png", "visible")
+    for scope in ("observed", "visible", "all"):
+        plot_confusions(results, figs / f"confusion_{scope}.png", scope)
     if results["histories"]:
         plot_curves(results["histories"], figs / "training_curves.png")
+    if results.get("curve"):
+        plot_size_curve(results, figs / "train_size_curve.png")
+    keys = sorted({k for p in preds.values() for k in p})
+    by_key = {ep.key: ep for ep in episodes}
     examples = []
-    if episodes is None:  # evaluation-only data: the stored BetP and labels
-        from dstenv.data.shards import ShardReader
-
-        for k in sorted(example_ids(frames, n_examples)):
-            fr = frames[k]
-            with ShardReader(fr["file"]) as r:
-                d = r.get(fr["index"], ["pignistic", "labels"])
-            key = (fr["seed"], fr["step"])
-            examples.append(
-                {
-                    "title": f"episode {fr['seed']} step {fr['step']}",
-                    "betp_moving": np.asarray(d["pignistic"][CLASSES.index("moving")]),
-                    "predictions": {lab: p[key] for lab, p in preds.items() if key in p},
-                    "labels": np.asarray(d["labels"]),
-                }
-            )
-    by_seed = {ep.seed: ep for ep in episodes or []}
-    for k in sorted(example_ids(frames, n_examples)) if episodes is not None else []:
-        fr = frames[k]
-        ep = by_seed[fr["seed"]]
-        j = int(np.searchsorted(ep.steps, fr["step"]))
-        gen = DSTParams.from_dict(results["data"]["generation_dst_params"])
-        betp_m = filter_episode(
-            Episode(
-                ep.seed,
-                ep.sensor,
-                ep.gis,
-                ep.poses,
-                ep.steps[j : j + 1],
-                ep.labels[j : j + 1],
-                ep.visible[j : j + 1],
-                ep.cell_size,
-            ),
-            gen,
-        )[0, 4]
-        examples.append(
-            {
-                "title": f"seed {fr['seed']} step {fr['step']}",
-                "betp_moving": betp_m,
-                "predictions": {
-                    lab: p[(fr["seed"], fr["step"])]
-                    for lab, p in preds.items()
-                    if (fr["seed"], fr["step"]) in p
-                },
-                "labels": ep.labels[j],
-            }
-        )
+    for seed, episode, step in keys:
+        ep = by_key[seed, episode]
+        j = next(k for k in range(len(ep.steps)) if ep.frame_key(k) == (seed, episode, step))
+        if ep.stored_x is not None:
+            betp_m = ep.stored_x[j, CLASSES.index("moving")]
+        else:
+            betp_m = filter_episode(ep, generation_params)[j, CLASSES.index("moving")]
+        examples.append({
+            "title": f"seed {seed} ep {episode} step {step}",
+            "betp_moving": betp_m,
+            "predictions": {lab: p[seed, episode, step] for lab, p in preds.items()
+                            if (seed, episode, step) in p},
+            "labels": ep.labels[j],
+        })
     if examples:
         plot_examples(examples, figs / "examples.png")

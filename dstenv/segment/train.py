@@ -48,6 +48,7 @@ def default_train_config() -> dict[str, Any]:
         "seed": 0,
         "device": "cpu",  # "cpu", "cuda" or "auto"
         "num_workers": 0,  # DataLoader workers
+        "init": "",  # checkpoint whose weights start the training (fine-tuning); "" = random
     }
 
 
@@ -165,6 +166,9 @@ def train(
     torch.manual_seed(cfg["seed"])
     seg = TorchSegmenter(cfg["model"], cfg["model_kwargs"], in_channels, len(CLASSES), device)
     model = seg.model
+    if cfg["init"] and ckpt is None:
+        model.load_state_dict(_init_weights(cfg, seg))
+        log(f"starting from the weights of {cfg['init']}")
     weights = (
         None if cfg["class_weights"] is None else np.asarray(cfg["class_weights"], dtype=np.float32)
     )
@@ -262,6 +266,18 @@ def train(
                 save_checkpoint(out / "best.pt", payload)
     model.eval()
     return seg, history
+
+
+def _init_weights(cfg: dict[str, Any], seg: TorchSegmenter) -> dict[str, Any]:
+    """The state dict of ``cfg["init"]``, checked against the network being trained."""
+    init = load_checkpoint(cfg["init"])
+    if init["spec"] != seg.spec():
+        diff = sorted(k for k in seg.spec() if init["spec"].get(k) != seg.spec()[k])
+        raise ConfigError(
+            f"train.init: {cfg['init']} holds another network ({', '.join(diff)} differ: "
+            f"{ {k: init['spec'].get(k) for k in diff} }); train the same model and inputs"
+        )
+    return init["model"]
 
 
 @torch.no_grad()

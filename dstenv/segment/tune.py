@@ -14,7 +14,9 @@ maps stay unseen:
 
 Every candidate is scored by running the filter over all training episodes
 (:func:`dstenv.segment.replay.filter_episode`) and taking the mIoU of argmax BetP
-over all labelled cells. The search is deterministic for a given ``seed``.
+over the cells of ``scope`` (:data:`dstenv.segment.score.SCOPES`; the benchmark
+uses its headline scope, ``observed``). The search is deterministic for a given
+``seed``.
 """
 
 from __future__ import annotations
@@ -28,7 +30,7 @@ from dstenv.dst.params import DSTParams
 from dstenv.segment.metrics import confusion_matrix, mean_iou
 from dstenv.segment.replay import Episode, filter_episode
 
-__all__ = ["SEARCH_SPACE", "score_params", "tune_dst_params"]
+__all__ = ["SEARCH_SPACE", "score_params", "scope_masks", "tune_dst_params"]
 
 #: field -> (low, high) searched range
 SEARCH_SPACE: dict[str, tuple[float, float]] = {
@@ -42,15 +44,36 @@ SEARCH_SPACE: dict[str, tuple[float, float]] = {
 }
 
 
-def score_params(episodes: Sequence[Episode], params: DSTParams, num_classes: int = 5) -> float:
-    """mIoU (all labelled cells) of argmax BetP over ``episodes`` with ``params``."""
+def score_params(
+    episodes: Sequence[Episode],
+    params: DSTParams,
+    num_classes: int = 5,
+    masks: Sequence[np.ndarray | None] | None = None,
+) -> float:
+    """mIoU of argmax BetP over ``episodes`` with ``params``.
+
+    Args:
+        masks: per episode ``(K, H, W) bool`` cells counted (``None``: all labelled).
+    """
     cm = np.zeros((num_classes, num_classes), dtype=np.int64)
-    for ep in episodes:
+    for i, ep in enumerate(episodes):
         if len(ep.steps) == 0:
             continue
         pred = filter_episode(ep, params)[:, :5].argmax(1)
-        cm += confusion_matrix(pred, ep.labels.astype(np.int64), num_classes)
+        mask = None if masks is None else masks[i]
+        cm += confusion_matrix(pred, ep.labels.astype(np.int64), num_classes, mask)
     return mean_iou(cm)
+
+
+def scope_masks(episodes: Sequence[Episode], scope: str) -> list[np.ndarray | None]:
+    """Per episode, the cells of ``scope`` (``observed``, ``visible`` or ``all``)."""
+    from dstenv.segment.score import SCOPES, observed_cells
+
+    if scope not in SCOPES:
+        raise ValueError(f"unknown scope {scope!r}; choose from {', '.join(SCOPES)}")
+    if scope == "all":
+        return [None] * len(episodes)
+    return [observed_cells(ep) if scope == "observed" else ep.visible for ep in episodes]
 
 
 def tune_dst_params(
@@ -60,6 +83,7 @@ def tune_dst_params(
     step: float = 0.2,
     seed: int = 0,
     progress: bool = False,
+    scope: str = "all",
 ) -> tuple[DSTParams, dict]:
     """Search :class:`DSTParams` for the best training mIoU.
 
@@ -70,9 +94,10 @@ def tune_dst_params(
         step: initial coordinate step, as a fraction of each field's range.
         seed: seed of the random samples.
         progress: show a tqdm bar.
+        scope: cells of the objective (:func:`scope_masks`).
 
     Returns:
-        ``(best_params, trace)``; ``trace`` is JSON-compatible: ``{"budget",
+        ``(best_params, trace)``; ``trace`` is JSON-compatible: ``{"budget", "scope",
         "evaluations": [{"params", "miou"}], "best_miou", "start_miou"}``.
     """
     from tqdm import tqdm
@@ -81,6 +106,7 @@ def tune_dst_params(
         raise ValueError(f"tuning budget must be >= 2 evaluations, got {budget}")
     if not episodes:
         raise ValueError("no training episodes to tune the DST parameters on")
+    masks = scope_masks(episodes, scope)
     rng = np.random.default_rng(seed)
     n_random = budget // 3 if n_random is None else n_random
     evaluations: list[dict] = []
@@ -90,7 +116,7 @@ def tune_dst_params(
     def score(p: DSTParams) -> float:
         key = tuple(round(v, 6) for v in p.to_dict().values())
         if key not in cache:
-            cache[key] = score_params(episodes, p)
+            cache[key] = score_params(episodes, p, masks=masks)
             evaluations.append({"params": p.to_dict(), "miou": _num(cache[key])})
             bar.update(1)
         return cache[key]
@@ -126,6 +152,7 @@ def tune_dst_params(
     trace = {
         "budget": budget,
         "seed": seed,
+        "scope": scope,
         "start_miou": _num(start_score),
         "best_miou": _num(best_score),
         "best_params": best.to_dict(),

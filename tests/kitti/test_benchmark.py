@@ -64,8 +64,9 @@ def test_every_frame_stored_scores_every_dst_variant(kitti_root, sim_checkpoint,
     assert [segs[k]["kind"] for k in segs] == ["dst", "dst", "dst", "learned"]
     assert segs["dst-tuned"]["describe"]["params"]["alpha"] == 0.5
     assert segs["unet-light"]["describe"]["checkpoint"] == str(sim_checkpoint)
-    assert res["unscored"] == {}
+    assert set(res["unscored"]) == {"dst-complete"}  # no train split, no complete.params
     assert res["data"]["source"] == "kitti" and res["data"]["test_frames"] == 6
+    assert res["preset"] is None and res["real_goal"]["reference"] == "dst (default)"
     assert res["data"]["grid_shape"] == [256, 256] and res["histories"] == {}
     # every segmenter on exactly the same cells
     cells = {(v["all"]["cells"], v["visible"]["cells"]) for v in segs.values()}
@@ -74,7 +75,8 @@ def test_every_frame_stored_scores_every_dst_variant(kitti_root, sim_checkpoint,
                  "figures/examples.png"):
         assert (out / name).stat().st_size > 0, name
     md = (out / "results.md").read_text()
-    assert "Evaluation-only data (kitti): 6 test frames" in md and "--checkpoint" in md
+    assert "Evaluation-only data (kitti): 6 frames" in md and "--checkpoint" in md
+    assert "preset" not in md.splitlines()[0] and "--preset" not in md
 
 
 def test_refiltered_preset_matches_stored_preset(kitti_root, tmp_path):
@@ -83,8 +85,10 @@ def test_refiltered_preset_matches_stored_preset(kitti_root, tmp_path):
     b = _convert(kitti_root, tmp_path / "paper", "--stride", "1", "--dst-preset", "paper")
     assert _bench(a, tmp_path / "ra") == 0 and _bench(b, tmp_path / "rb") == 0
     ra = json.loads((tmp_path / "ra" / "results.json").read_text())["segmenters"]
-    rb = json.loads((tmp_path / "rb" / "results.json").read_text())["segmenters"]
-    assert list(rb)[0] == "dst (paper)"  # the stored BetP of the paper conversion
+    rb_all = json.loads((tmp_path / "rb" / "results.json").read_text())
+    rb = rb_all["segmenters"]
+    # the paper conversion's own parameters
+    assert rb_all["data"]["generation_dst_params"] == rb["dst (paper)"]["describe"]["params"]
     for label in ("dst (default)", "dst (paper)"):
         for scope in ("all", "visible"):
             ca = np.array(ra[label][scope]["confusion"])
@@ -103,7 +107,7 @@ def test_sparse_frames_say_which_variants_are_not_scored(kitti_root, sim_checkpo
     assert _bench(ds, out, "--checkpoint", str(sim_checkpoint)) == 0
     res = json.loads((out / "results.json").read_text())
     assert list(res["segmenters"]) == ["dst (default)", "unet-light"]
-    assert set(res["unscored"]) == {"dst (paper)", "dst-tuned"}
+    assert set(res["unscored"]) == {"dst (paper)", "dst-tuned", "dst-complete"}
     assert "filter state between stored frames is lost" in res["unscored"]["dst (paper)"]
     assert "no train split to tune on" in res["unscored"]["dst-tuned"]
     md = (out / "results.md").read_text()
@@ -138,7 +142,8 @@ def test_real_sample_smoke(real_root, sim_checkpoint, tmp_path):
     res = json.loads((tmp_path / "b" / "results.json").read_text())
     segs = res["segmenters"]
     assert list(segs) == ["dst (default)", "dst (paper)", "unet-light"]
-    assert res["data"]["test_frames"] == 40 and set(res["unscored"]) == {"dst-tuned"}
+    assert res["data"]["test_frames"] == 40
+    assert set(res["unscored"]) == {"dst-tuned", "dst-complete"}
     assert len({v["all"]["cells"] for v in segs.values()}) == 1
     # real moving cars are found by the DST filter
     assert segs["dst (default)"]["all"]["iou"]["moving"] > 0.1

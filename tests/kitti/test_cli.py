@@ -90,10 +90,10 @@ def test_render_and_evaluate(tiny_root, tmp_path, capsys):
     capsys.readouterr()
     js = tmp_path / "m.json"
     assert main(["kitti", "evaluate", "--data", str(out), "--json", str(js)]) == 0
-    text = capsys.readouterr().out
-    assert "dst (stored BetP)" in text and "3 frames" in text
-    res = json.loads(js.read_text())["dst (stored BetP)"]
-    assert set(res) >= {"all", "visible"}
+    text = capsys.readouterr().out  # an alias of dstenv benchmark --data: its report
+    assert "| dst (default) |" in text and "3 frames" in text
+    res = json.loads(js.read_text())["segmenters"]["dst (default)"]
+    assert set(res) >= {"observed", "all", "visible"}
 
 
 @pytest.mark.parametrize("osm", ["dangling.osm"])

@@ -20,10 +20,16 @@ def tiny(tmp_path_factory):
 
 def test_tiny_benchmark_scores_every_segmenter_on_the_same_cells(tiny):
     out, res = tiny
-    assert set(res["segmenters"]) == {"dst (default)", "dst (paper)", "dst-tuned", "unet-light"}
-    cells = {k: (v["all"]["cells"], v["visible"]["cells"]) for k, v in res["segmenters"].items()}
+    assert set(res["segmenters"]) == {
+        "dst (default)", "dst (paper)", "dst-tuned", "dst-complete", "unet-light"
+    }
+    cells = {k: tuple(v[sc]["cells"] for sc in ("visible", "observed", "all"))
+             for k, v in res["segmenters"].items()}
     assert len(set(cells.values())) == 1, cells
-    assert 0 < cells["unet-light"][1] <= cells["unet-light"][0]
+    # visible now <= observed so far <= every labelled cell
+    assert 0 < cells["unet-light"][0] <= cells["unet-light"][1] <= cells["unet-light"][2]
+    assert res["segmenters"]["dst-complete"]["kind"] == "baseline"
+    assert res["data"]["test_maps"] >= 1 and res["schema"] == 2
     assert res["data"]["test_frames"] > 0 and res["data"]["grid_shape"] == [32, 32]
     tuning = res["segmenters"]["dst-tuned"]["describe"]["tuning"]
     assert tuning["best_miou"] >= tuning["start_miou"]
@@ -31,12 +37,15 @@ def test_tiny_benchmark_scores_every_segmenter_on_the_same_cells(tiny):
         "results.json",
         "results.md",
         "figures/confusion_all.png",
+        "figures/confusion_observed.png",
         "figures/confusion_visible.png",
         "figures/training_curves.png",
         "figures/examples.png",
     ):
         assert (out / name).stat().st_size > 0, name
-    assert json.loads((out / "results.json").read_text())["goal"]["best_dst"] in res["segmenters"]
+    assert json.loads((out / "results.json").read_text())["goal"]["best_baseline"] in res[
+        "segmenters"
+    ]
     assert (
         load_checkpoint(out / "models" / "unet-light" / "best.pt")["spec"]["model"] == "unet-light"
     )

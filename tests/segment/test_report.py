@@ -4,20 +4,29 @@ import numpy as np
 import pytest
 
 from dstenv.config import ConfigError
-from dstenv.dst import CLASSES
 from dstenv.segment import report
-from dstenv.segment.benchmark import _goal, preset_config
-from dstenv.segment.metrics import summarize
+from dstenv.segment.benchmark import preset_config, protocol_overrides
+from dstenv.segment.results import goal, segmenter_results
+from dstenv.segment.score import DISTANCE_BANDS, OBJECT_CLASSES, SCOPES, Scores
 
 
 def _results():
     eye = np.diag([50, 20, 30, 5, 5]).astype(np.int64)
     noisy = eye.copy()
     noisy[3, 4] = noisy[4, 3] = 5
-    segs = {}
-    for label, cm, kind in (("dst (default)", noisy, "dst"), ("unet-light", eye, "learned")):
-        s = summarize(cm, CLASSES)
-        segs[label] = {"all": s, "visible": s, "kind": kind}
+    # two drives on two maps, each holding half of every count
+    per_drive = {"dst (default)": np.stack([noisy, noisy]), "unet-light": np.stack([eye, eye])}
+    objs = np.zeros((2, len(OBJECT_CLASSES), len(DISTANCE_BANDS) - 1, 4), np.int64)
+    objs[:, 0, 0] = [4, 3, 2, 2]  # per drive: 4 static objects, 3 recovered, 2/2 predicted
+    scores = Scores(
+        drives=[(1, 0), (2, 0)], clusters=np.array([1, 2]),
+        confusion={k: {sc: v for sc in SCOPES} for k, v in per_drive.items()},
+        objects={k: objs for k in per_drive}, ties=np.zeros((2, 2), np.int64),
+        frames=np.array([2, 2]),
+    )
+    kinds = {"dst (default)": "dst", "unet-light": "learned"}
+    segs, conf, weights = segmenter_results(scores, kinds, {k: {"name": k} for k in kinds},
+                                            resamples=50)
     res = {
         "preset": "tiny",
         "command": "dstenv benchmark --preset tiny",
@@ -31,35 +40,51 @@ def _results():
                 "val_iou": [None, None],
             }
         },
-        "data": {
-            "test_frames": 4,
-            "test_episodes": 2,
-            "train_frames": 10,
-            "val_frames": 2,
-            "grid_shape": [8, 8],
-            "cell_size": 0.33,
-        },
+        "data": {"test_frames": 4, "test_episodes": 2, "test_maps": 2, "train_frames": 10,
+                 "val_frames": 2, "grid_shape": [8, 8], "cell_size": 0.33},
     }
-    res["goal"] = _goal(segs, {k: v["kind"] for k, v in segs.items()})
+    res["goal"] = goal(segs, conf, weights)
     return res
 
 
 def test_goal_by_hand():
     g = _results()["goal"]
-    # dst: static/moving IoU 5/15 = 1/3 each -> mIoU (3 + 2/3) / 5; learned: 1
-    assert g["best_learned"] == "unet-light" and g["best_dst"] == "dst (default)"
+    # dst: static/moving IoU 10/30 = 1/3 each -> mIoU (3 + 2/3) / 5; learned: 1
+    assert g["best_learned"] == "unet-light" and g["best_baseline"] == "dst (default)"
+    assert g["scope"] == "observed"
     assert g["margin"] == pytest.approx(1 - (3 + 2 / 3) / 5)
+    # both drives are alike: every resample gives the same margin
+    assert g["margin_ci"] == pytest.approx([g["margin"]] * 2)
+    assert g["moving_diff"] == pytest.approx(2 / 3)
     assert g["margin_met"] and g["moving_met"] and g["static_met"]
+
+
+def test_object_summary_and_seedless_rows():
+    o = _results()["segmenters"]["unet-light"]["objects"]["static"]
+    assert o["objects"] == 8 and o["recall"] == pytest.approx(6 / 8)
+    assert o["precision"] == 1.0 and o["bands"][0]["range_m"] == [0.0, 10.0]
+    assert o["bands"][-1]["range_m"][1] is None
 
 
 def test_markdown_and_json(tmp_path):
     res = _results()
     md = report.markdown_table(res)
-    assert "| unet-light | 1.000 | 1.000 | 1.000 | 1.000 | 1.000 | **1.000** |" in md
-    assert "| dst (default) | 1.000 | 1.000 | 1.000 | 0.333 | 0.333 | **0.733** |" in md
-    assert "dstenv benchmark --preset tiny" in md and "visible cells only" in md
+    assert ("| unet-light | learned | 1.000 | 1.000 | 1.000 | 1.000 [1.000, 1.000] | "
+            "1.000 [1.000, 1.000] | **1.000 [1.000, 1.000]** |") in md
+    assert "| dst (default) | dst | 1.000 | 1.000 | 1.000 | 0.333 [0.333, 0.333] |" in md
+    assert md.index("observed cells (headline") < md.index("all labelled cells (amodal")
+    assert "dstenv benchmark --preset tiny" in md and "(tiny preset)" in md
     path = report.write_json(tmp_path / "r.json", res)
     assert json.loads(path.read_text())["segmenters"]["unet-light"]["all"]["miou"] == 1.0
+
+
+def test_real_data_report_has_no_preset_or_goal_line():
+    res = _results()
+    res.update(preset=None, goal=None, command="dstenv benchmark --data kitti --out r")
+    res["data"].update(evaluation_only=True, source="kitti")
+    md = report.markdown_table(res)
+    assert "preset" not in md and "## Goal" not in md and "--preset" not in md
+    assert md.startswith("# Segmenter benchmark on kitti data")
 
 
 def test_figures_are_written(tmp_path):
@@ -75,6 +100,10 @@ def test_figures_are_written(tmp_path):
         "labels": lab,
     }
     assert report.plot_examples([ex, ex], tmp_path / "ex.png").stat().st_size > 1000
+    seg = res["segmenters"]["unet-light"]
+    res["curve"] = [{"train_frames": n, **seg} for n in (140, 1400)]
+    assert report.plot_size_curve(res, tmp_path / "c.png").stat().st_size > 1000
+    assert "| 1400 | 1.000 [1.000, 1.000] |" in report.markdown_table(res)
 
 
 def test_presets_validate():
@@ -84,3 +113,26 @@ def test_presets_validate():
         preset_config("tpu")
     with pytest.raises(ConfigError, match="unknown key 'frame'"):
         preset_config("cpu", {"data": {"frame": 3}})
+    from dstenv.segment.benchmark import _check
+
+    with pytest.raises(ConfigError, match="search.key: 'speed' is not a training option"):
+        _check(preset_config("tiny", {"search": {"key": "speed", "values": [1]}}))
+    with pytest.raises(ConfigError, match="train_seeds"):
+        _check(preset_config("tiny", {"train_seeds": [1, 1]}))
+
+
+def test_paper_protocol_names_missing_pipeline_keys():
+    from dstenv.pipeline import default_config
+
+    assert protocol_overrides("sim") == {}
+    with pytest.raises(ConfigError, match="choose from sim, paper"):
+        protocol_overrides("kitti")
+    if "protocol" in default_config():
+        assert protocol_overrides("paper")["protocol"]["update_every"] == 10
+        from dstenv.segment.benchmark import _check
+
+        with pytest.raises(ConfigError, match="data.stride = 4: the paper protocol fuses every 10"):
+            _check(preset_config("tiny", {"protocol": "paper"}))
+    else:
+        with pytest.raises(ConfigError, match=r"protocol.*\(1 Hz fusion.*issue 13"):
+            protocol_overrides("paper")

@@ -107,3 +107,21 @@ def test_streaming_training_without_disk():
         {**SMALL, "epochs": 2, "max_batches": 2, "class_weights": [1.0] * 5}, stream, **quiet
     )
     assert hist["epoch"] == [1, 2] and all(v > 0 for v in hist["train_loss"])
+
+
+def test_init_starts_from_a_checkpoint(tmp_path, make_frames):
+    """train --init: fine-tuning continues the checkpoint's weights (lr 0 keeps them)."""
+    data = make_frames(4, seed=1)
+    quiet = {"progress": False, "log": lambda m: None}
+    a, _ = train({**SMALL, "epochs": 1}, data, None, tmp_path / "a", **quiet)
+    frozen = {**SMALL, "epochs": 1, "lr": 1e-12, "seed": 7, "init": str(tmp_path / "a" / "last.pt")}
+    b, _ = train(frozen, make_frames(4, seed=3), None, tmp_path / "b", **quiet)
+    # parameters kept (batch-norm running statistics follow the new frames)
+    pa, pb = dict(a.model.named_parameters()), dict(b.model.named_parameters())
+    assert all(torch.allclose(pa[k], pb[k], atol=1e-6) for k in pa)
+    fresh, _ = train({**frozen, "init": ""}, make_frames(4, seed=3), None, None, **quiet)
+    first = next(iter(pa))  # without --init: another (seed 7) random start
+    assert not torch.allclose(pa[first], dict(fresh.model.named_parameters())[first])
+    other = {**frozen, "model_kwargs": {"base": 8, "depth": 2}}
+    with pytest.raises(ConfigError, match="train.init: .*model_kwargs"):
+        train(other, data, None, None, **quiet)

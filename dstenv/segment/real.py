@@ -1,0 +1,131 @@
+"""Real KITTI drives in the simulated benchmark's report (``dstenv benchmark --kitti``).
+
+After a simulated benchmark, :func:`real_benchmark` converts KITTI tracking
+sequences (every scan stored, so DST can be re-run with any parameters and the
+observed cells accumulated) and scores, with the same
+:func:`dstenv.segment.score.score`:
+
+* the DST presets and ``dst (stored)``;
+* ``dst-tuned`` and ``dst-complete`` with the parameters the simulated run tuned
+  on its training maps (never on real frames);
+* every network of the simulated run, trained only on simulated data;
+* with ``finetune_frames = N > 0``: the best simulated network fine-tuned
+  (``train.init``) on the labelled frames ``0 .. N-1`` of each sequence. Only
+  frames from step ``N + gap`` on are then scored, for every row, so no fine-tuning
+  frame (nor its immediate neighbours) is a test frame; the filter still runs
+  over the earlier scans, as it would on a car.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+__all__ = ["real_benchmark", "sim_checkpoints"]
+
+
+def sim_checkpoints(results: Mapping[str, Any]) -> dict[str, Path]:
+    """Row label -> ``best.pt`` of every network a simulated run trained or scored."""
+    out = {}
+    for label, row in results["segmenters"].items():
+        ckpt = row["describe"].get("checkpoint") if row["kind"] == "learned" else None
+        if ckpt:
+            path = Path(ckpt)
+            out[label] = path / "best.pt" if path.is_dir() else path
+    return out
+
+
+def _convert(root: str, sequences: Sequence[str], osm: str | None, data: Path) -> None:
+    from dstenv.cli import main
+    from dstenv.config import CLIError
+
+    if (data / "manifest.json").is_file():
+        return  # resumable: converted by an earlier run
+    args = ["kitti", "convert", "--root", str(root), "--sequences", ",".join(sequences),
+            "--stride", "1", "--warmup", "0", "--out", str(data)]
+    if osm:
+        args += ["--osm", str(osm)]
+    if main(args) != 0:
+        raise CLIError(f"--kitti {root}: converting sequences {','.join(sequences)} failed")
+
+
+def _finetune(sim: Mapping[str, Any], ckpts: Mapping[str, Path], data: Path, frames: int,
+              epochs: int, out: Path, progress: bool, log: Callable[[str], None]) -> Path:
+    import torch
+
+    from dstenv.data import ShardDataset
+    from dstenv.segment.replay import split_index
+    from dstenv.segment.results import HEADLINE
+    from dstenv.segment.train import train
+
+    learned = {k: v for k, v in sim["segmenters"].items() if k in ckpts}
+    best = max(learned, key=lambda k: learned[k][HEADLINE]["miou"] or -1.0)
+    ds = ShardDataset(data, split="test", inputs="fcn10")
+    index, _ = split_index(ds.files)
+    picked = [k for k, fr in enumerate(index) if fr["step"] < frames]
+    if not picked:
+        raise ValueError(f"finetune_frames {frames}: no converted frame before it")
+    spec = torch.load(ckpts[best], map_location="cpu", weights_only=True)["spec"]
+    cfg = {"init": str(ckpts[best]), "model": spec["model"], "model_kwargs": spec["model_kwargs"],
+           "epochs": epochs, "batch_size": 4, "lr": 1e-4, "device": "cpu"}
+    log(f"fine-tuning {best} on {len(picked)} real frames")
+    train(cfg, torch.utils.data.Subset(ds, picked), None, out, progress=progress, log=log)
+    return out / "last.pt"
+
+
+def real_benchmark(
+    sim: Mapping[str, Any],
+    out: Path,
+    root: str,
+    sequences: Sequence[str],
+    osm: str | None = None,
+    finetune_frames: int = 0,
+    finetune_epochs: int = 5,
+    gap: int = 10,
+    progress: bool = False,
+    log: Callable[[str], None] = print,
+) -> dict[str, Any]:
+    """Score a simulated run's segmenters on real KITTI drives (module docstring).
+
+    Args:
+        sim: the simulated run's results.
+        out: the simulated run's output directory (``kitti/`` is written inside).
+        root: KITTI tracking folder; sequences: e.g. ``["0003"]``; osm: optional map.
+        finetune_frames: N labelled real frames per sequence for fine-tuning (0: none).
+        finetune_epochs: fine-tuning epochs.
+        gap: frames skipped between the fine-tuning and the scored frames.
+        progress, log: tqdm bars, one-line messages.
+
+    Returns:
+        The real-data results (also in ``out/kitti/results.json``).
+    """
+    from dstenv.segment.benchmark import default_benchmark_config, run_benchmark
+
+    kdir = out / "kitti"
+    data = kdir / "data"
+    _convert(root, sequences, osm, data)
+    ckpts = sim_checkpoints(sim)
+    cfg = default_benchmark_config()
+    cfg.update(models=[], device="cpu", examples=min(int(sim["config"]["examples"]), 2))
+    segs = sim["segmenters"]
+    if "dst-tuned" in segs:
+        cfg["tune"]["params"] = dict(segs["dst-tuned"]["describe"]["params"])
+    else:
+        cfg["tune"]["enabled"] = False
+    if "dst-complete" in segs:
+        cfg["complete"]["params"] = dict(segs["dst-complete"]["describe"]["completion"])
+    else:
+        cfg["complete"]["enabled"] = False
+    labelled = [(f"{k} (sim only)", p) for k, p in ckpts.items()]
+    if finetune_frames > 0:
+        cfg["score_from_step"] = finetune_frames + gap
+        tuned = _finetune(sim, ckpts, data, finetune_frames, finetune_epochs,
+                          kdir / "finetune", progress, log)
+        labelled.append((f"fine-tuned on {finetune_frames} real frames/sequence", tuned))
+    res = run_benchmark(cfg, kdir, data_dir=data, progress=progress, log=log,
+                        command=None, checkpoints=labelled)
+    res["real"] = {"root": str(root), "sequences": list(sequences), "osm": osm,
+                   "finetune_frames": finetune_frames, "gap": gap,
+                   "scored_from_step": cfg["score_from_step"]}
+    return res

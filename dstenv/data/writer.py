@@ -49,7 +49,10 @@ class ShardWriter:
             produces the next frames (0, the default: compress in :meth:`add`; one
             worker process per core gains nothing from them). Only gzip and
             uncompressed shards are encoded here (:mod:`dstenv.data.codec`); lzf
-            goes through h5py. The bytes written do not depend on it.
+            goes through h5py. With ``threads > 0`` chunks are deflated with zlib
+            whatever ``deflate`` says: ISA-L called from worker threads did not give
+            reproducible bytes (2 of 20 runs of the threaded writer differed), and a
+            shard must be a pure function of its frames.
 
     With gzip or no compression every grid chunk is encoded once by
     :func:`dstenv.data.codec.encode_chunk` and written with ``write_direct_chunk``;
@@ -103,8 +106,9 @@ class ShardWriter:
         if compression == "gzip":
             self._filters["compression_opts"] = compression_opts
         self._direct = compression in DIRECT_COMPRESSIONS
-        self._codec = (compression, compression_opts, deflate)
         self._threads = max(int(threads), 0) if self._direct else 0
+        # ISA-L only on the calling thread: its output from worker threads varied
+        self._codec = (compression, compression_opts, "zlib" if self._threads else deflate)
         self._pool: cf.ThreadPoolExecutor | None = None
         self._last_prob: np.ndarray | None = None  # quantised pignistic of the last frame
         self._last_chunk: Any = None  # its encoded chunk (bytes or Future)

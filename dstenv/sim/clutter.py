@@ -55,6 +55,17 @@ def _rows() -> dict[str, list]:
     return {k: [] for k in ("xy", "yaw", "length", "width", "z_min", "z_max", "kind")}
 
 
+def _obstacles(rows: dict[str, list]) -> Obstacles:
+    """The collected rows as :class:`Obstacles` (empty when no row was added)."""
+    if not rows["yaw"]:
+        return Obstacles.empty()
+    f = np.float64
+    return Obstacles(np.array(rows["xy"], f).reshape(-1, 2), np.array(rows["yaw"], f),
+                     np.array(rows["length"], f), np.array(rows["width"], f),
+                     np.array(rows["z_min"], f), np.array(rows["z_max"], f),
+                     np.array(rows["kind"], np.uint8))
+
+
 def _add(rows, xy, yaw, length, width, z0, z1, kind) -> None:
     for k, v in zip(rows, (xy, yaw, length, width, z0, z1, int(kind))):
         rows[k].append(v)
@@ -167,13 +178,7 @@ def place_clutter(sides: list[Side], buildings: list[np.ndarray], slots: np.ndar
                          hi - lo, wid, 0.0, rng.uniform(0.8, 1.8) if hedge else
                          rng.uniform(1.0, 1.8), K.HEDGE if hedge else K.FENCE)
             s += seg
-    if not rows["yaw"]:
-        return Obstacles.empty()
-    f = np.float64
-    return Obstacles(np.array(rows["xy"], f).reshape(-1, 2), np.array(rows["yaw"], f),
-                     np.array(rows["length"], f), np.array(rows["width"], f),
-                     np.array(rows["z_min"], f), np.array(rows["z_max"], f),
-                     np.array(rows["kind"], np.uint8))
+    return _obstacles(rows)
 
 
 def street_clutter(world_map: Any, cfg: dict[str, Any], rng: np.random.Generator) -> Obstacles:
@@ -215,13 +220,7 @@ def street_clutter(world_map: Any, cfg: dict[str, Any], rng: np.random.Generator
                     size = {K.POLE: 0.26, K.SIGN: 0.1, K.BIN: 0.6}[kind]
                     _add(rows, p, yaw, size, size, 0.0,
                          {K.POLE: 7.0, K.SIGN: 2.3, K.BIN: 1.0}[kind], kind)
-    if not rows["yaw"]:
-        return Obstacles.empty()
-    f = np.float64
-    return Obstacles(np.array(rows["xy"], f).reshape(-1, 2), np.array(rows["yaw"], f),
-                     np.array(rows["length"], f), np.array(rows["width"], f),
-                     np.array(rows["z_min"], f), np.array(rows["z_max"], f),
-                     np.array(rows["kind"], np.uint8))
+    return _obstacles(rows)
 
 
 def _under_vehicle(xy: np.ndarray, radius: float, slots: np.ndarray) -> bool:

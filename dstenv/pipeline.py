@@ -144,13 +144,13 @@ def _frame_defaults() -> dict[str, Any]:
     }
 
 
-def _SOURCE_RULE() -> Any:  # noqa: N802 - read at validation time: WORLD_SOURCES may grow
+def _source_rule() -> Any:  # read at validation time: WORLD_SOURCES may grow
     return one_of(*WORLD_SOURCES, what="world source")
 
 
 #: The top-level ``source`` key (a :data:`WORLD_SOURCES` name).
 SOURCE_SECTION = Section(lambda: {"source": "city"}, {}, (
-    ("source", lambda c: _SOURCE_RULE().check(c["source"], "source") is None,
+    ("source", lambda c: _source_rule().check(c["source"], "source") is None,
      "must be a WORLD_SOURCES key"),))
 #: The ``protocol`` section: fusion rate, camera field of view, moving rule.
 PROTOCOL_SECTION = Section(_protocol_defaults, {

@@ -45,6 +45,9 @@ def default_train_config() -> dict[str, Any]:
         "weight_decay": 0.0,
         "crop": 0,  # [cells] side of random square training crops; 0: whole grids
         "max_batches": 0,  # training batches per epoch; 0: the whole dataset (required for streams)
+        # training batches per epoch drawn with replacement, whatever the data size (the
+        # same optimiser steps for 140 or 14000 frames: the training-set-size curve); 0: off
+        "fixed_batches": 0,
         "seed": 0,
         "device": "cpu",  # "cpu", "cuda" or "auto"
         "num_workers": 0,  # DataLoader workers
@@ -73,8 +76,10 @@ def _check(cfg: dict[str, Any]) -> None:
     for key in ("epochs", "batch_size"):
         if cfg[key] < 1:
             raise ConfigError(f"train.{key}: must be >= 1, got {cfg[key]}")
-    if cfg["crop"] < 0 or cfg["max_batches"] < 0 or cfg["lr"] <= 0 or cfg["weight_power"] < 0:
-        raise ConfigError("train.crop, max_batches and weight_power must be >= 0 and train.lr > 0")
+    if (cfg["crop"] < 0 or cfg["max_batches"] < 0 or cfg["fixed_batches"] < 0 or cfg["lr"] <= 0
+            or cfg["weight_power"] < 0):
+        raise ConfigError("train.crop, max_batches, fixed_batches and weight_power must be >= 0 "
+                          "and train.lr > 0")
 
 
 def _class_weights(
@@ -150,7 +155,9 @@ def train(
     last = out / "last.pt" if out else None
     ckpt = load_checkpoint(last) if (resume and last is not None and last.exists()) else None
     if ckpt is not None:
-        saved = {k: v for k, v in ckpt["config"].items() if k != "epochs"}
+        # options added since the checkpoint was written count as their defaults
+        saved = {k: v for k, v in {**default_train_config(), **ckpt["config"]}.items()
+                 if k != "epochs"}
         mine = {k: v for k, v in cfg.items() if k not in ("epochs", "class_weights")}
         saved.pop("class_weights", None)
         if saved != mine:
@@ -201,11 +208,16 @@ def train(
         gen = torch.Generator().manual_seed(cfg["seed"] * 100_003 + epoch)
         if hasattr(train_data, "set_epoch"):  # streaming: a new episode stream per epoch
             train_data.set_epoch(epoch)
+        fixed = cfg["fixed_batches"] if not streaming else 0
+        sampler = torch.utils.data.RandomSampler(
+            train_data, replacement=True, num_samples=fixed * cfg["batch_size"], generator=gen
+        ) if fixed else None
         loader = torch.utils.data.DataLoader(
             train_data,
             batch_size=cfg["batch_size"],
-            shuffle=not streaming,
-            generator=gen,
+            shuffle=not streaming and sampler is None,
+            sampler=sampler,
+            generator=gen if sampler is None else None,
             num_workers=cfg["num_workers"],
             drop_last=False,
         )

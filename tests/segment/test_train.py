@@ -125,3 +125,26 @@ def test_init_starts_from_a_checkpoint(tmp_path, make_frames):
     other = {**frozen, "model_kwargs": {"base": 8, "depth": 2}}
     with pytest.raises(ConfigError, match="train.init: .*model_kwargs"):
         train(other, data, None, None, **quiet)
+
+
+def test_fixed_batches_draws_the_same_steps_from_any_data_size(tmp_path, make_frames):
+    class Counting(torch.utils.data.Dataset):
+        def __init__(self, frames):
+            self.frames, self.calls = frames, 0
+
+        def __len__(self):
+            return len(self.frames)
+
+        def __getitem__(self, i):
+            self.calls += 1
+            return self.frames[i]
+
+    quiet = {"progress": False, "log": lambda m: None}
+    cfg = {**SMALL, "epochs": 2, "fixed_batches": 3, "class_weights": [1.0] * 5}
+    for n in (2, 9):  # fewer frames than one batch, and more than three batches' worth
+        data = Counting(make_frames(n, seed=1))
+        train(cfg, data, None, None, **quiet)
+        # one sample read to size the model, then 2 epochs x 3 batches x 4 frames
+        assert data.calls == 1 + 2 * 3 * 4
+    with pytest.raises(ConfigError, match="fixed_batches"):
+        train({**cfg, "fixed_batches": -1}, make_frames(2), progress=False)

@@ -92,6 +92,13 @@ def default_config() -> dict[str, Any]:
             "lateral_speed": 0.6,  # [m/s] sideways speed of a car pulling out of a space
             "pull_out_rate": 0.002,  # [1/s] chance per second that a parked car pulls out
             "delivery_halt_factor": 4.0,  # [-] vans / trucks halt this much longer than cars
+            # -- double parking and lane changes (0 in the clean scenario)
+            "double_park_prob": 0.03,  # [-] share of parked vehicles standing in the kerb
+            #                            lane beside their space instead (hazards on)
+            "double_park_duration": 60.0,  # [s] mean dwell before it drives off (exp., <= 4x)
+            "lane_change_rate": 0.01,  # [1/s] lane changes without a reason, per car on a
+            #                            multi-lane street (overtaking a slow vehicle is apart)
+            "lane_change_time": 4.0,  # [s] a lane change (one lane width sideways) takes ~this
         },
         "clutter": default_clutter_config(),
         "ego": {
@@ -204,6 +211,10 @@ RULES: dict[str, Any] = {
         "lateral_speed": between(0.1, 3.0, _MS),
         "pull_out_rate": between(0.0, 0.1, "1/s"),
         "delivery_halt_factor": between(1.0, 20.0),
+        "double_park_prob": PROB,
+        "double_park_duration": between(0.0, 3600.0, "s"),
+        "lane_change_rate": between(0.0, 1.0, "1/s"),
+        "lane_change_time": between(1.0, 15.0, "s"),
     },
     "clutter": {
         "density": between(0.0, 5.0),

@@ -6,8 +6,10 @@ The world state is a dict of structure-of-arrays over B rows, the ego last:
 ``s`` arc length on ``route[:,0]``, ``lat`` lateral offset (left +) and the
 ``lat_goal`` it returns to, junction
 ``grant`` (reserved connector), request time ``req_t``, ``stop_clock``, ``halt``
-timer, ``stuck``, ``still`` (standstill time), ``idm (B,5)`` (desired speed,
-accel, comfortable decel, headway, jam gap) and ``height`` [m] (body height).
+timer, ``stuck``, ``still`` (standstill time), ``lc`` (lane change / pass, see
+:mod:`dstenv.sim.lanechange`), ``hazard`` (double parked, hazard lights on), ``idm
+(B,5)`` (desired speed, accel, comfortable decel, headway, jam gap) and ``height``
+[m] (body height).
 """
 
 from __future__ import annotations
@@ -32,7 +34,8 @@ BODY = {
     AgentKind.PEDESTRIAN: ((0.45, 0.55), (0.45, 0.55), 0.8, 1.5, 0.6, 0.4),
 }
 _TRAFFIC_FIELDS = ("xy", "yaw", "v", "hl", "hw", "akind", "mobile", "parked", "route", "s",
-                   "lat", "grant", "req_t", "stop_clock", "halt", "stuck", "still", "lat_goal")
+                   "lat", "grant", "req_t", "stop_clock", "halt", "stuck", "still", "lat_goal",
+                   "lc", "hazard")
 _FIELDS = (*_TRAFFIC_FIELDS, "idm", "height")
 
 
@@ -48,12 +51,15 @@ def state_tuple(st: dict[str, np.ndarray]) -> tuple:
     return tuple(st[k] for k in _TRAFFIC_FIELDS)
 
 
-def rules_tuple(tr: dict[str, Any]) -> tuple:
-    """Traffic-rule parameters for :func:`dstenv.sim.traffic.traffic_step`."""
+def rules_tuple(tr: dict[str, Any], lane_width: float) -> tuple:
+    """Traffic-rule parameters for :func:`dstenv.sim.traffic.traffic_step` (``lane_width``
+    [m]: the network's, sets the lane-change speed)."""
     return tuple(float(tr[k]) for k in ("signal_green", "stop_duration", "halt_rate",
                                         "halt_duration", "pause_rate", "pause_duration",
                                         "crossing_prob", "lateral_drift", "drift_time",
-                                        "lateral_speed", "delivery_halt_factor"))
+                                        "lateral_speed", "delivery_halt_factor",
+                                        "lane_change_rate", "lane_change_time")) + (
+        float(lane_width),)
 
 
 def plan_route(net: LaneNetwork, lane: int, rng: np.random.Generator, k: int,
@@ -94,8 +100,8 @@ def _empty(k: int) -> dict[str, np.ndarray]:
             "parked": np.zeros(0, bool), "route": np.zeros((0, k), np.int64), "s": np.zeros(0),
             "lat": np.zeros(0), "grant": np.zeros(0, np.int64), "req_t": np.zeros(0),
             "stop_clock": np.zeros(0), "halt": np.zeros(0), "stuck": np.zeros(0, bool),
-            "still": np.zeros(0), "lat_goal": np.zeros(0), "idm": np.zeros((0, 5)),
-            "height": np.zeros(0)}
+            "still": np.zeros(0), "lat_goal": np.zeros(0), "lc": np.zeros(0),
+            "hazard": np.zeros(0, bool), "idm": np.zeros((0, 5)), "height": np.zeros(0)}
 
 
 def add_row(st: dict[str, np.ndarray], kind: AgentKind, xy, yaw: float, length: float,
@@ -111,7 +117,8 @@ def add_row(st: dict[str, np.ndarray], kind: AgentKind, xy, yaw: float, length: 
            "mobile": [route is not None and not parked], "parked": [parked],
            "route": (np.full((1, k), -1) if route is None else np.asarray(route).reshape(1, k)),
            "s": [s], "lat": [lat], "grant": [-1], "req_t": [np.inf], "stop_clock": [0.0],
-           "halt": [0.0], "stuck": [False], "still": [0.0], "lat_goal": [lat],
+           "halt": [0.0], "stuck": [False], "still": [0.0], "lat_goal": [lat], "lc": [0.0],
+           "hazard": [False],
            "idm": np.asarray(idm, float).reshape(1, 5),
            "height": [AGENT_HEIGHT[int(kind)] if height is None else height]}
     at = len(st["v"]) if at is None else at
@@ -141,7 +148,8 @@ def _add_parked(st: dict[str, np.ndarray], slots: np.ndarray, rng: np.random.Gen
             "route": np.full((n, k), -1, np.int64), "s": np.zeros(n), "lat": np.zeros(n),
             "grant": np.full(n, -1, np.int64), "req_t": np.full(n, np.inf),
             "stop_clock": np.zeros(n), "halt": np.zeros(n), "stuck": np.zeros(n, bool),
-            "still": np.zeros(n), "lat_goal": np.zeros(n), "idm": np.zeros((n, 5)),
+            "still": np.zeros(n), "lat_goal": np.zeros(n), "lc": np.zeros(n),
+            "hazard": np.zeros(n, bool), "idm": np.zeros((n, 5)),
             "height": height}
     for f in _FIELDS:
         st[f] = np.concatenate([st[f], rows[f].astype(st[f].dtype)])
@@ -214,7 +222,13 @@ def populate(world_map: WorldMap, cfg: dict[str, Any], rng: np.random.Generator,
     st = _empty(k)
     slots = world_map.meta.get("parking_slots", np.zeros((0, 6)))
     taken = rng.random(len(slots)) < tr["parked_density"]
-    _add_parked(st, slots[taken], rng)
+    double = np.zeros(len(slots), bool)
+    if tr["double_park_prob"] > 0:
+        double = taken & (rng.random(len(slots)) < tr["double_park_prob"])
+    _add_parked(st, slots[taken & ~double], rng)
+    for slot in slots[double]:
+        if _double_park(world_map, st, slot, cfg, rng, k) is None:
+            _add_parked(st, slot[None], rng)  # no lane beside it: it parks after all
     road = np.flatnonzero((net.kind == LaneKind.ROAD) & (net.length > 12.0))
     if len(road) == 0:
         road = np.flatnonzero(net.kind == LaneKind.ROAD)
@@ -245,6 +259,45 @@ def populate(world_map: WorldMap, cfg: dict[str, Any], rng: np.random.Generator,
         for _ in range(count):
             _mobile(world_map, st, rng, cfg, kind, lanes, cdf, k, at=len(st["v"]) - 1)
     return st
+
+
+def _double_park(world_map: WorldMap, st: dict[str, np.ndarray], slot: np.ndarray,
+                 cfg: dict[str, Any], rng: np.random.Generator, k: int) -> int | None:
+    """A vehicle meant for parking ``slot`` ``(6,)`` stands in the kerb-side travel lane
+    beside it instead: hazards on, halted for a drawn dwell time (exponential, mean
+    ``traffic.double_park_duration``, at most 4x), then it drives off with the traffic.
+    Its right side keeps 0.2 m from the lane edge. Returns its row, or None when no
+    kerb lane runs beside the slot or the spot is not free."""
+    net, tr = world_map.lanes, cfg["traffic"]
+    x, y, yaw = slot[:3]
+    found = nearest_lane(net, x, y, yaw, max_dist=net.lane_width + 2.5)
+    if found is None or net.kind[found[0]] != LaneKind.ROAD or not net.rightmost[found[0]]:
+        return None
+    lane, s = found
+    s, _, _ = project_on_lane(net.pts, net.start, net.npts, net.ds, lane, x, y, s, 3.0)
+    if slot[3] > 0:
+        length, width, height = (float(q) for q in slot[3:6])
+    else:
+        (l_lo, l_hi), (w_lo, w_hi) = BODY[AgentKind.CAR][:2]
+        length, width, height = rng.uniform(l_lo, l_hi), rng.uniform(w_lo, w_hi), None
+    if not length / 2 + 1.0 <= s <= net.length[lane] - length / 2 - 6.0:
+        return None  # not on the stop line
+    lat = -(net.lane_width / 2 - width / 2 - 0.2)
+    lx, ly, h = lane_pose(net.pts, net.hdg, net.start, net.npts, net.ds, lane, s)
+    cx, cy = lx - lat * np.sin(h), ly + lat * np.cos(h)
+    if not _free(st, (cx, cy), h, length, width, 0.3):
+        return None
+    _, _, amax, bcomf, headway, jam = BODY[AgentKind.CAR]
+    if length > 4.9:  # vans and trucks: gentler, as in traffic
+        amax, bcomf = amax * 0.7, bcomf * 0.8
+    v0 = tr["speed_limit"] * rng.uniform(0.8, 1.2)
+    i = add_row(st, AgentKind.CAR, (cx, cy), h, length, width, route=plan_route(net, lane, rng, k),
+                s=s, lat=lat, idm=(v0, amax, bcomf, headway, jam), height=height)
+    mean = tr["double_park_duration"]
+    st["halt"][i] = min(-mean * np.log(max(rng.random(), 1e-9)), 4.0 * mean)
+    st["hazard"][i] = True
+    st["lat_goal"][i] = 0.0  # when it drives off it moves over to the lane centre
+    return i
 
 
 def _task(world_map, st, rng, cfg, k, slots, taken) -> None:
@@ -327,6 +380,7 @@ def pull_out(world_map: WorldMap, st: dict[str, np.ndarray], cfg: dict[str, Any]
     st["yaw"][i] = h
     st["idm"][i] = (tr["speed_limit"] * rng.uniform(0.8, 1.2), amax, bcomf, headway, jam)
     st["grant"][i], st["req_t"][i], st["halt"][i], st["still"][i] = -1, np.inf, 0.0, 0.0
+    st["lc"][i], st["hazard"][i] = 0.0, False
     return i
 
 
@@ -341,7 +395,9 @@ def respawn(world_map: WorldMap, st: dict[str, np.ndarray], i: int, rng: np.rand
     if st["akind"][i] == AgentKind.CYCLIST and net.rightmost[lanes].any():
         lanes = lanes[net.rightmost[lanes]]
     k = st["route"].shape[1]
-    keep = {f: st[f][i].copy() for f in ("hl", "hw", "akind", "idm", "lat")}
+    keep = {f: st[f][i].copy() for f in ("hl", "hw", "akind", "idm")}
+    # a respawned agent starts on its lane's usual line (cyclists keep to the kerb side)
+    keep["lat"] = -(net.lane_width / 2 - 0.8) if keep["akind"] == AgentKind.CYCLIST else 0.0
     tmp = {f: np.delete(st[f], i, axis=0) for f in _FIELDS}
     w = net.length[lanes] / net.length[lanes].sum()
     for _ in range(30):
@@ -356,5 +412,7 @@ def respawn(world_map: WorldMap, st: dict[str, np.ndarray], i: int, rng: np.rand
     st["route"][i] = plan_route(net, ln, rng, k)
     st["s"][i], st["v"][i], st["grant"][i], st["stuck"][i] = pos, 0.0, -1, False
     st["req_t"][i], st["stop_clock"][i], st["halt"][i], st["still"][i] = np.inf, 0.0, 0.0, 0.0
+    st["lc"][i], st["hazard"][i], st["lat"][i], st["lat_goal"][i] = 0.0, False, keep["lat"], \
+        keep["lat"]
     st["xy"][i] = x - keep["lat"] * np.sin(h), y + keep["lat"] * np.cos(h)
     st["yaw"][i] = h

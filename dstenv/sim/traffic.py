@@ -12,9 +12,11 @@ lanes planned in ``route[i, 1:]``. One step:
    its corridor, an ungranted stop line or a blocked crosswalk, and takes the
    IDM acceleration towards it (of two standing agents that block each other,
    the lower row heeds only its next obstacle);
-4. agents move along their lanes; the travel is also clamped to the gap, so no
-   agent ever drives into a body ahead of it;
-5. a move (along or across the lane) that would still make two footprints overlap
+4. vehicles start, steer or end lane changes and passes on the oncoming lane
+   (:mod:`dstenv.sim.lanechange`);
+5. agents move along their lanes (and sideways towards their lateral goal); the
+   travel is also clamped to the gap, so no agent ever drives into a body ahead of it;
+6. a move (along or across the lane) that would still make two footprints overlap
    is undone. An agent
    standing for a minute (a gridlock from odd OSM junctions) out of the ego's
    sight is flagged ``stuck`` and replaced by the world.
@@ -30,9 +32,10 @@ import numba as nb
 import numpy as np
 
 from dstenv.sim.ego import box_overlap
+from dstenv.sim.lanechange import LC_NONE, lane_changes
 from dstenv.sim.lanes import lane_pose
 
-__all__ = ["traffic_step", "choose_successor", "route_point", "signal_green", "CAR", "CYCLIST",
+__all__ = ["traffic_step", "n_randoms", "choose_successor", "route_point", "signal_green", "CAR", "CYCLIST",
            "PEDESTRIAN"]
 
 CAR, CYCLIST, PEDESTRIAN = 0, 1, 2  # AgentKind codes (kept numeric for numba)
@@ -43,6 +46,13 @@ AMBER = 3.0  # [s] end of a green phase in which no new vehicle is let in
 PATH_MAX = 200  # points in an agent's look-ahead path
 GRIDLOCK_TIME = 60.0  # [s] standstill (not a planned halt) after which an agent is ...
 REPLACE_DIST = 90.0  # [m] ... replaced, if it is at least this far from the ego (unseen)
+LC_YAW_MAX = 0.35  # [rad] largest heading offset from the lane while moving sideways
+LC_LAT_ACCEL = 0.8  # [m/s^2] lateral deceleration at the end of a lane change
+
+
+def n_randoms(n_route: int) -> int:
+    """Columns of the uniform randoms ``u`` that :func:`traffic_step` takes per row."""
+    return 5 + n_route
 
 
 @nb.njit(cache=True)
@@ -110,26 +120,34 @@ def _seg_dist(px, py, ax, ay, bx, by):
 
 
 @nb.njit(cache=True)
-def traffic_step(net, st, idm, rules, t, dt, u, ego_auto):
+def traffic_step(net, nbr, st, idm, rules, t, dt, u, ego_auto):
     """Advance all mobile agents by ``dt`` (state arrays are updated in place).
 
     Args:
         net: lane-network arrays ``(pts, hdg, start, npts, ds, length, kind, node,
             turn, group, vmax, succ_ptr, succ, conf_ptr, conf, node_control, node_phase)``.
+        nbr: ``(left, right, oncoming)`` lanes beside each lane
+            (:func:`dstenv.sim.lanechange.lane_neighbours`).
         st: state arrays over B rows (ego last) ``(xy, yaw, v, hl, hw, akind, mobile,
             parked, route, s, lat, grant, req_t, stop_clock, halt, stuck, still,
-            lat_goal)``.
+            lat_goal, lc, hazard)`` (``lc``: lane-change state of
+            :mod:`dstenv.sim.lanechange`; ``hazard``: double parked, hazard lights on,
+            cleared when its halt ends).
         idm: ``(B, 5)`` desired speed, max accel, comfortable decel, headway, jam gap.
         rules: ``(signal_green, stop_duration, halt_rate, halt_mean, pause_rate,
             pause_mean, crossing_prob, drift, drift_time, lateral_speed,
-            delivery_factor)``.
-        t: time [s]; dt: step [s]; u: ``(B, 3)`` uniform randoms, ``(B, 4)`` when
-            ``drift > 0`` (the 4th drives the drift); ego_auto: plan the ego.
+            delivery_factor, lane_change_rate, lane_change_time, lane_width)``.
+        t: time [s]; dt: step [s]; u: ``(B, n_randoms(K))`` uniform randoms (0: route
+            choice, 1-2: halts, 3: drift, 4-5: lane changes, 6..: successors after a
+            lane change); ego_auto: plan the ego.
 
     Lateral motion of vehicles: ``lat`` follows ``lat_goal`` at up to
     ``lateral_speed`` [m/s] (a car pulling out of a parking space), and while a
     vehicle drives faster than 1 m/s it drifts around the goal (Ornstein-Uhlenbeck,
-    std ``drift`` [m], correlation time ``drift_time`` [s], at most 2 std).
+    std ``drift`` [m], correlation time ``drift_time`` [s], at most 2 std). During a
+    lane change or pass it moves at up to ``1.2 lane_width / lane_change_time``
+    (``0.3 + 0.5 v`` at low speed, braking at ``LC_LAT_ACCEL`` towards the end), its
+    heading turned along the move.
 
     Returns:
         ``(accel, gap)`` of the ego under autopilot: IDM acceleration [m/s^2] and the
@@ -138,9 +156,9 @@ def traffic_step(net, st, idm, rules, t, dt, u, ego_auto):
     (pts, hdg, start, npts, ds, length, lkind, node, turn, group, vmax, succ_ptr, succ,
      conf_ptr, conf, node_control, node_phase) = net
     (xy, yaw, v, hl, hw, akind, mobile, parked, route, s, lat, grant, req_t, stop_clock,
-     halt, stuck, still, lat_goal) = st
+     halt, stuck, still, lat_goal, lc, hazard) = st
     (green, stop_dur, halt_rate, halt_mean, pause_rate, pause_mean, cross_prob, drift,
-     drift_time, lat_speed, delivery) = rules
+     drift_time, lat_speed, delivery, lc_rate, lc_time, lane_width) = rules
     nb_rows = xy.shape[0]
     ego = nb_rows - 1
     n_route = route.shape[1]
@@ -333,7 +351,16 @@ def traffic_step(net, st, idm, rules, t, dt, u, ego_auto):
             dyn = v[i] * headway + v[i] * (v[i] - leads[i]) / (2 * np.sqrt(amax * bcomf))
             a -= amax * ((jam + max(0.0, dyn)) / max(gaps[i], 0.01)) ** 2
         acc[i] = min(max(a, -3.0 if akind[i] == PEDESTRIAN else -9.0), amax)
-    # 4. motion of the non-ego agents
+    # 4. lane changes and passes; a vehicle that changed lanes re-draws its route
+    lane_changes(net, nbr, st, idm, planner, gaps, leads, blocker, dt, u, lc_rate, lc_time,
+                 lane_width)
+    for i in range(nb_rows - 1):
+        if route[i, 1] == -2:
+            for k in range(1, n_route):
+                prev = route[i, k - 1]
+                route[i, k] = -1 if prev < 0 else choose_successor(
+                    prev, u[i, 5 + k], succ_ptr, succ, lkind, turn, cross_prob)
+    # 5. motion of the non-ego agents
     old_xy, old_yaw, old_s, old_route = xy.copy(), yaw.copy(), s.copy(), route.copy()
     old_lat = lat.copy()
     for i in range(nb_rows - 1):
@@ -361,9 +388,16 @@ def traffic_step(net, st, idm, rules, t, dt, u, ego_auto):
             last = route[i, n_route - 2]
             route[i, n_route - 1] = -1 if last < 0 else choose_successor(
                 last, u[i, 0], succ_ptr, succ, lkind, turn, cross_prob)
+        dlat = 0.0
         if akind[i] != PEDESTRIAN:
             off = lat[i] - lat_goal[i]
-            if drift > 0.0 and v[i] > 1.0 and abs(off) < 2.0 * drift:
+            if lc[i] != LC_NONE:  # changing lanes / passing: smooth sideways move
+                vlat = min(1.2 * lane_width / lc_time, 0.3 + 0.5 * v[i],
+                           np.sqrt(2.0 * LC_LAT_ACCEL * abs(off)) + 0.05)
+                step = vlat * dt
+                dlat = -min(max(off, -step), step)
+                off = off + dlat
+            elif drift > 0.0 and v[i] > 1.0 and abs(off) < 2.0 * drift:
                 a = dt / drift_time
                 off = off * (1.0 - a) + drift * np.sqrt(2.0 * a) * (u[i, 3] - 0.5) * 3.4641016
                 off = min(max(off, -2.0 * drift), 2.0 * drift)
@@ -373,6 +407,8 @@ def traffic_step(net, st, idm, rules, t, dt, u, ego_auto):
             lat[i] = lat_goal[i] + off
         x, y, h = lane_pose(pts, hdg, start, npts, ds, route[i, 0], s[i])
         xy[i, 0], xy[i, 1], yaw[i] = x - lat[i] * np.sin(h), y + lat[i] * np.cos(h), h
+        if dlat != 0.0:
+            yaw[i] = h + min(max(np.arctan2(dlat / dt, max(v[i], 2.0)), -LC_YAW_MAX), LC_YAW_MAX)
         # a gridlock (rare, from odd junction geometry) is cleared out of the ego's sight
         still[i] = still[i] + dt if (v[i] < 0.1 and halt[i] <= 0.0) else 0.0
         if still[i] > GRIDLOCK_TIME:
@@ -381,6 +417,8 @@ def traffic_step(net, st, idm, rules, t, dt, u, ego_auto):
         # halts of cars mid-block and pauses of pedestrians
         if halt[i] > 0.0:
             halt[i] -= dt
+            if halt[i] <= 0.0:
+                hazard[i] = False  # a double-parked vehicle drives off
         elif akind[i] == PEDESTRIAN:
             if lkind[route[i, 0]] == K_WALK and u[i, 1] < pause_rate * dt:
                 halt[i] = min(-pause_mean * np.log(max(u[i, 2], 1e-9)), 4.0 * pause_mean)
@@ -389,7 +427,7 @@ def traffic_step(net, st, idm, rules, t, dt, u, ego_auto):
             # vans and trucks (longer than 4.9 m) halt like delivery vans: longer
             mean = halt_mean * (delivery if hl[i] > 2.45 else 1.0)
             halt[i] = min(-mean * np.log(max(u[i, 2], 1e-9)), 4.0 * mean)
-    # 5. safety net: a move that would make two footprints overlap is undone (the agent
+    # 6. safety net: a move that would make two footprints overlap is undone (the agent
     # stands still for this step); earlier rows are final, later rows still old
     for i in range(nb_rows - 1):
         if not mobile[i] or (old_s[i] == s[i] and old_route[i, 0] == route[i, 0]

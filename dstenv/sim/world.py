@@ -15,7 +15,9 @@ from dstenv.sim.citygen import generate_city
 from dstenv.sim.clutter import street_clutter
 from dstenv.sim.ego import bicycle_step, hits, pure_pursuit, pursuit_lookahead
 from dstenv.sim.lanes import Control, LaneKind, LaneNetwork, Turn, lane_pose, project_on_lane
-from dstenv.sim.traffic import choose_successor, route_point, signal_green, traffic_step
+from dstenv.sim.lanechange import lane_neighbours
+from dstenv.sim.traffic import (choose_successor, n_randoms, route_point, signal_green,
+                                traffic_step)
 from dstenv.sim.types import AgentKind, Agents, WorldMap
 
 __all__ = ["World"]
@@ -101,6 +103,8 @@ class World:
         self.time = 0.0
         self.steps = 0
         self.route_progress = 0.0
+        if getattr(self, "_nbr_of", None) is not self._map.lanes:  # once per lane network
+            self._nbr, self._nbr_of = lane_neighbours(self._map.lanes), self._map.lanes
         self._state = spawn.populate(self._map, self.config, self.rng, ROUTE_LEN)
         self._steer = 0.0
         self._lane_offset = 0.0
@@ -118,9 +122,10 @@ class World:
         dt = cfg["dt"]
         net = self._map.lanes
         auto = ego_action is None
-        u = self.rng.random((len(st["v"]), 4 if cfg["traffic"]["lateral_drift"] > 0 else 3))
-        acc, gap = traffic_step(spawn.net_tuple(net), spawn.state_tuple(st), st["idm"],
-                                spawn.rules_tuple(cfg["traffic"]), self.time, dt, u, auto)
+        u = self.rng.random((len(st["v"]), n_randoms(ROUTE_LEN)))
+        acc, gap = traffic_step(spawn.net_tuple(net), self._nbr, spawn.state_tuple(st), st["idm"],
+                                spawn.rules_tuple(cfg["traffic"], net.lane_width), self.time,
+                                dt, u, auto)
         e = len(st["v"]) - 1
         x, y, yaw, v = st["xy"][e, 0], st["xy"][e, 1], st["yaw"][e], st["v"][e]
         if auto:

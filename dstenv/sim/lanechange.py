@@ -45,7 +45,8 @@ __all__ = ["lane_neighbours", "lane_changes", "LC_NONE", "LC_MOVING"]
 
 LC_NONE, LC_MOVING = 0.0, -1.0  # ``lc`` codes (> 0: borrowing until s reaches lc)
 LOOK = 40.0  # [m] a slow leader closer than this is worth overtaking
-MIN_LEFT = 30.0  # [m] no lane change with less lane than this ahead
+MIN_LEFT = 30.0  # [m] no lane change without reason with less lane than this ahead (half
+#                   of it to overtake)
 RETURN_BEFORE = 8.0  # [m] a pass on the oncoming lane ends this far before the stop line
 PASS_SPEED = 5.0  # [m/s] assumed mean speed over a pass from standstill (conservative)
 _CAR, _CYCLIST, _PED = 0, 1, 2
@@ -212,8 +213,6 @@ def lane_changes(net, nbr, st, idm, planner, gaps, leads, blocker, dt, u, lc_rat
             continue
         if lkind[ln] != _K_ROAD or halt[i] > 0.0 or hazard[i]:
             continue
-        if length[ln] - s[i] < MIN_LEFT:
-            continue
         j = blocker[i]
         v0 = min(idm[i, 0], vmax[ln])
         motive = 0
@@ -235,7 +234,8 @@ def lane_changes(net, nbr, st, idm, planner, gaps, leads, blocker, dt, u, lc_rat
                 continue
             s_t, lat_t, dist = project_on_lane(pts, start, npts, ds, tl, xy[i, 0], xy[i, 1],
                                                s[i] * length[tl] / length[ln], 15.0)
-            if dist > 6.0 or s_t < hl[i] + 1.0 or length[tl] - s_t < MIN_LEFT:
+            if dist > 6.0 or s_t < hl[i] + 1.0 or \
+                    length[tl] - s_t < (MIN_LEFT if motive == 2 else 0.5 * MIN_LEFT):
                 continue
             ga, va, gb, vb = _gaps_on_lane(i, tl, s_t, route, s, v, hl, length)
             need_a = 2.0 + 0.8 * v[i] + max(v[i] - va, 0.0) ** 2 / 5.0

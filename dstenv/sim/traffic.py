@@ -32,11 +32,11 @@ import numba as nb
 import numpy as np
 
 from dstenv.sim.ego import box_overlap
-from dstenv.sim.lanechange import LC_NONE, lane_changes
+from dstenv.sim.lanechange import LC_MOVING, LC_NONE, lane_changes
 from dstenv.sim.lanes import lane_pose
 
-__all__ = ["traffic_step", "n_randoms", "choose_successor", "route_point", "signal_green", "CAR", "CYCLIST",
-           "PEDESTRIAN"]
+__all__ = ["traffic_step", "n_randoms", "choose_successor", "route_point", "signal_green",
+           "CAR", "CYCLIST", "PEDESTRIAN"]
 
 CAR, CYCLIST, PEDESTRIAN = 0, 1, 2  # AgentKind codes (kept numeric for numba)
 K_ROAD, K_CONN, K_WALK, K_CROSS = 0, 1, 2, 3  # LaneKind codes
@@ -417,8 +417,8 @@ def traffic_step(net, nbr, st, idm, rules, t, dt, u, ego_auto):
         # halts of cars mid-block and pauses of pedestrians
         if halt[i] > 0.0:
             halt[i] -= dt
-            if halt[i] <= 0.0:
-                hazard[i] = False  # a double-parked vehicle drives off
+            if halt[i] <= 0.0 and hazard[i]:  # a double-parked vehicle drives off, moving
+                hazard[i], lc[i] = False, LC_MOVING  # over to the lane centre as it goes
         elif akind[i] == PEDESTRIAN:
             if lkind[route[i, 0]] == K_WALK and u[i, 1] < pause_rate * dt:
                 halt[i] = min(-pause_mean * np.log(max(u[i, 2], 1e-9)), 4.0 * pause_mean)

@@ -1,4 +1,5 @@
-"""A hand-built map for exact tests: one 4-way junction with 60 m arms."""
+"""A hand-built map for exact tests: one 4-way junction with 60 m arms (1 or more lanes
+per direction)."""
 
 from __future__ import annotations
 
@@ -11,15 +12,17 @@ from dstenv.sim.types import MapClass, WorldMap
 
 ARM = 60.0  # [m] junction centre -> arm end
 TRIM = 10.0  # [m] junction centre -> stop line
-LW = 3.25  # [m] lane width (one lane per direction)
+LW = 3.25  # [m] lane width
 RES = 0.2  # [m]
 BLOCK = (LW + 4.0, LW + 24.0)  # building square in each quadrant, distance from the axes
 
 
-def cross_map(control: Control = Control.STOP) -> WorldMap:
-    """Junction at (0, 0); arms east, north, west, south; a building in each quadrant."""
+def cross_map(control: Control = Control.STOP, lanes: int = 1) -> WorldMap:
+    """Junction at (0, 0); arms east, north, west, south with ``lanes`` lanes per
+    direction (lane ``k`` from the centre line at ``(k + 0.5) LW``); a building in each
+    quadrant."""
     node_xy = np.array([[0, 0], [ARM, 0], [0, ARM], [-ARM, 0], [0, -ARM]], float)
-    edges = [RoadEdge(0, k, node_xy[[0, k]], 1, 1) for k in range(1, 5)]
+    edges = [RoadEdge(0, k, node_xy[[0, k]], lanes, lanes) for k in range(1, 5)]
     builder = NetworkBuilder()
     add_road_lanes(builder, 5, edges, np.full(5, TRIM), LW)
     controls = np.array([control] + [Control.NONE] * 4, np.uint8)
@@ -28,10 +31,11 @@ def cross_map(control: Control = Control.STOP) -> WorldMap:
     n = int(round(2 * (ARM + 10.0) / RES))
     raster = np.full((n, n), MapClass.INTERMEDIATE, np.uint8)
     org = (lo, lo)
-    fill_rect(raster, -ARM - 5, ARM + 5, -LW, LW, org, RES, MapClass.ROAD)
-    fill_rect(raster, -LW, LW, -ARM - 5, ARM + 5, org, RES, MapClass.ROAD)
+    half = LW * lanes
+    fill_rect(raster, -ARM - 5, ARM + 5, -half, half, org, RES, MapClass.ROAD)
+    fill_rect(raster, -half, half, -ARM - 5, ARM + 5, org, RES, MapClass.ROAD)
     buildings = []
-    a, b = BLOCK
+    a, b = BLOCK[0] + half - LW, BLOCK[1]
     for sx in (1, -1):
         for sy in (1, -1):
             xs, ys = sorted((sx * a, sx * b)), sorted((sy * a, sy * b))

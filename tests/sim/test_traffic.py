@@ -96,6 +96,9 @@ def test_follower_keeps_distance_behind_stopped_leader():
     lead = w.add_agent(AgentKind.CAR, south_in, 30.0, speed=0.0)
     follow = w.add_agent(AgentKind.CAR, south_in, 2.0, speed=10.0)
     w._state["halt"][lead] = 1e9  # the leader stays put
+    # and a car stands on the oncoming lane beside it: no pass (test_overtaking.py)
+    other = w.add_agent(AgentKind.CAR, lane_starting_near(net, -LW / 2, -TRIM), 20.0)
+    w._state["halt"][other] = 1e9
     for _ in range(150):
         w.step(HOLD)
         a = w.agents

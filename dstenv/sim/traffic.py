@@ -46,7 +46,8 @@ AMBER = 3.0  # [s] end of a green phase in which no new vehicle is let in
 PATH_MAX = 200  # points in an agent's look-ahead path
 GRIDLOCK_TIME = 60.0  # [s] standstill (not a planned halt) after which an agent is ...
 REPLACE_DIST = 90.0  # [m] ... replaced, if it is at least this far from the ego (unseen)
-LC_YAW_MAX = 0.35  # [rad] largest heading offset from the lane while moving sideways
+LC_YAW = 0.2  # [-] sideways speed / speed (at least 2.5 m/s) while changing lanes: the
+#               heading turns at most ~0.2 rad off the lane
 LC_LAT_ACCEL = 0.8  # [m/s^2] lateral deceleration at the end of a lane change
 
 
@@ -146,8 +147,8 @@ def traffic_step(net, nbr, st, idm, rules, t, dt, u, ego_auto):
     vehicle drives faster than 1 m/s it drifts around the goal (Ornstein-Uhlenbeck,
     std ``drift`` [m], correlation time ``drift_time`` [s], at most 2 std). During a
     lane change or pass it moves at up to ``1.2 lane_width / lane_change_time``
-    (``0.3 + 0.5 v`` at low speed, braking at ``LC_LAT_ACCEL`` towards the end), its
-    heading turned along the move.
+    (``LC_YAW * max(v, 2.5)`` at low speed, braking at ``LC_LAT_ACCEL`` towards the
+    end), its heading turned along the move.
 
     Returns:
         ``(accel, gap)`` of the ego under autopilot: IDM acceleration [m/s^2] and the
@@ -392,7 +393,7 @@ def traffic_step(net, nbr, st, idm, rules, t, dt, u, ego_auto):
         if akind[i] != PEDESTRIAN:
             off = lat[i] - lat_goal[i]
             if lc[i] != LC_NONE:  # changing lanes / passing: smooth sideways move
-                vlat = min(1.2 * lane_width / lc_time, 0.3 + 0.5 * v[i],
+                vlat = min(1.2 * lane_width / lc_time, LC_YAW * max(v[i], 2.5),
                            np.sqrt(2.0 * LC_LAT_ACCEL * abs(off)) + 0.05)
                 step = vlat * dt
                 dlat = -min(max(off, -step), step)
@@ -408,7 +409,7 @@ def traffic_step(net, nbr, st, idm, rules, t, dt, u, ego_auto):
         x, y, h = lane_pose(pts, hdg, start, npts, ds, route[i, 0], s[i])
         xy[i, 0], xy[i, 1], yaw[i] = x - lat[i] * np.sin(h), y + lat[i] * np.cos(h), h
         if dlat != 0.0:
-            yaw[i] = h + min(max(np.arctan2(dlat / dt, max(v[i], 2.0)), -LC_YAW_MAX), LC_YAW_MAX)
+            yaw[i] = h + np.arctan2(dlat / dt, max(v[i], 2.5))
         # a gridlock (rare, from odd junction geometry) is cleared out of the ego's sight
         still[i] = still[i] + dt if (v[i] < 0.1 and halt[i] <= 0.0) else 0.0
         if still[i] > GRIDLOCK_TIME:

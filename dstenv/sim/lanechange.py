@@ -40,6 +40,7 @@ import numba as nb
 import numpy as np
 
 from dstenv.sim.lanes import LaneKind, LaneNetwork, lane_pose, project_on_lane
+from dstenv.sim.types import AgentKind
 
 __all__ = ["lane_neighbours", "lane_changes", "LC_NONE", "LC_MOVING"]
 
@@ -49,7 +50,7 @@ MIN_LEFT = 30.0  # [m] no lane change without reason with less lane than this ah
 #                   of it to overtake)
 RETURN_BEFORE = 8.0  # [m] a pass on the oncoming lane ends this far before the stop line
 PASS_SPEED = 5.0  # [m/s] assumed mean speed over a pass from standstill (conservative)
-_CAR, _CYCLIST, _PED = 0, 1, 2
+_CAR, _CYCLIST, _PED = int(AgentKind.CAR), int(AgentKind.CYCLIST), int(AgentKind.PEDESTRIAN)
 _K_ROAD = int(LaneKind.ROAD)
 
 

@@ -96,8 +96,8 @@ def fit_ground_plane(points: np.ndarray, config: dict[str, Any] | None = None, *
     cfg = ground_config(config)
     xyz = np.asarray(points, dtype=np.float64)[:, :3]
     r = (polar or polar_coordinates(xyz))[0]
-    near = (r < cfg["fit_range"]) & (r > cfg["ego_radius"])
-    cand = xyz[near & (xyz[:, 2] < cfg["max_candidate_z"])]
+    cand = _candidates(xyz, r, float(cfg["fit_range"]), float(cfg["ego_radius"]),
+                       float(cfg["max_candidate_z"]))
     if len(cand) < 3:
         raise CloudError(f"ground fit: only {len(cand)} candidate points near the road")
     rng = np.random.default_rng(cfg["seed"])
@@ -188,6 +188,24 @@ def classify_points(
         away & (height >= cfg["min_obstacle_height"]) & (height <= cfg["max_obstacle_height"])
     )
     return ground, obstacle, height
+
+
+@numba.njit(cache=True)
+def _candidates(xyz, r, fit_range, ego_radius, max_z):  # pragma: no cover - numba
+    """``(K, 3)`` points with ``ego_radius < r < fit_range`` and ``z < max_z``, in order."""
+    n = 0
+    for p in range(r.shape[0]):
+        if ego_radius < r[p] < fit_range and xyz[p, 2] < max_z:
+            n += 1
+    out = np.empty((n, 3))
+    k = 0
+    for p in range(r.shape[0]):
+        if ego_radius < r[p] < fit_range and xyz[p, 2] < max_z:
+            out[k, 0] = xyz[p, 0]
+            out[k, 1] = xyz[p, 1]
+            out[k, 2] = xyz[p, 2]
+            k += 1
+    return out
 
 
 @numba.njit(cache=True)

@@ -44,6 +44,7 @@ import numba
 import numpy as np
 
 from dstenv.grid import GridSpec
+from dstenv.sensing.cast3d import cast_boxes, cast_ground, cast_walls, column_index, raised_distance
 from dstenv.sensing.cloud import cloud_sensor_grid
 from dstenv.sensing.config import lidar_config
 from dstenv.sim.types import Agents, MapClass, WorldMap
@@ -121,14 +122,17 @@ class Hdl64:
         n = int(c["channels"])
         self.elevation = np.deg2rad(np.linspace(c["elevation_top"], c["elevation_bottom"], n))
         self.slope = np.tan(self.elevation)
+        self._neg_slope = -self.slope  # increasing: the channel search of cast3d
         self.columns = int(round(360.0 / c["azimuth_step"]))
         self.azimuth = math.pi - np.deg2rad(c["azimuth_step"]) * np.arange(self.columns)
         self._cos_az, self._sin_az = np.cos(self.azimuth), np.sin(self.azimuth)
+        self._cos_el, self._sin_el = np.cos(self.elevation), np.sin(self.elevation)
         gain_rng = np.random.default_rng(int(c["channel_seed"]))
         self.gain = gain_rng.uniform(0.75, 1.25, n)  # per-channel intensity calibration
         self._map: WorldMap | None = None
         self._walls: tuple[np.ndarray, ...] = ()
         self._raster = np.zeros((0, 0), np.uint8)
+        self._dist = np.zeros((0, 0), np.uint8)
 
     @property
     def beams(self) -> int:
@@ -172,6 +176,7 @@ class Hdl64:
         if self._map is not world_map:  # static geometry, flattened once per map
             self._walls = _building_table(world_map)
             self._raster = np.ascontiguousarray(world_map.raster, dtype=np.uint8)
+            self._dist = raised_distance(self._raster, MapClass.INTERMEDIATE)
             self._map = world_map
         edges, starts, circles, heights = self._walls
         n = len(self.slope)
@@ -179,57 +184,77 @@ class Hdl64:
         surf = np.full((self.columns, n), -1, np.int16)
         idx = np.full((self.columns, n), -1, np.int32)
         h_max = c["max_range"]  # a slant range bounds the horizontal one
-        _cast_boxes(boxes, ox, oy, ux, uy, self.slope, c["mount_height"], h_max, best, surf, idx)
-        _cast_walls(edges, starts, circles, heights, ox, oy, ux, uy, self.slope,
-                    c["mount_height"], h_max, best, surf, idx)
-        _cast_ground(self._raster, np.uint8(MapClass.INTERMEDIATE), float(world_map.origin[0]),
-                     float(world_map.origin[1]),
-                     float(world_map.resolution), float(world_map.kerb_height), ox, oy, ux, uy,
-                     self.slope, c["mount_height"], h_max, best, surf, idx)
+        mount = float(c["mount_height"])
+        cols = column_index(ox, oy, world_az)
+        cast_boxes(boxes, *cols, ox, oy, ux, uy, self.slope, self._neg_slope, mount, h_max,
+                   best, surf, idx)
+        cast_walls(edges, starts, circles, heights, _BUILDING, *cols, ox, oy, ux, uy,
+                   self.slope, self._neg_slope, mount, h_max, best, surf, idx)
+        cast_ground(self._raster, self._dist, np.uint8(MapClass.INTERMEDIATE),
+                    float(world_map.origin[0]), float(world_map.origin[1]),
+                    float(world_map.resolution), float(world_map.kerb_height), ox, oy, ux, uy,
+                    self.slope, mount, h_max, best, surf, idx)
         return self._measure(best, surf, idx, rng)
 
     def _measure(self, best: np.ndarray, surf: np.ndarray, idx: np.ndarray,
                  rng: np.random.Generator) -> Cloud:
         c = self.config
-        cos_el = np.cos(self.elevation)
-        col, ch = np.nonzero(np.isfinite(best))  # returns before noise, column-major
-        n = len(col)
+        n = _count_returns(best)  # returns before noise, column-major
+        # the draws, in this order, are the sweep's whole use of ``rng``
         noise = rng.normal(0.0, c["range_noise"], n) if c["range_noise"] > 0 else np.zeros(n)
         keep = rng.random(n) >= c["dropout"] if c["dropout"] > 0 else np.ones(n, bool)
         inoise = (rng.normal(0.0, c["intensity_noise"], n) if c["intensity_noise"] > 0
                   else np.zeros(n))
         pts = np.empty((n, 4), np.float32)
+        out_ch = np.empty(n, np.int16)
+        out_col = np.empty(n, np.int32)
         out_s = np.empty(n, np.uint8)
         out_i = np.empty(n, np.int32)
-        m = _points(best, col, ch, noise, keep, inoise, surf, idx, self._cos_az, self._sin_az,
-                    cos_el, np.sin(self.elevation), self.gain, REFLECTANCE,
-                    float(c["min_range"]), float(c["max_range"]), pts, out_s, out_i)
-        return Cloud(pts[:m], ch[:m].astype(np.int16), col[:m].astype(np.int32), out_s[:m],
-                     out_i[:m], self.mount.copy(), c, best.shape)
+        m = _points(best, noise, keep, inoise, surf, idx, self._cos_az, self._sin_az,
+                    self._cos_el, self._sin_el, self.gain, REFLECTANCE,
+                    float(c["min_range"]), float(c["max_range"]), pts, out_ch, out_col, out_s,
+                    out_i)
+        return Cloud(pts[:m], out_ch[:m], out_col[:m], out_s[:m], out_i[:m], self.mount.copy(),
+                     c, best.shape)
 
 
 @numba.njit(cache=True)
-def _points(best, col, ch, noise, keep, inoise, surf, idx, cos_az, sin_az, cos_el, sin_el,
-            gain, refl, min_range, max_range, pts, out_s, out_i):  # pragma: no cover - numba
-    """Noisy slant ranges -> Velodyne points and reflectance, compacted in place
-    (``col``, ``ch`` too); returns how many returns are kept."""
+def _count_returns(best):  # pragma: no cover - numba
+    n = 0
+    for j in range(best.shape[0]):
+        for c in range(best.shape[1]):
+            if best[j, c] < np.inf:
+                n += 1
+    return n
+
+
+@numba.njit(cache=True)
+def _points(best, noise, keep, inoise, surf, idx, cos_az, sin_az, cos_el, sin_el, gain, refl,
+            min_range, max_range, pts, out_ch, out_col, out_s, out_i):  # pragma: no cover
+    """Returns (finite ``best``, column-major) -> noisy Velodyne points and reflectance,
+    written compacted; returns how many are kept."""
     m = 0
-    for k in range(col.shape[0]):
-        j, c = col[k], ch[k]
-        r = best[j, c] / cos_el[c] + noise[k]
-        if not keep[k] or r > max_range or r < min_range:
-            continue
-        ce = cos_el[c] * r
-        pts[m, 0] = ce * cos_az[j]
-        pts[m, 1] = ce * sin_az[j]
-        pts[m, 2] = r * sin_el[c]
-        v = refl[surf[j, c]] * gain[c] * (1.0 - 0.25 * min(r / 100.0, 1.0)) + inoise[k]
-        pts[m, 3] = min(max(v, 0.0), 1.0)
-        out_s[m] = surf[j, c]
-        out_i[m] = idx[j, c]
-        col[m] = j
-        ch[m] = c
-        m += 1
+    k = -1
+    for j in range(best.shape[0]):
+        for c in range(best.shape[1]):
+            if not best[j, c] < np.inf:
+                continue
+            k += 1
+            r = best[j, c] / cos_el[c] + noise[k]
+            if not keep[k] or r > max_range or r < min_range:
+                continue
+            ce = cos_el[c] * r
+            pts[m, 0] = ce * cos_az[j]
+            pts[m, 1] = ce * sin_az[j]
+            pts[m, 2] = r * sin_el[c]
+            s = surf[j, c]
+            v = refl[s] * gain[c] * (1.0 - 0.25 * min(r / 100.0, 1.0)) + inoise[k]
+            pts[m, 3] = min(max(v, 0.0), 1.0)
+            out_ch[m] = c
+            out_col[m] = j
+            out_s[m] = s
+            out_i[m] = idx[j, c]
+            m += 1
     return m
 
 
@@ -266,140 +291,3 @@ def _building_table(world_map: WorldMap) -> tuple[np.ndarray, np.ndarray, np.nda
     return (np.ascontiguousarray(np.concatenate(edges)) if edges else np.zeros((0, 4)),
             np.asarray(starts, np.int64), np.asarray(circles, np.float64).reshape(-1, 3),
             np.asarray(world_map.building_heights, np.float64))
-
-
-@numba.njit(cache=True)
-def _visible(cx, cy, radius, ox, oy, ux, uy, h_max):  # pragma: no cover - numba
-    """Can the column (origin o, direction u) pass within ``radius`` of (cx, cy)?"""
-    dx = cx - ox
-    dy = cy - oy
-    along = dx * ux + dy * uy
-    if along < -radius or along > h_max + radius:
-        return False
-    across = -dx * uy + dy * ux
-    return abs(across) <= radius
-
-
-@numba.njit(cache=True, inline="always")
-def _slab(p, d, half, t0, t1):  # pragma: no cover - numba
-    """Clip ``[t0, t1]`` to the slab ``|p + t d| <= half``; ok = not empty."""
-    if abs(d) < 1e-12:
-        return t0, t1, abs(p) <= half
-    a = (-half - p) / d
-    b = (half - p) / d
-    return max(t0, min(a, b)), min(t1, max(a, b)), True
-
-
-@numba.njit(cache=True)
-def _cast_boxes(boxes, ox, oy, ux, uy, slope, mount, h_max, best, surf, idx):  # pragma: no cover
-    """Extruded oriented boxes: the first t of the slab interval with z in [z_lo, z_hi]."""
-    for j in range(ux.shape[0]):
-        for k in range(boxes.shape[0]):
-            cx, cy, ca, sa = boxes[k, 0], boxes[k, 1], boxes[k, 2], boxes[k, 3]
-            hl, hw, zlo, zhi = boxes[k, 4], boxes[k, 5], boxes[k, 6], boxes[k, 7]
-            s, ind, rad = boxes[k, 8], boxes[k, 9], boxes[k, 10]
-            if not _visible(cx, cy, rad, ox[j], oy[j], ux[j], uy[j], h_max):
-                continue
-            px = ca * (ox[j] - cx) + sa * (oy[j] - cy)  # origin in the box frame
-            py = -sa * (ox[j] - cx) + ca * (oy[j] - cy)
-            dx = ca * ux[j] + sa * uy[j]
-            dy = -sa * ux[j] + ca * uy[j]
-            t0, t1, ok = _slab(px, dx, hl, -np.inf, np.inf)
-            t0, t1, ok2 = _slab(py, dy, hw, t0, t1)
-            if not (ok and ok2) or t1 < t0 or t0 < 0.0:
-                continue  # missed, or the sensor is inside the box
-            for c in range(slope.shape[0]):
-                if t0 >= best[j, c]:
-                    continue
-                z0 = mount + slope[c] * t0
-                if zlo <= z0 <= zhi:
-                    t = t0  # side face
-                elif z0 > zhi and slope[c] < 0:
-                    t = (zhi - mount) / slope[c]  # roof
-                elif z0 < zlo and slope[c] > 0:
-                    t = (zlo - mount) / slope[c]  # underside (a tree crown)
-                else:
-                    continue
-                if t <= t1 and t < best[j, c]:
-                    best[j, c] = t
-                    surf[j, c] = int(s)
-                    idx[j, c] = int(ind)
-
-
-@numba.njit(cache=True)
-def _cast_walls(edges, starts, circles, heights, ox, oy, ux, uy, slope, mount, h_max,
-                best, surf, idx):  # pragma: no cover - numba
-    """Building walls: an edge crossed at t with z(t) in [0, height]."""
-    for j in range(ux.shape[0]):
-        for b in range(circles.shape[0]):
-            if not _visible(circles[b, 0], circles[b, 1], circles[b, 2], ox[j], oy[j], ux[j],
-                            uy[j], h_max):
-                continue
-            for e in range(starts[b], starts[b + 1]):
-                ax = edges[e, 0] - ox[j]
-                ay = edges[e, 1] - oy[j]
-                ex = edges[e, 2] - edges[e, 0]
-                ey = edges[e, 3] - edges[e, 1]
-                den = ux[j] * ey - uy[j] * ex
-                if den == 0.0:
-                    continue
-                t = (ax * ey - ay * ex) / den
-                sp = (ax * uy[j] - ay * ux[j]) / den
-                if t < 0.0 or sp < 0.0 or sp > 1.0:
-                    continue
-                for c in range(slope.shape[0]):
-                    z = mount + slope[c] * t
-                    if t < best[j, c] and 0.0 <= z <= heights[b]:
-                        best[j, c] = t
-                        surf[j, c] = 2
-                        idx[j, c] = b
-
-
-@numba.njit(cache=True)
-def _cast_ground(raster, raised, x0, y0, res, kerb, ox, oy, ux, uy, slope, mount, h_max,
-                 best, surf, idx):  # pragma: no cover - numba
-    """The road (z = 0) and kerb-raised cells (``raised`` raster code, as
-    :meth:`WorldMap.ground_height`): walk the raster where 0 <= z <= kerb."""
-    hm, wm = raster.shape
-    for j in range(ux.shape[0]):
-        for c in range(slope.shape[0]):
-            if slope[c] >= 0.0:
-                continue
-            t_top = (kerb - mount) / slope[c]  # the beam sinks below the kerb top here
-            t_road = -mount / slope[c]
-            if t_top >= best[j, c] or t_top > h_max:
-                continue
-            hit = min(t_road, best[j, c])
-            kind = 0
-            if kerb > 0.0:
-                # exact traversal of the raster cells over [t_top, t_road]
-                u = (ox[j] + ux[j] * t_top - x0) / res
-                v = (oy[j] + uy[j] * t_top - y0) / res
-                col = int(math.floor(u))
-                row = int(math.floor(v))
-                sc = 1 if ux[j] > 0 else -1
-                sr = 1 if uy[j] > 0 else -1
-                tdc = res / abs(ux[j]) if ux[j] != 0.0 else np.inf
-                tdr = res / abs(uy[j]) if uy[j] != 0.0 else np.inf
-                tmc = t_top + (((col + 1 - u) if ux[j] > 0 else (u - col)) * tdc
-                               if ux[j] != 0.0 else np.inf)
-                tmr = t_top + (((row + 1 - v) if uy[j] > 0 else (v - row)) * tdr
-                               if uy[j] != 0.0 else np.inf)
-                t = t_top
-                while t < hit:
-                    if 0 <= row < hm and 0 <= col < wm and raster[row, col] == raised:
-                        hit = t  # the kerb top (t = t_top) or its vertical face
-                        kind = 1
-                        break
-                    if tmc < tmr:
-                        t = tmc
-                        tmc += tdc
-                        col += sc
-                    else:
-                        t = tmr
-                        tmr += tdr
-                        row += sr
-            if hit < best[j, c]:
-                best[j, c] = hit
-                surf[j, c] = kind
-                idx[j, c] = -1

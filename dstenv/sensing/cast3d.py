@@ -216,59 +216,70 @@ def cast_ground(raster, dist, raised, x0, y0, res, kerb, ox, oy, ux, uy, slope, 
                 best, surf, idx):  # pragma: no cover - numba
     """The road (z = 0, surface 0) and ``raised`` raster cells (z = ``kerb``, surface 1):
     the first raised cell met while the beam is between the kerb top and the road,
-    else the road. ``dist`` from :func:`raised_distance` lets the walk jump."""
+    else the road. ``dist`` from :func:`raised_distance` lets the walk jump: from a
+    point of a cell with ``dist = d`` no raised cell lies within ``d`` cells, so the
+    walk moves ``d`` cells (less a micrometre) at once, and steps cell by cell only
+    where ``d = 0``."""
     hm, wm = raster.shape
-    for j in range(ux.shape[0]):
-        dxj = ux[j]
-        dyj = uy[j]
-        sc = 1 if dxj > 0 else -1
-        sr = 1 if dyj > 0 else -1
-        tdc = res / abs(dxj) if dxj != 0.0 else np.inf
-        tdr = res / abs(dyj) if dyj != 0.0 else np.inf
-        for c in range(slope.shape[0]):
-            if slope[c] >= 0.0:
+    n = slope.shape[0]
+    t_top = np.empty(n)  # where each beam sinks below the kerb top, and meets the road
+    t_road = np.empty(n)
+    for c in range(n):
+        t_top[c] = (kerb - mount) / slope[c] if slope[c] < 0.0 else np.inf
+        t_road[c] = -mount / slope[c] if slope[c] < 0.0 else np.inf
+    # channel by channel: neighbouring columns read neighbouring raster cells
+    for c in range(n):
+        if slope[c] >= 0.0 or t_top[c] > h_max:
+            continue
+        for j in range(ux.shape[0]):
+            if t_top[c] >= best[j, c]:
                 continue
-            t_top = (kerb - mount) / slope[c]  # the beam sinks below the kerb top here
-            t_road = -mount / slope[c]
-            if t_top >= best[j, c] or t_top > h_max:
-                continue
-            hit = min(t_road, best[j, c])
+            dxj = ux[j]
+            dyj = uy[j]
+            sc = 1 if dxj > 0 else -1
+            sr = 1 if dyj > 0 else -1
+            tdc = res / abs(dxj) if dxj != 0.0 else np.inf
+            tdr = res / abs(dyj) if dyj != 0.0 else np.inf
+            hit = min(t_road[c], best[j, c])
             kind = 0
-            if kerb > 0.0:
-                t = t_top
-                while t < hit:
-                    # (re)start the exact cell walk at t
-                    u = (ox[j] + dxj * t - x0) / res
-                    v = (oy[j] + dyj * t - y0) / res
-                    col = int(math.floor(u))
-                    row = int(math.floor(v))
-                    tmc = t + (((col + 1 - u) if dxj > 0 else (u - col)) * tdc
-                               if dxj != 0.0 else np.inf)
-                    tmr = t + (((row + 1 - v) if dyj > 0 else (v - row)) * tdr
-                               if dyj != 0.0 else np.inf)
-                    jumped = False
-                    while t < hit:
-                        inside = 0 <= row < hm and 0 <= col < wm
-                        if inside and raster[row, col] == raised:
-                            hit = t  # the kerb top (t = t_top) or its vertical face
+            t = t_top[c]
+            while kerb > 0.0 and t < hit:
+                u = (ox[j] + dxj * t - x0) / res
+                v = (oy[j] + dyj * t - y0) / res
+                col = int(math.floor(u))
+                row = int(math.floor(v))
+                if 0 <= row < hm and 0 <= col < wm:
+                    if dist[row, col] > 0:
+                        t += dist[row, col] * res - 1e-6
+                        continue
+                    if raster[row, col] == raised:
+                        hit = t  # the kerb top (t = t_top) or its vertical face
+                        kind = 1
+                        break
+                # next to raised cells (or off the map): the exact cell walk from t
+                tmc = t + (((col + 1 - u) if dxj > 0 else (u - col)) * tdc
+                           if dxj != 0.0 else np.inf)
+                tmr = t + (((row + 1 - v) if dyj > 0 else (v - row)) * tdr
+                           if dyj != 0.0 else np.inf)
+                while True:
+                    if tmc < tmr:
+                        t = tmc
+                        tmc += tdc
+                        col += sc
+                    else:
+                        t = tmr
+                        tmr += tdr
+                        row += sr
+                    if t >= hit:
+                        break
+                    if 0 <= row < hm and 0 <= col < wm:
+                        if raster[row, col] == raised:
+                            hit = t  # a vertical kerb face
                             kind = 1
                             break
-                        if inside and dist[row, col] > 1:
-                            # from this cell's exit, no raised cell is within
-                            # dist * res: jump by one cell less
-                            t = min(tmc, tmr) + (dist[row, col] - 1) * res
-                            jumped = True
+                        if dist[row, col] > 1:
+                            t += dist[row, col] * res - 1e-6  # from the entry point
                             break
-                        if tmc < tmr:
-                            t = tmc
-                            tmc += tdc
-                            col += sc
-                        else:
-                            t = tmr
-                            tmr += tdr
-                            row += sr
-                    if not jumped:
-                        break
             if hit < best[j, c]:
                 best[j, c] = hit
                 surf[j, c] = kind

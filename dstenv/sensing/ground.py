@@ -113,7 +113,8 @@ def fit_ground_plane(points: np.ndarray, config: dict[str, Any] | None = None, *
     if not ok.any():
         raise CloudError("ground fit: no near-horizontal plane among the RANSAC hypotheses")
     d = -np.einsum("ij,ij->i", normal, tri[:, 0])
-    score = np.where(ok, _inlier_counts(normal, d, cand, cfg["inlier_distance"]), -1)
+    columns = np.ascontiguousarray(cand.T)  # (3, K): the scoring loop vectorises
+    score = np.where(ok, _inlier_counts(normal, d, columns, cfg["inlier_distance"]), -1)
     plane = np.append(normal[np.argmax(score)], d[np.argmax(score)])
     for _ in range(2):  # least-squares refit on the inliers: the normal is the
         # eigenvector of the smallest eigenvalue of their scatter matrix
@@ -209,15 +210,16 @@ def _candidates(xyz, r, fit_range, ego_radius, max_z):  # pragma: no cover - num
 
 
 @numba.njit(cache=True)
-def _inlier_counts(normal, d, cand, dist):  # pragma: no cover - numba
-    """``(I,) int64`` candidates within ``dist`` of each plane hypothesis."""
+def _inlier_counts(normal, d, columns, dist):  # pragma: no cover - numba
+    """``(I,) int64`` candidates (``columns``: ``(3, K)`` x, y, z rows) within ``dist``
+    of each plane hypothesis."""
     out = np.zeros(normal.shape[0], np.int64)
+    x, y, z = columns[0], columns[1], columns[2]
     for k in range(normal.shape[0]):
         a, b, c, e = normal[k, 0], normal[k, 1], normal[k, 2], d[k]
         n = 0
-        for p in range(cand.shape[0]):
-            if abs(a * cand[p, 0] + b * cand[p, 1] + c * cand[p, 2] + e) < dist:
-                n += 1
+        for p in range(x.shape[0]):
+            n += abs(a * x[p] + b * y[p] + c * z[p] + e) < dist
         out[k] = n
     return out
 

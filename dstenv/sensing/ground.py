@@ -96,13 +96,14 @@ def fit_ground_plane(points: np.ndarray, config: dict[str, Any] | None = None, *
     cfg = ground_config(config)
     xyz = np.asarray(points, dtype=np.float64)[:, :3]
     r = (polar or polar_coordinates(xyz))[0]
-    cand = _candidates(xyz, r, float(cfg["fit_range"]), float(cfg["ego_radius"]),
+    pick = _candidates(xyz, r, float(cfg["fit_range"]), float(cfg["ego_radius"]),
                        float(cfg["max_candidate_z"]))
-    if len(cand) < 3:
-        raise CloudError(f"ground fit: only {len(cand)} candidate points near the road")
+    if len(pick) < 3:
+        raise CloudError(f"ground fit: only {len(pick)} candidate points near the road")
     rng = np.random.default_rng(cfg["seed"])
-    if len(cand) > cfg["sample"]:
-        cand = cand[rng.choice(len(cand), cfg["sample"], replace=False)]
+    if len(pick) > cfg["sample"]:
+        pick = pick[rng.choice(len(pick), cfg["sample"], replace=False)]
+    cand = xyz[pick]
     tri = cand[rng.integers(0, len(cand), size=(cfg["iterations"], 3))]  # (I, 3, 3)
     normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     norm = np.linalg.norm(normal, axis=1)
@@ -193,20 +194,15 @@ def classify_points(
 
 @numba.njit(cache=True)
 def _candidates(xyz, r, fit_range, ego_radius, max_z):  # pragma: no cover - numba
-    """``(K, 3)`` points with ``ego_radius < r < fit_range`` and ``z < max_z``, in order."""
-    n = 0
-    for p in range(r.shape[0]):
-        if ego_radius < r[p] < fit_range and xyz[p, 2] < max_z:
-            n += 1
-    out = np.empty((n, 3))
+    """``(K,) int64`` indices of the points with ``ego_radius < r < fit_range`` and
+    ``z < max_z``, in order."""
+    out = np.empty(r.shape[0], np.int64)
     k = 0
     for p in range(r.shape[0]):
         if ego_radius < r[p] < fit_range and xyz[p, 2] < max_z:
-            out[k, 0] = xyz[p, 0]
-            out[k, 1] = xyz[p, 1]
-            out[k, 2] = xyz[p, 2]
+            out[k] = p
             k += 1
-    return out
+    return out[:k]
 
 
 @numba.njit(cache=True)
@@ -284,16 +280,25 @@ def _inlier_moments(cand, plane, dist):  # pragma: no cover - numba
         d = plane[0] * cand[p, 0] + plane[1] * cand[p, 1] + plane[2] * cand[p, 2] + plane[3]
         if abs(d) < dist:
             n += 1
-            s += cand[p]
+            for i in range(3):  # scalar sums: no temporary array per point
+                s[i] += cand[p, i]
     centre = s / max(n, 1)
     m = np.zeros((3, 3))
     for p in range(cand.shape[0]):
         d = plane[0] * cand[p, 0] + plane[1] * cand[p, 1] + plane[2] * cand[p, 2] + plane[3]
         if abs(d) < dist:
-            q = cand[p] - centre
-            for i in range(3):
-                for j in range(3):
-                    m[i, j] += q[i] * q[j]
+            q0 = cand[p, 0] - centre[0]
+            q1 = cand[p, 1] - centre[1]
+            q2 = cand[p, 2] - centre[2]
+            m[0, 0] += q0 * q0
+            m[0, 1] += q0 * q1
+            m[0, 2] += q0 * q2
+            m[1, 0] += q1 * q0
+            m[1, 1] += q1 * q1
+            m[1, 2] += q1 * q2
+            m[2, 0] += q2 * q0
+            m[2, 1] += q2 * q1
+            m[2, 2] += q2 * q2
     return n, centre, m
 
 

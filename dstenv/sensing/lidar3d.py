@@ -47,6 +47,7 @@ from dstenv.grid import GridSpec
 from dstenv.sensing.cast3d import cast_boxes, cast_ground, cast_walls, column_index, raised_distance
 from dstenv.sensing.cloud import cloud_sensor_grid
 from dstenv.sensing.config import lidar_config
+from dstenv.sensing.draws import normal
 from dstenv.sim.types import Agents, MapClass, WorldMap
 
 __all__ = ["Hdl64", "Cloud", "SURFACES", "REFLECTANCE"]
@@ -201,9 +202,10 @@ class Hdl64:
         c = self.config
         n = _count_returns(best)  # returns before noise, column-major
         # the draws, in this order, are the sweep's whole use of ``rng``
-        noise = rng.normal(0.0, c["range_noise"], n) if c["range_noise"] > 0 else np.zeros(n)
+        # (draws.normal(rng, s, n) is rng.normal(0, s, n), bit for bit, but faster)
+        noise = normal(rng, c["range_noise"], n) if c["range_noise"] > 0 else np.zeros(n)
         keep = rng.random(n) >= c["dropout"] if c["dropout"] > 0 else np.ones(n, bool)
-        inoise = (rng.normal(0.0, c["intensity_noise"], n) if c["intensity_noise"] > 0
+        inoise = (normal(rng, c["intensity_noise"], n) if c["intensity_noise"] > 0
                   else np.zeros(n))
         pts = np.empty((n, 4), np.float32)
         out_ch = np.empty(n, np.int16)

@@ -180,7 +180,8 @@ def cloud_sensor_grid(
     """
     gcfg = ground_config(ground_cfg)  # merged once, not again in every stage
     rcfg = merge_config(default_ray_config(), ray_cfg, "rays")
-    xyz = np.asarray(points, dtype=np.float64)[:, :3]
+    # one copy with contiguous columns: the stages read x, y, z column by column
+    xyz = np.asfortranarray(np.asarray(points, dtype=np.float64)[:, :3])
     polar = polar_coordinates(xyz)  # shared by the three stages
     plane = fit_ground_plane(xyz, gcfg, polar=polar)
     ground, obstacle, height = classify_points(xyz, plane, gcfg, polar=polar)

@@ -183,13 +183,25 @@ def classify_points(
     xyz = np.asarray(points, dtype=np.float64)[:, :3]
     polar = polar or polar_coordinates(xyz)
     height = ground_heights(xyz, plane, cfg, polar=polar)
-    away = polar[0] > cfg["ego_radius"]
-    # Returns below the road plane (ditches, lower verges) are free space too.
-    ground = away & (height > -3.0) & (height < cfg["ground_height"])
-    obstacle = (
-        away & (height >= cfg["min_obstacle_height"]) & (height <= cfg["max_obstacle_height"])
-    )
+    ground, obstacle = _split(polar[0], height, float(cfg["ego_radius"]),
+                              float(cfg["ground_height"]), float(cfg["min_obstacle_height"]),
+                              float(cfg["max_obstacle_height"]))
     return ground, obstacle, height
+
+
+@numba.njit(cache=True)
+def _split(r, height, ego_radius, ground_height, low, high):  # pragma: no cover - numba
+    """Ground and obstacle masks: away from the ego, height in the ground band (down
+    to 3 m below: ditches and lower verges are free space too) or in [low, high]."""
+    n = r.shape[0]
+    ground = np.empty(n, np.bool_)
+    obstacle = np.empty(n, np.bool_)
+    for p in range(n):
+        away = r[p] > ego_radius
+        h = height[p]
+        ground[p] = away and -3.0 < h < ground_height
+        obstacle[p] = away and low <= h <= high
+    return ground, obstacle
 
 
 @numba.njit(cache=True)
@@ -307,21 +319,16 @@ def _local_ground(r_all, angle, h, n_sec, bin_size, ego_radius, max_slope, step_
                   max_drop_slope, drop_tol):  # pragma: no cover - numba
     """Heights above the local ground of the polar walk (see :func:`ground_heights`)."""
     n = r_all.shape[0]
-    sec = np.empty(n, np.int64)
-    rbin = np.empty(n, np.int64)
-    rmax = 0.0
-    for p in range(n):
-        r = r_all[p]
-        rmax = max(rmax, r)
-        s = int((angle[p] + math.pi) / (2 * math.pi) * n_sec)
-        sec[p] = min(s, n_sec - 1)
-        rbin[p] = int(r / bin_size)
-    n_bin = int(math.ceil(rmax / bin_size)) + 1
+    n_bin = int(math.ceil(np.max(r_all) / bin_size)) + 1
+    cell = np.empty(n, np.int64)  # sector * n_bin + range bin of every point
     lowest = np.full((n_sec, n_bin), np.inf)
     highest = np.full((n_sec, n_bin), -np.inf)
     for p in range(n):
-        lowest[sec[p], rbin[p]] = min(lowest[sec[p], rbin[p]], h[p])
-        highest[sec[p], rbin[p]] = max(highest[sec[p], rbin[p]], h[p])
+        s = min(int((angle[p] + math.pi) / (2 * math.pi) * n_sec), n_sec - 1)
+        b = int(r_all[p] / bin_size)
+        cell[p] = s * n_bin + b
+        lowest[s, b] = min(lowest[s, b], h[p])
+        highest[s, b] = max(highest[s, b], h[p])
     ground = np.zeros((n_sec, n_bin))
     first = int(ego_radius / bin_size)
     for s in range(n_sec):
@@ -339,7 +346,8 @@ def _local_ground(r_all, angle, h, n_sec, bin_size, ego_radius, max_slope, step_
                     g = cand
                     last_r = rc
             ground[s, b] = g
+    flat = ground.ravel()
     out = np.empty(n)
     for p in range(n):
-        out[p] = h[p] - ground[sec[p], rbin[p]]
+        out[p] = h[p] - flat[cell[p]]
     return out

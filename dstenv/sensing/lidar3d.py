@@ -98,9 +98,12 @@ class Cloud:
         """``(H, W) uint8`` sensor grid by :func:`dstenv.sensing.cloud.cloud_sensor_grid`
         (ground removal, one ray per point), the road KITTI scans take; the points are
         shifted by the mount so the grid stays ego-centred."""
-        pts = self.points.astype(np.float64)
+        pts = np.empty((len(self), 3), order="F")  # columns contiguous, as the road reads them
+        pts[:, 0] = self.points[:, 0]
         pts[:, 0] += self.mount[0]
+        pts[:, 1] = self.points[:, 1]
         pts[:, 1] += self.mount[1]
+        pts[:, 2] = self.points[:, 2]
         return cloud_sensor_grid(pts, spec, self.config["ground"], self.config["rays"])[0]
 
 
@@ -134,6 +137,9 @@ class Hdl64:
         self._walls: tuple[np.ndarray, ...] = ()
         self._raster = np.zeros((0, 0), np.uint8)
         self._dist = np.zeros((0, 0), np.uint8)
+        self._best = np.empty((self.columns, n))  # nearest hit per beam [m], horizontal
+        self._surf = np.empty((self.columns, n), np.int16)
+        self._idx = np.empty((self.columns, n), np.int32)
 
     @property
     def beams(self) -> int:
@@ -180,10 +186,10 @@ class Hdl64:
             self._dist = raised_distance(self._raster, MapClass.INTERMEDIATE)
             self._map = world_map
         edges, starts, circles, heights = self._walls
-        n = len(self.slope)
-        best = np.full((self.columns, n), np.inf)
-        surf = np.full((self.columns, n), -1, np.int16)
-        idx = np.full((self.columns, n), -1, np.int32)
+        best, surf, idx = self._best, self._surf, self._idx  # reused: no page faults
+        best.fill(np.inf)
+        surf.fill(-1)
+        idx.fill(-1)
         h_max = c["max_range"]  # a slant range bounds the horizontal one
         mount = float(c["mount_height"])
         cols = column_index(ox, oy, world_az)

@@ -42,12 +42,11 @@ def normal(rng: np.random.Generator, scale: float, n: int) -> np.ndarray:
     if not isinstance(rng.bit_generator, _RAW64):
         return rng.normal(0.0, scale, n)
     out = np.empty(n)
-    words = np.zeros(0, np.uint64)
-    done = 0
-    while done < n:
-        words = np.concatenate([words, rng.bit_generator.random_raw(n - done)])
+    words = rng.bit_generator.random_raw(n)  # the fewest n normals can take
+    done, used = _ziggurat(words, out, 0, float(scale))
+    while done < n:  # ~1 % rejections: a few short top-ups
+        words = np.concatenate([words[used:], rng.bit_generator.random_raw(n - done)])
         done, used = _ziggurat(words, out, done, float(scale))
-        words = words[used:]
     return out
 
 

@@ -9,7 +9,8 @@ Each part is timed alone and the chain as a whole; every figure is also given as
 a ratio to a reference computation (``np.sin`` over 256 x 256 floats) run in the
 same process, so the numbers compare across machines. Goal: chain <= 2 ms.
 Beside it the 3-D LIDAR (``lidar.model = "hdl64"``, 64 x 2048 beams): its sweep and
-the point-cloud road to the grid (ground removal, rays); goal <= 10 ms together.
+the point-cloud road to the grid (ground removal, then rays; each also alone);
+goal <= 10 ms together.
 """
 
 from __future__ import annotations
@@ -97,9 +98,34 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         def sweep3d():
             return hdl.sweep(world.map, world.agents, world.ego_pose, rng, world.ego_speed)
 
+        from dstenv.sensing.cloud import scan_sensor_grid
+        from dstenv.sensing.ground import (
+            classify_points,
+            fit_ground_plane,
+            ground_config,
+            polar_coordinates,
+        )
+
         cloud = sweep3d()
+        # the stages of the point-cloud road on this cloud, as cloud_sensor_grid runs them
+        gcfg = ground_config(hdl.config["ground"])
+        xyz = np.asfortranarray(cloud.points[:, :3], dtype=np.float64)
+        polar = polar_coordinates(xyz)
+        plane = fit_ground_plane(xyz, gcfg, polar=polar)
+        ground, obstacle, height = classify_points(xyz, plane, gcfg, polar=polar)
+        rays = hdl.config["rays"]
+
+        def removal():
+            pol = polar_coordinates(xyz)
+            classify_points(xyz, fit_ground_plane(xyz, gcfg, polar=pol), gcfg, polar=pol)
+
         cases.update({
             "hdl64 sweep (64 x 2048 beams)": sweep3d,
+            "  ground removal (plane, local)": removal,
+            "  rays into the grid": lambda: scan_sensor_grid(
+                xyz, ground, obstacle, spec, rays["max_range"], rays["azimuth_bin_deg"],
+                rays["occluded_hits"], blocking=obstacle & (height >= rays["block_height"]),
+                block_window_deg=rays["block_window_deg"], polar=polar),
             "hdl64 ground removal + sensor grid": lambda: cloud.sensor_grid(spec),
             "hdl64 sweep + sensor grid (goal 10)": lambda: sweep3d().sensor_grid(spec),
         })

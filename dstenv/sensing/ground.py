@@ -103,7 +103,7 @@ def fit_ground_plane(points: np.ndarray, config: dict[str, Any] | None = None, *
     rng = np.random.default_rng(cfg["seed"])
     if len(pick) > cfg["sample"]:
         pick = pick[rng.choice(len(pick), cfg["sample"], replace=False)]
-    cand = xyz[pick]
+    cand = _rows(xyz, pick)
     tri = cand[rng.integers(0, len(cand), size=(cfg["iterations"], 3))]  # (I, 3, 3)
     normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     norm = np.linalg.norm(normal, axis=1)
@@ -149,13 +149,12 @@ def ground_heights(
     """
     cfg = ground_config(config)
     xyz = np.asarray(points, dtype=np.float64)[:, :3]
-    h = xyz @ plane[:3] + plane[3]
-    if not cfg["local"] or len(h) == 0:
-        return h
+    if not cfg["local"] or len(xyz) == 0:
+        return xyz @ plane[:3] + plane[3]
     n_sec = max(round(360.0 / cfg["sector_deg"]), 1)
     r, angle = polar or polar_coordinates(xyz)
     return _local_ground(
-        r, angle, h, n_sec,
+        xyz, np.asarray(plane, dtype=np.float64), r, angle, n_sec,
         float(cfg["bin_size"]), float(cfg["ego_radius"]), float(cfg["max_slope"]),
         float(cfg["step_tolerance"]), float(cfg["flat_spread"]), float(cfg["max_drop_slope"]),
         float(cfg["drop_tolerance"]))
@@ -215,6 +214,17 @@ def _candidates(xyz, r, fit_range, ego_radius, max_z):  # pragma: no cover - num
             out[k] = p
             k += 1
     return out[:k]
+
+
+@numba.njit(cache=True)
+def _rows(xyz, pick):  # pragma: no cover - numba
+    """``(K, 3)`` C-ordered rows ``xyz[pick]`` (NumPy's fancy indexing of a column-major
+    array is several times slower)."""
+    out = np.empty((pick.shape[0], 3))
+    for k in range(pick.shape[0]):
+        for i in range(3):
+            out[k, i] = xyz[pick[k], i]
+    return out
 
 
 @numba.njit(cache=True)
@@ -315,10 +325,14 @@ def _inlier_moments(cand, plane, dist):  # pragma: no cover - numba
 
 
 @numba.njit(cache=True)
-def _local_ground(r_all, angle, h, n_sec, bin_size, ego_radius, max_slope, step_tol, flat_spread,
-                  max_drop_slope, drop_tol):  # pragma: no cover - numba
+def _local_ground(xyz, plane, r_all, angle, n_sec, bin_size, ego_radius, max_slope, step_tol,
+                  flat_spread, max_drop_slope, drop_tol):  # pragma: no cover - numba
     """Heights above the local ground of the polar walk (see :func:`ground_heights`)."""
     n = r_all.shape[0]
+    h = np.empty(n)  # above the plane
+    a, b, c, d = plane[0], plane[1], plane[2], plane[3]
+    for p in range(n):
+        h[p] = a * xyz[p, 0] + b * xyz[p, 1] + c * xyz[p, 2] + d
     n_bin = int(math.ceil(np.max(r_all) / bin_size)) + 1
     cell = np.empty(n, np.int64)  # sector * n_bin + range bin of every point
     lowest = np.full((n_sec, n_bin), np.inf)

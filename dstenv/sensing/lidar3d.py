@@ -16,6 +16,8 @@ of its slab interval ``[t_in, t_out]`` where ``z(t)`` lies in its height range (
 face, roof or underside); a building wall where an edge is crossed with ``z`` in
 ``[0, h]``; the ground where ``z`` reaches the kerb top over a raised cell (walked
 with an exact grid traversal between the heights ``kerb`` and 0) or 0 on the road.
+The kernels live in :mod:`dstenv.sensing.cast3d`, which tests each occluder only
+against the columns and channels that can reach it (same results, ~10x faster).
 
 Measurement. Slant range ``t / cos(elevation)`` with Gaussian noise, returns beyond
 ``max_range`` or closer than ``min_range`` (the blind zone) discarded, dropout, and

@@ -32,9 +32,9 @@ from dstenv.config import merge_config
 from dstenv.dst import SensorState
 from dstenv.grid import GridSpec
 from dstenv.sensing.ground import (
-    classify_points,
     fit_ground_plane,
     ground_config,
+    ground_heights,
     polar_coordinates,
 )
 from dstenv.sensing.raycast import sensor_grid
@@ -80,7 +80,7 @@ def scan_sensor_grid(
 
     Args:
         points: ``(P, 3+) float`` Velodyne points.
-        ground, obstacle: ``(P,) bool`` masks from :func:`classify_points`.
+        ground, obstacle: ``(P,) bool`` masks from :func:`~dstenv.sensing.ground.classify_points`.
         spec: grid geometry (the sensor at the ego cell).
         max_range: rays are clipped to this horizontal range [m].
         azimuth_bin_deg: width of the first-hit bins [deg].
@@ -98,9 +98,19 @@ def scan_sensor_grid(
     obstacle = np.asarray(obstacle, dtype=bool)
     block = obstacle if blocking is None else np.asarray(blocking, dtype=bool) & obstacle
     n_bins = max(round(360.0 / azimuth_bin_deg), 1)
-    x, y = np.ascontiguousarray(xyz[:, 0]), np.ascontiguousarray(xyz[:, 1])
     rng, angle = polar or polar_coordinates(xyz)
     b, nearest = _azimuth_bins(rng, angle, block, n_bins)
+    return _rays(xyz, rng, b, nearest, ground, obstacle, spec, max_range, azimuth_bin_deg,
+                 occluded_hits, block_window_deg)
+
+
+def _rays(xyz: np.ndarray, rng: np.ndarray, b: np.ndarray, nearest: np.ndarray,
+          ground: np.ndarray, obstacle: np.ndarray, spec: GridSpec, max_range: float,
+          azimuth_bin_deg: float, occluded_hits: bool, block_window_deg: float) -> np.ndarray:
+    """The rays of :func:`scan_sensor_grid` once every point has its azimuth bin ``b``
+    ``(P,) int64`` and every bin its nearest blocking range ``nearest (n_bins,)``."""
+    n_bins = nearest.shape[0]
+    x, y = np.ascontiguousarray(xyz[:, 0]), np.ascontiguousarray(xyz[:, 1])
     half = round(0.5 * block_window_deg / azimuth_bin_deg)
     if half > 0:
         nearest = minimum_filter1d(nearest, 2 * half + 1, mode="wrap")
@@ -111,6 +121,30 @@ def scan_sensor_grid(
     _mark_points(grid, x, y, b, rng, ground, obstacle, nearest, occluded_hits, max_range,
                  float(spec.cell_size), i0, j0)
     return grid
+
+
+@numba.njit(cache=True)
+def _classify_bins(r, angle, height, ego_radius, ground_height, low, high, block_height,
+                   n_bins):  # pragma: no cover - numba
+    """One pass of the whole road: the masks of :func:`~dstenv.sensing.ground.classify_points` (same rule as
+    ``ground._split``), the azimuth bin of every point and the nearest blocking range
+    per bin (obstacles at least ``block_height`` tall), as :func:`_azimuth_bins`."""
+    n = r.shape[0]
+    ground = np.empty(n, np.bool_)
+    obstacle = np.empty(n, np.bool_)
+    b = np.empty(n, np.int64)
+    nearest = np.full(n_bins, np.inf)
+    for p in range(n):
+        away = r[p] > ego_radius
+        h = height[p]
+        ground[p] = away and -3.0 < h < ground_height
+        o = away and low <= h <= high
+        obstacle[p] = o
+        k = min(int((angle[p] + math.pi) / (2 * math.pi) * n_bins), n_bins - 1)
+        b[p] = k
+        if o and h >= block_height and r[p] < nearest[k]:
+            nearest[k] = r[p]
+    return ground, obstacle, b, nearest
 
 
 @numba.njit(cache=True)
@@ -184,10 +218,14 @@ def cloud_sensor_grid(
     xyz = np.asfortranarray(np.asarray(points, dtype=np.float64)[:, :3])
     polar = polar_coordinates(xyz)  # shared by the three stages
     plane = fit_ground_plane(xyz, gcfg, polar=polar)
-    ground, obstacle, height = classify_points(xyz, plane, gcfg, polar=polar)
-    sensor = scan_sensor_grid(
-        xyz, ground, obstacle, spec, rcfg["max_range"], rcfg["azimuth_bin_deg"],
-        rcfg["occluded_hits"], blocking=obstacle & (height >= rcfg["block_height"]),
-        block_window_deg=rcfg["block_window_deg"], polar=polar,
-    )
+    height = ground_heights(xyz, plane, gcfg, polar=polar)
+    # classification, azimuth bins and blockers in one pass (classify_points +
+    # scan_sensor_grid's first pass, the same results)
+    n_bins = max(round(360.0 / rcfg["azimuth_bin_deg"]), 1)
+    ground, obstacle, b, nearest = _classify_bins(
+        polar[0], polar[1], height, float(gcfg["ego_radius"]), float(gcfg["ground_height"]),
+        float(gcfg["min_obstacle_height"]), float(gcfg["max_obstacle_height"]),
+        float(rcfg["block_height"]), n_bins)
+    sensor = _rays(xyz, polar[0], b, nearest, ground, obstacle, spec, rcfg["max_range"],
+                   rcfg["azimuth_bin_deg"], rcfg["occluded_hits"], rcfg["block_window_deg"])
     return sensor, plane, ground, obstacle, height

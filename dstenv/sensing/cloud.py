@@ -126,7 +126,8 @@ def _rays(xyz: np.ndarray, rng: np.ndarray, b: np.ndarray, nearest: np.ndarray,
 @numba.njit(cache=True)
 def _classify_bins(r, angle, height, ego_radius, ground_height, low, high, block_height,
                    n_bins):  # pragma: no cover - numba
-    """One pass of the whole road: the masks of :func:`~dstenv.sensing.ground.classify_points` (same rule as
+    """One pass of the whole road: the masks of
+    :func:`~dstenv.sensing.ground.classify_points` (same rule as
     ``ground._split``), the azimuth bin of every point and the nearest blocking range
     per bin (obstacles at least ``block_height`` tall), as :func:`_azimuth_bins`."""
     n = r.shape[0]

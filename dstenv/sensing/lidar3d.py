@@ -49,7 +49,7 @@ from dstenv.grid import GridSpec
 from dstenv.sensing.cast3d import cast_boxes, cast_ground, cast_walls, column_index, raised_distance
 from dstenv.sensing.cloud import cloud_sensor_grid
 from dstenv.sensing.config import lidar_config
-from dstenv.sensing.draws import normal
+from dstenv.sensing.draws import beam_normal, beam_uniform, stream_keys
 from dstenv.sim.types import Agents, MapClass, WorldMap
 
 __all__ = ["Hdl64", "Cloud", "SURFACES", "REFLECTANCE"]
@@ -209,12 +209,15 @@ class Hdl64:
                  rng: np.random.Generator) -> Cloud:
         c = self.config
         n = _count_returns(best)  # returns before noise, column-major
-        # the draws, in this order, are the sweep's whole use of ``rng``
-        # (draws.normal(rng, s, n) is rng.normal(0, s, n), bit for bit, but faster)
-        noise = normal(rng, c["range_noise"], n) if c["range_noise"] > 0 else np.zeros(n)
-        keep = rng.random(n) >= c["dropout"] if c["dropout"] > 0 else np.ones(n, bool)
-        inoise = (normal(rng, c["intensity_noise"], n) if c["intensity_noise"] > 0
-                  else np.zeros(n))
+        # the sweep's whole use of ``rng``: three stream keys of counter-based draws
+        # (draws.beam_*: NumPy's distributions, one vectorised loop each)
+        k_noise, k_drop, k_int = stream_keys(rng, 3)
+        noise = (beam_normal(k_noise, n, float(c["range_noise"])) if c["range_noise"] > 0
+                 else np.zeros(n))
+        keep = (beam_uniform(k_drop, n) >= c["dropout"] if c["dropout"] > 0
+                else np.ones(n, bool))
+        inoise = (beam_normal(k_int, n, float(c["intensity_noise"]))
+                  if c["intensity_noise"] > 0 else np.zeros(n))
         pts = np.empty((n, 4), np.float32)
         out_ch = np.empty(n, np.int16)
         out_col = np.empty(n, np.int32)

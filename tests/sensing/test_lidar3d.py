@@ -123,6 +123,25 @@ def test_noise_dropout_blind_zone_and_determinism():
     assert lidar.beams == 64 * 2048
 
 
+def test_noise_and_dropout_have_their_configured_distributions():
+    """Range noise ``N(0, range_noise)`` along the beam, dropout of a ``dropout`` share
+    of the returns, reflectance noise ``N(0, intensity_noise)``."""
+    noisy = _lidar(range_noise=0.05, dropout=0.1, intensity_noise=0.04)
+    ideal = _lidar()
+    world = rect_map([])  # the flat road: every beam of the lower channels returns
+    clean, a = _sweep(ideal, world), _sweep(noisy, world, seed=2)
+    dense_a, dense_c = a.dense(), clean.dense()
+    both = np.isfinite(dense_a[:, 0]) & np.isfinite(dense_c[:, 0])
+    hit = np.isfinite(dense_c[:, 0])
+    assert 1 - both.sum() / hit.sum() == pytest.approx(0.1, abs=0.004)
+    dr = (np.linalg.norm(dense_a[both, :3], axis=1)
+          - np.linalg.norm(dense_c[both, :3], axis=1))
+    assert abs(dr.mean()) < 0.002 and dr.std() == pytest.approx(0.05, rel=0.02)
+    di = dense_a[both, 3] - dense_c[both, 3]
+    inside = (dense_c[both, 3] > 0.15) & (dense_c[both, 3] < 0.85)  # away from the clip
+    assert di[inside].std() == pytest.approx(0.04, rel=0.03)
+
+
 def test_cloud_takes_kittis_road_to_the_grid():
     spec = GridSpec(128, 128, 0.33)
     lidar = _lidar()

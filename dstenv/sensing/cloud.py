@@ -34,7 +34,7 @@ from dstenv.grid import GridSpec
 from dstenv.sensing.ground import (
     fit_ground_plane,
     ground_config,
-    ground_heights,
+    ground_walk,
     polar_coordinates,
 )
 from dstenv.sensing.raycast import sensor_grid
@@ -124,28 +124,31 @@ def _rays(xyz: np.ndarray, rng: np.ndarray, b: np.ndarray, nearest: np.ndarray,
 
 
 @numba.njit(cache=True)
-def _classify_bins(r, angle, height, ego_radius, ground_height, low, high, block_height,
+def _classify_bins(r, angle, h, cell, flat, ego_radius, ground_height, low, high, block_height,
                    n_bins):  # pragma: no cover - numba
     """One pass of the whole road: the masks of
     :func:`~dstenv.sensing.ground.classify_points` (same rule as
     ``ground._split``), the azimuth bin of every point and the nearest blocking range
-    per bin (obstacles at least ``block_height`` tall), as :func:`_azimuth_bins`."""
+    per bin (obstacles at least ``block_height`` tall), as :func:`_azimuth_bins`; the
+    heights above the local ground are ``h - flat[cell]`` (``ground.ground_walk``)."""
     n = r.shape[0]
+    height = np.empty(n)
     ground = np.empty(n, np.bool_)
     obstacle = np.empty(n, np.bool_)
     b = np.empty(n, np.int64)
     nearest = np.full(n_bins, np.inf)
     for p in range(n):
         away = r[p] > ego_radius
-        h = height[p]
-        ground[p] = away and -3.0 < h < ground_height
-        o = away and low <= h <= high
+        hp = h[p] - flat[cell[p]]
+        height[p] = hp
+        ground[p] = away and -3.0 < hp < ground_height
+        o = away and low <= hp <= high
         obstacle[p] = o
         k = min(int((angle[p] + math.pi) / (2 * math.pi) * n_bins), n_bins - 1)
         b[p] = k
-        if o and h >= block_height and r[p] < nearest[k]:
+        if o and hp >= block_height and r[p] < nearest[k]:
             nearest[k] = r[p]
-    return ground, obstacle, b, nearest
+    return height, ground, obstacle, b, nearest
 
 
 @numba.njit(cache=True)
@@ -219,12 +222,12 @@ def cloud_sensor_grid(
     xyz = np.asfortranarray(np.asarray(points, dtype=np.float64)[:, :3])
     polar = polar_coordinates(xyz)  # shared by the three stages
     plane = fit_ground_plane(xyz, gcfg, polar=polar)
-    height = ground_heights(xyz, plane, gcfg, polar=polar)
-    # classification, azimuth bins and blockers in one pass (classify_points +
-    # scan_sensor_grid's first pass, the same results)
+    h, cell, flat = ground_walk(xyz, plane, gcfg, polar=polar)
+    # heights, classification, azimuth bins and blockers in one pass (ground_heights'
+    # last pass, classify_points and scan_sensor_grid's first pass: the same results)
     n_bins = max(round(360.0 / rcfg["azimuth_bin_deg"]), 1)
-    ground, obstacle, b, nearest = _classify_bins(
-        polar[0], polar[1], height, float(gcfg["ego_radius"]), float(gcfg["ground_height"]),
+    height, ground, obstacle, b, nearest = _classify_bins(
+        polar[0], polar[1], h, cell, flat, float(gcfg["ego_radius"]), float(gcfg["ground_height"]),
         float(gcfg["min_obstacle_height"]), float(gcfg["max_obstacle_height"]),
         float(rcfg["block_height"]), n_bins)
     sensor = _rays(xyz, polar[0], b, nearest, ground, obstacle, spec, rcfg["max_range"],

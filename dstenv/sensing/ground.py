@@ -33,7 +33,7 @@ import numpy as np
 from dstenv.config import Validated, merge_config
 
 __all__ = ["CloudError", "default_ground_config", "fit_ground_plane", "ground_heights",
-           "classify_points", "ground_config", "polar_coordinates"]
+           "classify_points", "ground_config", "ground_walk", "polar_coordinates"]
 
 
 class CloudError(ValueError):
@@ -154,6 +154,32 @@ def ground_heights(
     n_sec = max(round(360.0 / cfg["sector_deg"]), 1)
     r, angle = polar or polar_coordinates(xyz)
     return _local_ground(
+        xyz, np.asarray(plane, dtype=np.float64), r, angle, n_sec,
+        float(cfg["bin_size"]), float(cfg["ego_radius"]), float(cfg["max_slope"]),
+        float(cfg["step_tolerance"]), float(cfg["flat_spread"]), float(cfg["max_drop_slope"]),
+        float(cfg["drop_tolerance"]))
+
+
+def ground_walk(
+    points: np.ndarray, plane: np.ndarray, config: dict[str, Any] | None = None, *,
+    polar: tuple[np.ndarray, np.ndarray] | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The local ground of :func:`ground_heights` as a table, for callers that fuse the
+    last subtraction into their own pass (:func:`dstenv.sensing.cloud.cloud_sensor_grid`).
+
+    Returns:
+        ``(h, cell, flat)``: ``(P,) float64`` heights above the plane, ``(P,) int64``
+        polar bin of each point and ``(B,) float64`` local ground per bin above the
+        plane; ``h - flat[cell]`` is :func:`ground_heights` (``local`` off: ``cell`` all
+        0 and ``flat = [0.0]``).
+    """
+    cfg = ground_config(config)
+    xyz = np.asarray(points, dtype=np.float64)[:, :3]
+    if not cfg["local"] or len(xyz) == 0:
+        return xyz @ plane[:3] + plane[3], np.zeros(len(xyz), np.int64), np.zeros(1)
+    n_sec = max(round(360.0 / cfg["sector_deg"]), 1)
+    r, angle = polar or polar_coordinates(xyz)
+    return _ground_walk(
         xyz, np.asarray(plane, dtype=np.float64), r, angle, n_sec,
         float(cfg["bin_size"]), float(cfg["ego_radius"]), float(cfg["max_slope"]),
         float(cfg["step_tolerance"]), float(cfg["flat_spread"]), float(cfg["max_drop_slope"]),
@@ -328,40 +354,50 @@ def _inlier_moments(cand, plane, dist):  # pragma: no cover - numba
 def _local_ground(xyz, plane, r_all, angle, n_sec, bin_size, ego_radius, max_slope, step_tol,
                   flat_spread, max_drop_slope, drop_tol):  # pragma: no cover - numba
     """Heights above the local ground of the polar walk (see :func:`ground_heights`)."""
+    h, cell, flat = _ground_walk(xyz, plane, r_all, angle, n_sec, bin_size, ego_radius,
+                                 max_slope, step_tol, flat_spread, max_drop_slope, drop_tol)
+    out = np.empty(h.shape[0])
+    for p in range(h.shape[0]):
+        out[p] = h[p] - flat[cell[p]]
+    return out
+
+
+@numba.njit(cache=True)
+def _ground_walk(xyz, plane, r_all, angle, n_sec, bin_size, ego_radius, max_slope, step_tol,
+                 flat_spread, max_drop_slope, drop_tol):  # pragma: no cover - numba
+    """The polar walk: ``(h, cell, flat)``, heights ``(P,)`` above the plane, polar bin
+    ``(P,) int64`` of every point and local ground ``(n_sec * n_bin,)`` above the plane;
+    a point's height above the local ground is ``h[p] - flat[cell[p]]``."""
     n = r_all.shape[0]
     h = np.empty(n)  # above the plane
     a, b, c, d = plane[0], plane[1], plane[2], plane[3]
-    for p in range(n):
-        h[p] = a * xyz[p, 0] + b * xyz[p, 1] + c * xyz[p, 2] + d
     n_bin = int(math.ceil(np.max(r_all) / bin_size)) + 1
     cell = np.empty(n, np.int64)  # sector * n_bin + range bin of every point
     lowest = np.full((n_sec, n_bin), np.inf)
     highest = np.full((n_sec, n_bin), -np.inf)
     for p in range(n):
+        hp = a * xyz[p, 0] + b * xyz[p, 1] + c * xyz[p, 2] + d
+        h[p] = hp
         s = min(int((angle[p] + math.pi) / (2 * math.pi) * n_sec), n_sec - 1)
-        b = int(r_all[p] / bin_size)
-        cell[p] = s * n_bin + b
-        lowest[s, b] = min(lowest[s, b], h[p])
-        highest[s, b] = max(highest[s, b], h[p])
+        k = int(r_all[p] / bin_size)
+        cell[p] = s * n_bin + k
+        lowest[s, k] = min(lowest[s, k], hp)
+        highest[s, k] = max(highest[s, k], hp)
     ground = np.zeros((n_sec, n_bin))
     first = int(ego_radius / bin_size)
     for s in range(n_sec):
         g = 0.0  # the plane is the ground next to the car
         last_r = ego_radius
-        for b in range(first, n_bin):
-            rc = (b + 0.5) * bin_size
-            cand = lowest[s, b]
+        for k in range(first, n_bin):
+            rc = (k + 0.5) * bin_size
+            cand = lowest[s, k]
             # a bin holding a vertical surface (a car's side) spans its height: never ground
-            if highest[s, b] - cand <= flat_spread and math.isfinite(cand):
+            if highest[s, k] - cand <= flat_spread and math.isfinite(cand):
                 dr = rc - last_r
                 # a lower outlier (a reflection) must not drag the ground down
                 rise_ok = cand - g <= step_tol + max_slope * dr
                 if rise_ok and g - cand <= drop_tol + max_drop_slope * dr:
                     g = cand
                     last_r = rc
-            ground[s, b] = g
-    flat = ground.ravel()
-    out = np.empty(n)
-    for p in range(n):
-        out[p] = h[p] - flat[cell[p]]
-    return out
+            ground[s, k] = g
+    return h, cell, ground.ravel()

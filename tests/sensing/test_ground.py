@@ -7,7 +7,13 @@ import pytest
 
 from dstenv.config import ConfigError
 from dstenv.kitti.readers import read_velodyne, split_root, velodyne_path
-from dstenv.sensing.ground import CloudError, classify_points, fit_ground_plane, ground_heights
+from dstenv.sensing.ground import (
+    CloudError,
+    classify_points,
+    fit_ground_plane,
+    ground_heights,
+    ground_walk,
+)
 
 
 def _cloud(slope=0.0, seed=0):
@@ -51,6 +57,16 @@ def test_classify_ground_and_obstacles():
     np.testing.assert_allclose(height[n_ground:], car_h, atol=1e-9)  # the walk kept the road
     assert (obstacle[n_ground:] == (car_h >= 0.30)).all()
     assert not (ground & obstacle).any()
+
+
+@pytest.mark.parametrize("local", [True, False])
+def test_ground_walk_table_gives_the_heights_exactly(local):
+    pts = _cloud(slope=0.05)
+    plane = fit_ground_plane(pts)
+    h, cell, flat = ground_walk(pts, plane, {"local": local})
+    np.testing.assert_allclose(h, pts @ plane[:3] + plane[3], rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(h - flat[cell], ground_heights(pts, plane, {"local": local}))
+    assert cell.dtype == np.int64 and (local or not flat.any())
 
 
 def test_local_walk_follows_a_rising_verge():

@@ -371,13 +371,14 @@ def _ground_walk(xyz, plane, r_all, angle, n_sec, bin_size, ego_radius, max_slop
     n = r_all.shape[0]
     h = np.empty(n)  # above the plane
     a, b, c, d = plane[0], plane[1], plane[2], plane[3]
+    for p in range(n):  # its own loop: it vectorises
+        h[p] = a * xyz[p, 0] + b * xyz[p, 1] + c * xyz[p, 2] + d
     n_bin = int(math.ceil(np.max(r_all) / bin_size)) + 1
     cell = np.empty(n, np.int64)  # sector * n_bin + range bin of every point
     lowest = np.full((n_sec, n_bin), np.inf)
     highest = np.full((n_sec, n_bin), -np.inf)
     for p in range(n):
-        hp = a * xyz[p, 0] + b * xyz[p, 1] + c * xyz[p, 2] + d
-        h[p] = hp
+        hp = h[p]
         s = min(int((angle[p] + math.pi) / (2 * math.pi) * n_sec), n_sec - 1)
         k = int(r_all[p] / bin_size)
         cell[p] = s * n_bin + k

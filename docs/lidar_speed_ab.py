@@ -1,0 +1,55 @@
+"""Old and new 3-D LIDAR sweep + road in one process: minimum CPU time, alternately.
+
+On a loaded machine wall-clock medians and separate processes hide differences of a
+few per cent; this times a copy of an older ``dstenv`` (renamed ``dstenv_old``)
+against the current one in turns, in one process (``docs/realism-lidar.md``)::
+
+    mkdir -p /tmp/old && git archive aa76a0a dstenv | tar -x -C /tmp/old
+    cd /tmp/old && mv dstenv dstenv_old
+    grep -rl dstenv dstenv_old --include=*.py | xargs sed -i 's/\\bdstenv\\b/dstenv_old/g'
+    cd /tmp && PYTHONPATH=/path/to/dstenv python /path/to/dstenv/docs/lidar_speed_ab.py \\
+        /tmp/old 60
+"""
+
+import sys
+import time
+
+import numpy as np
+
+sys.path.insert(0, sys.argv[1])
+
+from dstenv.grid import GridSpec  # noqa: E402
+from dstenv.sensing.lidar3d import Hdl64  # noqa: E402
+from dstenv.sim.bench import BENCH_CONFIG  # noqa: E402
+from dstenv.sim.world import World  # noqa: E402
+from dstenv_old.sensing.lidar3d import Hdl64 as Hdl64Old  # noqa: E402
+
+world = World(BENCH_CONFIG, seed=0)  # the world of `dstenv bench world`
+for _ in range(20):
+    world.step()
+spec = GridSpec()
+rng = np.random.default_rng(0)
+lidars = {"old": Hdl64Old({"model": "hdl64"}), "new": Hdl64({"model": "hdl64"})}
+
+
+def sweep(lidar):
+    return lidar.sweep(world.map, world.agents, world.ego_pose, rng, world.ego_speed)
+
+
+cases = {}
+for name, lidar in lidars.items():
+    cloud = sweep(lidar)
+    cases[f"{name} sweep"] = lambda lidar=lidar: sweep(lidar)
+    cases[f"{name} road"] = lambda cloud=cloud: cloud.sensor_grid(spec)
+    cases[f"{name} total"] = lambda lidar=lidar: sweep(lidar).sensor_grid(spec)
+for f in cases.values():
+    f()
+best = dict.fromkeys(cases, np.inf)
+for _ in range(int(sys.argv[2]) if len(sys.argv) > 2 else 50):
+    for key, f in cases.items():
+        t0 = time.process_time()
+        f()
+        best[key] = min(best[key], time.process_time() - t0)
+print("  ".join(f"{k}={v * 1e3:.2f}" for k, v in best.items()), "[ms CPU, min]")
+print("old/new:", "  ".join(f"{s} {best['old ' + s] / best['new ' + s]:.2f}"
+                            for s in ("sweep", "road", "total")))

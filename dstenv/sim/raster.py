@@ -19,6 +19,7 @@ class Surface:
     SIDEWALK = 3
     PARKING = 4
     CROSSWALK = 5
+    VERGE = 6  # raised grass: roundabout islands and medians
 
 
 @nb.njit(cache=True)

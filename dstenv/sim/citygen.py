@@ -22,17 +22,17 @@ import numpy as np
 
 from dstenv.sim.lanes import Control, NetworkBuilder
 from dstenv.sim.medians import draw_medians, median_box
-from dstenv.sim.raster import Surface, fill_polygon, fill_rect
+from dstenv.sim.raster import Surface, fill_polygon, fill_rect, fillet_corners
 from dstenv.sim.roads import RoadEdge, add_road_lanes
 from dstenv.sim.roundabout import (island_clutter, paint_roundabout, pick_roundabouts,
                                    ring_nodes)
 from dstenv.sim.sidewalks import LANE_OFFSET, add_block_rings
 from dstenv.sim.clutter import concat_obstacles, median_clutter, place_clutter
-from dstenv.sim.warp import draw_warp, warp_boxes, warp_lanes, warp_obstacles
+from dstenv.sim.warp import Warp, draw_warp, warp_boxes, warp_lanes, warp_obstacles
 from dstenv.sim.parking import SLOT_LENGTH, side_slots
 from dstenv.sim.types import MapClass, WorldMap
 
-__all__ = ["generate_city", "SLOT_LENGTH"]
+__all__ = ["generate_city", "SLOT_LENGTH", "Warp"]
 
 STOP_MARGIN = 4.4  # [m] stop line behind the crosswalk's outer walking line
 BUILDING_STEP = 12.0  # [m] longest building edge after a warp (it follows curved streets)
@@ -47,7 +47,9 @@ def generate_city(cfg: dict[str, Any], traffic: dict[str, Any], rng: np.random.G
         A :class:`WorldMap` with ``lanes`` a :class:`~dstenv.sim.lanes.LaneNetwork`
         and ``meta`` keys ``surface`` (``(Hm, Wm) uint8`` :class:`Surface` codes),
         ``parking_slots`` (``(S, 6) float64`` x, y, yaw, length, width, height; see
-        :mod:`dstenv.sim.parking`), ``kind``; ``obstacles`` the street clutter
+        :mod:`dstenv.sim.parking`), ``kind``, ``warp`` (the :class:`Warp` applied,
+        or None), ``roundabouts`` (``(R, 4) float64`` centre x, y, outer and island
+        radius [m]), ``faces`` (block boxes before the warp); ``obstacles`` the street clutter
         (:mod:`dstenv.sim.clutter`); ``streets`` / ``street_lanes`` the centre-lines.
 
     Geometry jitter (lane width per street, kerb strip and sidewalk width per
@@ -198,7 +200,7 @@ def generate_city(cfg: dict[str, Any], traffic: dict[str, Any], rng: np.random.G
             fill_rect(r, xs[i] - hwx[i], xs[i + 1] + hwx[i + 1], ys[j] - hwy[j], ys[j] + hwy[j],
                       org, res, MapClass.ROAD if r is raster else Surface.ROAD)
     for face in faces:
-        _fillet(raster, surface, face, curb + 0.5 * sw, res)
+        fillet_corners(raster, surface, face, curb + 0.5 * sw, res)
     for centre, d, hw in zebras:
         _zebra(surface, centre, d, hw, res)
     medians = [(e.poly, e.median, reach[e.u] + STOP_MARGIN, reach[e.v] + STOP_MARGIN)
@@ -300,29 +302,6 @@ def _degree(vseg: np.ndarray, hseg: np.ndarray, i: int, j: int) -> int:
     nx, ny = vseg.shape[0], hseg.shape[1]
     return int(sum([j < ny - 1 and vseg[i, j], j > 0 and vseg[i, j - 1],
                     i < nx - 1 and hseg[i, j], i > 0 and hseg[i - 1, j]]))
-
-
-def _fillet(raster, surface, face, r, res):
-    """Round the kerb at the four corners of a block (radius ``r``)."""
-    x0, x1, y0, y1 = face
-    for cx, cy, sx, sy in ((x0, y0, 1, 1), (x1, y0, -1, 1), (x0, y1, 1, -1), (x1, y1, -1, -1)):
-        c_lo, c_hi = (int(np.floor(min(cx, cx + sx * r) / res)),
-                      int(np.ceil(max(cx, cx + sx * r) / res)))
-        r_lo, r_hi = (int(np.floor(min(cy, cy + sy * r) / res)),
-                      int(np.ceil(max(cy, cy + sy * r) / res)))
-        cols, rows = np.arange(c_lo, c_hi), np.arange(r_lo, r_hi)
-        xc, yc = (cols + 0.5) * res, (rows + 0.5) * res
-        inside_x = (xc - cx) * sx >= 0
-        inside_y = (yc - cy) * sy >= 0
-        ox, oy = cx + sx * r, cy + sy * r
-        far = ((xc[None, :] - ox) ** 2 + (yc[:, None] - oy) ** 2 > r * r)
-        corner = ((xc[None, :] - ox) * sx < 0) & ((yc[:, None] - oy) * sy < 0)
-        m = far & corner & inside_x[None, :] & inside_y[:, None]
-        rr, cc = np.nonzero(m)
-        rr, cc = rows[rr], cols[cc]
-        ok = (rr >= 0) & (rr < raster.shape[0]) & (cc >= 0) & (cc < raster.shape[1])
-        raster[rr[ok], cc[ok]] = MapClass.ROAD
-        surface[rr[ok], cc[ok]] = Surface.ROAD
 
 
 def _zebra(surface, centre, d, hw, res):

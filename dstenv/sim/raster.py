@@ -7,7 +7,7 @@ import numpy as np
 
 from dstenv.sim.types import MapClass, WorldMap
 
-__all__ = ["fill_polygon", "fill_rect", "lookup", "Surface"]
+__all__ = ["fill_polygon", "fill_rect", "fillet_corners", "lookup", "Surface"]
 
 
 class Surface:
@@ -103,3 +103,29 @@ def lookup(world_map: WorldMap, xy: np.ndarray) -> np.ndarray:
     out = np.full(c.shape, MapClass.NONE, np.uint8)
     out[ok] = world_map.raster[r[ok], c[ok]]
     return out
+
+
+def fillet_corners(raster: np.ndarray, surface: np.ndarray, face: tuple[float, ...], r: float,
+                   res: float) -> None:
+    """Round the kerb at the four corners of a block ``face = (x0, x1, y0, y1)`` [m]
+    (radius ``r`` [m]): the cut-off corners become road in both rasters (origin
+    ``(0, 0)``, cell size ``res``), in place."""
+    x0, x1, y0, y1 = face
+    for cx, cy, sx, sy in ((x0, y0, 1, 1), (x1, y0, -1, 1), (x0, y1, 1, -1), (x1, y1, -1, -1)):
+        c_lo, c_hi = (int(np.floor(min(cx, cx + sx * r) / res)),
+                      int(np.ceil(max(cx, cx + sx * r) / res)))
+        r_lo, r_hi = (int(np.floor(min(cy, cy + sy * r) / res)),
+                      int(np.ceil(max(cy, cy + sy * r) / res)))
+        cols, rows = np.arange(c_lo, c_hi), np.arange(r_lo, r_hi)
+        xc, yc = (cols + 0.5) * res, (rows + 0.5) * res
+        inside_x = (xc - cx) * sx >= 0
+        inside_y = (yc - cy) * sy >= 0
+        ox, oy = cx + sx * r, cy + sy * r
+        far = ((xc[None, :] - ox) ** 2 + (yc[:, None] - oy) ** 2 > r * r)
+        corner = ((xc[None, :] - ox) * sx < 0) & ((yc[:, None] - oy) * sy < 0)
+        m = far & corner & inside_x[None, :] & inside_y[:, None]
+        rr, cc = np.nonzero(m)
+        rr, cc = rows[rr], cols[cc]
+        ok = (rr >= 0) & (rr < raster.shape[0]) & (cc >= 0) & (cc < raster.shape[1])
+        raster[rr[ok], cc[ok]] = MapClass.ROAD
+        surface[rr[ok], cc[ok]] = Surface.ROAD

@@ -22,7 +22,7 @@ import numpy as np
 
 from dstenv.sim.lanes import Control, NetworkBuilder
 from dstenv.sim.medians import draw_medians, median_box
-from dstenv.sim.raster import Surface, fill_polygon, fill_rect, fillet_corners
+from dstenv.sim.raster import Surface, fill_polygons, fill_rect, fillet_corners
 from dstenv.sim.roads import RoadEdge, add_road_lanes
 from dstenv.sim.roundabout import (island_clutter, paint_roundabout, pick_roundabouts,
                                    ring_nodes)
@@ -257,8 +257,7 @@ def generate_city(cfg: dict[str, Any], traffic: dict[str, Any], rng: np.random.G
         node_xy = warp.points(node_xy)
         buildings = [b[:-1] for b in warp.polylines([np.vstack([b, b[:1]]) for b in buildings],
                                                     BUILDING_STEP)]
-        for b in buildings:
-            fill_polygon(raster, [b], org, res, MapClass.BUILDING)
+        fill_polygons(raster, buildings, org, res, MapClass.BUILDING)
         surface[raster == MapClass.BUILDING] = Surface.BUILDING
         slots = warp_boxes(warp, slots)
         obstacles = warp_obstacles(warp, obstacles)

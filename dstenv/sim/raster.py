@@ -7,7 +7,7 @@ import numpy as np
 
 from dstenv.sim.types import MapClass, WorldMap
 
-__all__ = ["fill_polygon", "fill_rect", "fillet_corners", "lookup", "Surface"]
+__all__ = ["fill_polygon", "fill_polygons", "fill_rect", "fillet_corners", "lookup", "Surface"]
 
 
 class Surface:
@@ -69,6 +69,28 @@ def fill_polygon(raster: np.ndarray, rings: list[np.ndarray], origin: tuple[floa
     ptr = np.cumsum([0] + [len(r) for r in rings]).astype(np.int64)
     _fill_rings(raster, np.ascontiguousarray(xy[:, 0]), np.ascontiguousarray(xy[:, 1]), ptr,
                 float(origin[0]), float(origin[1]), float(resolution), np.uint8(value))
+
+
+@nb.njit(cache=True)
+def _fill_each(raster, xs, ys, poly_ptr, x0, y0, res, value):  # pragma: no cover - numba
+    one = np.zeros(2, np.int64)
+    for k in range(poly_ptr.shape[0] - 1):
+        one[0], one[1] = 0, poly_ptr[k + 1] - poly_ptr[k]
+        _fill_rings(raster, xs[poly_ptr[k]:poly_ptr[k + 1]], ys[poly_ptr[k]:poly_ptr[k + 1]], one,
+                    x0, y0, res, value)
+
+
+def fill_polygons(raster: np.ndarray, polys: list[np.ndarray], origin: tuple[float, float],
+                  resolution: float, value: int) -> None:
+    """:func:`fill_polygon` of many simple polygons (each ``(K, 2)``, no holes) in one
+    call (a city's buildings), in place."""
+    polys = [np.asarray(p, np.float64) for p in polys if len(p) >= 3]
+    if not polys:
+        return
+    xy = np.concatenate(polys)
+    ptr = np.cumsum([0] + [len(p) for p in polys]).astype(np.int64)
+    _fill_each(raster, np.ascontiguousarray(xy[:, 0]), np.ascontiguousarray(xy[:, 1]), ptr,
+               float(origin[0]), float(origin[1]), float(resolution), np.uint8(value))
 
 
 def fill_rect(raster: np.ndarray, x_lo: float, x_hi: float, y_lo: float, y_hi: float,

@@ -171,3 +171,20 @@ def test_same_seed_same_city_and_keys_validated():
         World({"map": {"bend_amplitude": 20.0, "bend_wavelength": 100.0}})
     with pytest.raises(ConfigError, match=r"world\.map\.shear_deg: must be in \[0, 30\]"):
         World({"map": {"shear_deg": 45.0}})
+
+
+def test_batched_polylines_and_polygon_fill_match_one_by_one():
+    from dstenv.sim.raster import fill_polygon, fill_polygons
+
+    warp, _ = draw_warp(default_config()["map"], (200.0, 200.0), np.random.default_rng(0))
+    polys = [np.array([[0, 0], [10, 0], [10, 23], [0, 0.0]]), np.array([[5, 5], [50, 5.0]])]
+    out = warp.polylines(polys, 5.0)
+    assert [len(o) for o in out] == [1 + 2 + 5 + 6, 1 + 9]  # pieces of <= 5 m
+    assert np.allclose(out[0][[0, 2, 7]], warp.points(np.array([[0, 0], [10, 0], [10, 23.0]])))
+    rng = np.random.default_rng(1)
+    shapes = [rng.uniform(0, 40, 2) + rng.uniform(0, 15, (k, 2)) for k in (3, 5, 8)]
+    one, many = np.zeros((300, 300), np.uint8), np.zeros((300, 300), np.uint8)
+    for p in shapes:
+        fill_polygon(one, [p], (0.0, 0.0), 0.2, 1)
+    fill_polygons(many, shapes, (0.0, 0.0), 0.2, 1)
+    assert one.sum() > 100 and np.array_equal(one, many)

@@ -126,7 +126,7 @@ class Warp:
         """Re-sample two rasters of one grid (origin ``(0, 0)``) through the warp.
 
         Args:
-            srcs: two ``(H, W) uint8`` rasters of the unwarped city, codes < 16.
+            srcs: two ``(H, W) uint8`` rasters of the unwarped city.
             shape: ``(H2, W2)`` of the outputs (also with origin ``(0, 0)``).
             resolution: cell size of all [m].
             fills: codes of output cells whose source lies outside the inputs.
@@ -135,12 +135,10 @@ class Warp:
             Two ``(H2, W2) uint8``: each cell takes the source cell under its inverse
             image (nearest cell).
         """
-        # both codes in one byte (4 bits each): one pass, one read and write per cell
-        both = (srcs[0] << 4) | srcs[1]
-        out = np.empty(shape, np.uint8)
-        _resample(both, out, self._params(), float(resolution),
-                  np.uint8((fills[0] << 4) | fills[1]), 16)
-        return out >> 4, out & 15
+        outs = (np.empty(shape, np.uint8), np.empty(shape, np.uint8))
+        _resample(np.ascontiguousarray(srcs[0]), np.ascontiguousarray(srcs[1]), *outs,
+                  self._params(), float(resolution), np.uint8(fills[0]), np.uint8(fills[1]), 16)
+        return outs
 
 
 @nb.njit(cache=True)
@@ -153,7 +151,7 @@ def _source(q, u, v):  # pragma: no cover - numba
 
 
 @nb.njit(cache=True)
-def _resample(src0, out0, q, res, fill0, step):  # pragma: no cover
+def _resample(src0, src1, out0, out1, q, res, fill0, fill1, step):  # pragma: no cover
     """Nearest-cell re-sampling; the inverse map is evaluated exactly every ``step``
     columns and linearly in between (its curvature is tiny: < 1 cm off at 16 cells)."""
     h, w = src0.shape
@@ -172,8 +170,10 @@ def _resample(src0, out0, q, res, fill0, step):  # pragma: no cover
                 cc, rr = xi >> 16, yi >> 16
                 if 0 <= rr < h and 0 <= cc < w:
                     out0[r, c] = src0[rr, cc]
+                    out1[r, c] = src1[rr, cc]
                 else:
                     out0[r, c] = fill0
+                    out1[r, c] = fill1
                 xi += dx
                 yi += dy
             xa, ya = xb, yb

@@ -191,14 +191,18 @@ def generate_city(cfg: dict[str, Any], traffic: dict[str, Any], rng: np.random.G
         a, b = start, start + along * length + inward * (curb + sw)
         fill_rect(surface, min(a[0], b[0]), max(a[0], b[0]), min(a[1], b[1]), max(a[1], b[1]),
                   org, res, Surface.SIDEWALK)
+    # a warp re-samples the rasters (a second rounding to cells): the road gets half a
+    # cell more on each side first, so that no lane loses kerb clearance to rounding
+    pad = 0.5 * res if geo is not None and (cfg["shear_deg"] > 0 or cfg["bend_amplitude"] > 0) \
+        else 0.0
     for i, j in zip(*np.nonzero(vseg)):
-        for r in (raster, surface):
-            fill_rect(r, xs[i] - hwx[i], xs[i] + hwx[i], ys[j] - hwy[j], ys[j + 1] + hwy[j + 1],
-                      org, res, MapClass.ROAD if r is raster else Surface.ROAD)
+        for r, v in ((raster, MapClass.ROAD), (surface, Surface.ROAD)):
+            fill_rect(r, xs[i] - hwx[i] - pad, xs[i] + hwx[i] + pad, ys[j] - hwy[j],
+                      ys[j + 1] + hwy[j + 1], org, res, v)
     for i, j in zip(*np.nonzero(hseg)):
-        for r in (raster, surface):
-            fill_rect(r, xs[i] - hwx[i], xs[i + 1] + hwx[i + 1], ys[j] - hwy[j], ys[j] + hwy[j],
-                      org, res, MapClass.ROAD if r is raster else Surface.ROAD)
+        for r, v in ((raster, MapClass.ROAD), (surface, Surface.ROAD)):
+            fill_rect(r, xs[i] - hwx[i], xs[i + 1] + hwx[i + 1], ys[j] - hwy[j] - pad,
+                      ys[j] + hwy[j] + pad, org, res, v)
     for face in faces:
         fillet_corners(raster, surface, face, curb + 0.5 * sw, res)
     for centre, d, hw in zebras:

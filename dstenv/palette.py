@@ -27,10 +27,10 @@ IGNORE_RGB: np.ndarray = np.array([238, 238, 238], np.uint8)
 #: sensor grid codes: unknown (mid grey), free (white), occupied (black)
 SENSOR_RGB: np.ndarray = np.array([[140, 140, 140], [255, 255, 255], [0, 0, 0]], np.uint8)
 #: :class:`dstenv.sim.raster.Surface` codes: yard, building, road, sidewalk, parking,
-#: crosswalk
+#: crosswalk, verge (roundabout islands, medians)
 SURFACE_RGB: np.ndarray = np.array(
     [[204, 219, 189], [107, 102, 115], [140, 140, 145], [219, 214, 204], [178, 178, 168],
-     [237, 237, 237]], np.uint8)
+     [237, 237, 237], [150, 190, 120]], np.uint8)
 #: :class:`dstenv.sim.types.MapClass` codes: none, building, road, intermediate
 MAPCLASS_RGB: np.ndarray = np.array(
     [[255, 255, 255], [107, 102, 115], [140, 140, 145], [219, 214, 204]], np.uint8)

@@ -5,6 +5,13 @@ per direction. Some interior street segments are removed, which merges two block
 and turns their junctions into T junctions. Each block gets, from the kerb in: a
 curb strip (parking strip or verge), a sidewalk, a setback, then a row of
 buildings of varied frontage and depth with gaps (alleys, driveways, empty lots).
+
+Varied geometry (``world.map`` keys, all 0 in the ``clean`` scenario): wide streets
+may get a raised median (:mod:`dstenv.sim.medians`), some 4-way junctions become
+roundabouts (:mod:`dstenv.sim.roundabout`), and finally one smooth warp of the plane
+(:mod:`dstenv.sim.warp`: shear and bends) turns the grid into diagonal and curved
+streets with irregular blocks, applied to every lane, building, slot, obstacle,
+street centre-line and raster alike.
 """
 
 from __future__ import annotations
@@ -14,16 +21,21 @@ from typing import Any
 import numpy as np
 
 from dstenv.sim.lanes import Control, NetworkBuilder
-from dstenv.sim.raster import Surface, fill_rect
+from dstenv.sim.medians import draw_medians, median_box
+from dstenv.sim.raster import Surface, fill_polygons, fill_rect, fillet_corners
 from dstenv.sim.roads import RoadEdge, add_road_lanes
+from dstenv.sim.roundabout import (island_clutter, paint_roundabout, pick_roundabouts,
+                                   ring_nodes)
 from dstenv.sim.sidewalks import LANE_OFFSET, add_block_rings
-from dstenv.sim.clutter import place_clutter
+from dstenv.sim.clutter import concat_obstacles, median_clutter, place_clutter
+from dstenv.sim.warp import Warp, draw_warp, warp_boxes, warp_lanes, warp_obstacles
 from dstenv.sim.parking import SLOT_LENGTH, side_slots
 from dstenv.sim.types import MapClass, WorldMap
 
-__all__ = ["generate_city", "SLOT_LENGTH"]
+__all__ = ["generate_city", "SLOT_LENGTH", "Warp"]
 
 STOP_MARGIN = 4.4  # [m] stop line behind the crosswalk's outer walking line
+BUILDING_STEP = 12.0  # [m] longest building edge after a warp (it follows curved streets)
 
 
 def generate_city(cfg: dict[str, Any], traffic: dict[str, Any], rng: np.random.Generator,
@@ -35,7 +47,9 @@ def generate_city(cfg: dict[str, Any], traffic: dict[str, Any], rng: np.random.G
         A :class:`WorldMap` with ``lanes`` a :class:`~dstenv.sim.lanes.LaneNetwork`
         and ``meta`` keys ``surface`` (``(Hm, Wm) uint8`` :class:`Surface` codes),
         ``parking_slots`` (``(S, 6) float64`` x, y, yaw, length, width, height; see
-        :mod:`dstenv.sim.parking`), ``kind``; ``obstacles`` the street clutter
+        :mod:`dstenv.sim.parking`), ``kind``, ``warp`` (the :class:`Warp` applied,
+        or None), ``roundabouts`` (``(R, 4) float64`` centre x, y, outer and island
+        radius [m]), ``faces`` (block boxes before the warp); ``obstacles`` the street clutter
         (:mod:`dstenv.sim.clutter`); ``streets`` / ``street_lanes`` the centre-lines.
 
     Geometry jitter (lane width per street, kerb strip and sidewalk width per
@@ -43,6 +57,9 @@ def generate_city(cfg: dict[str, Any], traffic: dict[str, Any], rng: np.random.G
     city is the same as without them.
     """
     real = rng.spawn(1)[0]
+    # curved streets, roundabouts and medians draw from their own child stream, taken
+    # only when one of them is on (so the clean city is the same as without them)
+    geo = rng.spawn(1)[0] if _varied_geometry(cfg) else None
     cfg = dict(cfg)
     for key, jit in (("curb_strip_width", "curb_strip_jitter"),
                      ("sidewalk_width", "sidewalk_jitter")):
@@ -62,7 +79,8 @@ def generate_city(cfg: dict[str, Any], traffic: dict[str, Any], rng: np.random.G
     if cfg["lane_width_jitter"] > 0:
         jit = cfg["lane_width_jitter"]
         lwx, lwy = lw + real.uniform(-jit, jit, nx), lw + real.uniform(-jit, jit, ny)
-    hwx, hwy = lanes_x * lwx, lanes_y * lwy  # half widths of the streets [m]
+    med_x, med_y = draw_medians(lanes_x, cfg, geo), draw_medians(lanes_y, cfg, geo)  # [m] widths
+    hwx, hwy = lanes_x * lwx + med_x / 2, lanes_y * lwy + med_y / 2  # street half widths [m]
 
     # street segments (True = exists) and T junctions by merging neighbouring cells
     vseg = np.ones((nx, ny - 1), bool)  # x line i, from y_j to y_j+1
@@ -98,14 +116,16 @@ def generate_city(cfg: dict[str, Any], traffic: dict[str, Any], rng: np.random.G
     hw_node = np.array([max(hwx[i], hwy[j]) for i in range(nx) for j in range(ny)])
     reach = hw_node + curb + sw / 2  # [m] node -> middle of the crossing sidewalk
     edges = [RoadEdge(nid(i, j), nid(i, j + 1), node_xy[[nid(i, j), nid(i, j + 1)]],
-                      int(lanes_x[i]), int(lanes_x[i]), _lw(lwx[i], lw))
+                      int(lanes_x[i]), int(lanes_x[i]), _lw(lwx[i], lw), float(med_x[i]))
              for i, j in zip(*np.nonzero(vseg))]
     edges += [RoadEdge(nid(i, j), nid(i + 1, j), node_xy[[nid(i, j), nid(i + 1, j)]],
-                       int(lanes_y[j]), int(lanes_y[j]), _lw(lwy[j], lw))
+                       int(lanes_y[j]), int(lanes_y[j]), _lw(lwy[j], lw), float(med_y[j]))
               for i, j in zip(*np.nonzero(hseg))]
+    rounds = pick_roundabouts(node_xy, edges, hwx.repeat(ny), np.tile(hwy, nx),
+                              curb + 0.5 * sw, lw, cfg["roundabout_prob"], geo)
     builder = NetworkBuilder()
     degree = add_road_lanes(builder, len(node_xy), edges, reach + STOP_MARGIN, lw,
-                            right_radius=curb + 0.5 * sw + 0.5 * lw)
+                            right_radius=curb + 0.5 * sw + 0.5 * lw, roundabouts=rounds)
     u = rng.random(len(node_xy))
     p_stop, p_sig = traffic["stop_sign_prob"], traffic["signal_prob"]
     control = np.where(u < p_stop, Control.STOP, np.where(u < p_stop + p_sig, Control.SIGNAL,
@@ -142,7 +162,12 @@ def generate_city(cfg: dict[str, Any], traffic: dict[str, Any], rng: np.random.G
                                       base - sgn * p * lat))
                 zebras.append((node_xy[n] + d * (reach[n] + 2.5), d, hw))
     add_block_rings(builder, faces, inset, crossings, walk_off)
-    network = builder.build(node_xy, control, phase, lw)
+    if rounds:  # the ring's yield points are junctions of their own
+        ring_xy, ring_ctl = ring_nodes(rounds)
+        control[[r.node for r in rounds]] = Control.NONE
+        node_xy = np.vstack([node_xy, ring_xy])
+        control = np.concatenate([control, ring_ctl])
+        phase = np.concatenate([phase, np.zeros(len(ring_xy))])
 
     # rasters
     res = cfg["resolution"]
@@ -166,18 +191,30 @@ def generate_city(cfg: dict[str, Any], traffic: dict[str, Any], rng: np.random.G
         a, b = start, start + along * length + inward * (curb + sw)
         fill_rect(surface, min(a[0], b[0]), max(a[0], b[0]), min(a[1], b[1]), max(a[1], b[1]),
                   org, res, Surface.SIDEWALK)
+    # a warp re-samples the rasters (a second rounding to cells): the road gets half a
+    # cell more on each side first, so that no lane loses kerb clearance to rounding
+    pad = 0.5 * res if geo is not None and (cfg["shear_deg"] > 0 or cfg["bend_amplitude"] > 0) \
+        else 0.0
     for i, j in zip(*np.nonzero(vseg)):
-        for r in (raster, surface):
-            fill_rect(r, xs[i] - hwx[i], xs[i] + hwx[i], ys[j] - hwy[j], ys[j + 1] + hwy[j + 1],
-                      org, res, MapClass.ROAD if r is raster else Surface.ROAD)
+        for r, v in ((raster, MapClass.ROAD), (surface, Surface.ROAD)):
+            fill_rect(r, xs[i] - hwx[i] - pad, xs[i] + hwx[i] + pad, ys[j] - hwy[j],
+                      ys[j + 1] + hwy[j + 1], org, res, v)
     for i, j in zip(*np.nonzero(hseg)):
-        for r in (raster, surface):
-            fill_rect(r, xs[i] - hwx[i], xs[i + 1] + hwx[i + 1], ys[j] - hwy[j], ys[j] + hwy[j],
-                      org, res, MapClass.ROAD if r is raster else Surface.ROAD)
+        for r, v in ((raster, MapClass.ROAD), (surface, Surface.ROAD)):
+            fill_rect(r, xs[i] - hwx[i], xs[i + 1] + hwx[i + 1], ys[j] - hwy[j] - pad,
+                      ys[j] + hwy[j] + pad, org, res, v)
     for face in faces:
-        _fillet(raster, surface, face, curb + 0.5 * sw, res)
+        fillet_corners(raster, surface, face, curb + 0.5 * sw, res)
     for centre, d, hw in zebras:
         _zebra(surface, centre, d, hw, res)
+    medians = [(e.poly, e.median, reach[e.u] + STOP_MARGIN, reach[e.v] + STOP_MARGIN)
+               for e in edges if e.median > 0]
+    for poly, wid, t_u, t_v in medians:
+        a, b = median_box(poly, wid, t_u, t_v)
+        for r, v in ((raster, MapClass.INTERMEDIATE), (surface, Surface.VERGE)):
+            fill_rect(r, a[0], b[0], a[1], b[1], org, res, v)
+    for r in rounds:
+        paint_roundabout(raster, surface, r, res)
     slots, parked = [], []
     walk_ends = np.array([p for c in crossings for p in c[2:]]).reshape(-1, 2)
     for f, face in enumerate(faces):
@@ -194,23 +231,56 @@ def generate_city(cfg: dict[str, Any], traffic: dict[str, Any], rng: np.random.G
         buildings += _buildings(face, cfg, rng)
     for box, side in strips:
         buildings += _buildings(box, cfg, rng, side)
-    for b in buildings:
-        for r, v in ((raster, MapClass.BUILDING), (surface, Surface.BUILDING)):
-            fill_rect(r, b[:, 0].min(), b[:, 0].max(), b[:, 1].min(), b[:, 1].max(), org, res, v)
+    drawn = draw_warp(cfg, (width, height), geo) if geo is not None else None
+    if drawn is None:
+        for b in buildings:
+            for r, v in ((raster, MapClass.BUILDING), (surface, Surface.BUILDING)):
+                fill_rect(r, b[:, 0].min(), b[:, 0].max(), b[:, 1].min(), b[:, 1].max(),
+                          org, res, v)
     # a child stream: heights do not shift the draws of the layout and the traffic
     heights = _building_heights(len(buildings), cfg, rng.spawn(1)[0])
     has_parking = _parked_keys(faces, strips, parked)
     sides = [(*_sides(box)[k], (tuple(box), k) in has_parking)
              for box, k in [(f, k) for f in faces for k in range(4)] + list(strips)]
-    obstacles = place_clutter(sides, buildings, slots, walk_ends, curb, sw,
-                              clutter or {"density": 0.0}, real)
-    meta = {"kind": "procedural", "surface": surface, "parking_slots": slots, "faces": faces}
+    clutter = clutter or {"density": 0.0}
+    obstacles = place_clutter(sides, buildings, slots, walk_ends, curb, sw, clutter, real)
+    if medians or rounds:
+        obstacles = concat_obstacles([obstacles, island_clutter(rounds, clutter, geo),
+                                      median_clutter([median_box(*m) for m in medians],
+                                                     clutter, geo)])
     streets = [e.poly for e in edges]
+    meta = {"kind": "procedural", "parking_slots": slots, "faces": faces, "warp": None,
+            "roundabouts": np.array([[*r.centre, r.r_out, r.r_island] for r in rounds]
+                                    ).reshape(-1, 4)}
+    if drawn is not None:  # curved and diagonal streets: everything through one warp
+        warp, (width, height) = drawn
+        shape = (int(np.ceil(height / res)), int(np.ceil(width / res)))
+        raster, surface = warp.rasters((raster, surface), shape, res,
+                                       (MapClass.INTERMEDIATE, Surface.YARD))
+        warp_lanes(builder, warp)
+        node_xy = warp.points(node_xy)
+        buildings = [b[:-1] for b in warp.polylines([np.vstack([b, b[:1]]) for b in buildings],
+                                                    BUILDING_STEP)]
+        fill_polygons(raster, buildings, org, res, MapClass.BUILDING)
+        surface[raster == MapClass.BUILDING] = Surface.BUILDING
+        slots = warp_boxes(warp, slots)
+        obstacles = warp_obstacles(warp, obstacles)
+        streets = warp.polylines(streets)
+        meta["roundabouts"][:, :2] = warp.points(meta["roundabouts"][:, :2])
+        meta.update(parking_slots=slots, warp=warp)
+    meta["surface"] = surface
+    network = builder.build(node_xy, control, phase, lw)
     street_lanes = np.array([e.n_fwd + e.n_bwd for e in edges], np.int64)
     return WorldMap(raster=raster, origin=org, resolution=res, buildings=buildings,
                     lanes=network, meta=meta, building_heights=heights,
                     kerb_height=cfg["kerb_height"], obstacles=obstacles, streets=streets,
                     street_lanes=street_lanes)
+
+
+def _varied_geometry(cfg: dict[str, Any]) -> bool:
+    """Curved streets, roundabouts or medians are on."""
+    return (cfg["shear_deg"] > 0 or cfg["bend_amplitude"] > 0 or cfg["roundabout_prob"] > 0
+            or cfg["median_prob"] > 0)
 
 
 def _lw(w: float, default: float) -> float | None:
@@ -235,29 +305,6 @@ def _degree(vseg: np.ndarray, hseg: np.ndarray, i: int, j: int) -> int:
     nx, ny = vseg.shape[0], hseg.shape[1]
     return int(sum([j < ny - 1 and vseg[i, j], j > 0 and vseg[i, j - 1],
                     i < nx - 1 and hseg[i, j], i > 0 and hseg[i - 1, j]]))
-
-
-def _fillet(raster, surface, face, r, res):
-    """Round the kerb at the four corners of a block (radius ``r``)."""
-    x0, x1, y0, y1 = face
-    for cx, cy, sx, sy in ((x0, y0, 1, 1), (x1, y0, -1, 1), (x0, y1, 1, -1), (x1, y1, -1, -1)):
-        c_lo, c_hi = (int(np.floor(min(cx, cx + sx * r) / res)),
-                      int(np.ceil(max(cx, cx + sx * r) / res)))
-        r_lo, r_hi = (int(np.floor(min(cy, cy + sy * r) / res)),
-                      int(np.ceil(max(cy, cy + sy * r) / res)))
-        cols, rows = np.arange(c_lo, c_hi), np.arange(r_lo, r_hi)
-        xc, yc = (cols + 0.5) * res, (rows + 0.5) * res
-        inside_x = (xc - cx) * sx >= 0
-        inside_y = (yc - cy) * sy >= 0
-        ox, oy = cx + sx * r, cy + sy * r
-        far = ((xc[None, :] - ox) ** 2 + (yc[:, None] - oy) ** 2 > r * r)
-        corner = ((xc[None, :] - ox) * sx < 0) & ((yc[:, None] - oy) * sy < 0)
-        m = far & corner & inside_x[None, :] & inside_y[:, None]
-        rr, cc = np.nonzero(m)
-        rr, cc = rows[rr], cols[cc]
-        ok = (rr >= 0) & (rr < raster.shape[0]) & (cc >= 0) & (cc < raster.shape[1])
-        raster[rr[ok], cc[ok]] = MapClass.ROAD
-        surface[rr[ok], cc[ok]] = Surface.ROAD
 
 
 def _zebra(surface, centre, d, hw, res):

@@ -82,6 +82,7 @@ def draw_world(ax: Any, world: Any, sweep: Any = None, extent: float | None = No
 LEGEND: tuple[tuple[str, Any], ...] = (
     ("road", SURFACE_RGB[2]), ("sidewalk", SURFACE_RGB[3]), ("parking strip", SURFACE_RGB[4]),
     ("building", SURFACE_RGB[1]), ("yard / open", SURFACE_RGB[0]),
+    ("median / island", SURFACE_RGB[6]),
     ("moving car", "#d62728"), ("moving cyclist", "#ff7f0e"),
     ("moving pedestrian", "#e377c2"), ("static agent (parked, stopped)", "#1f3fbf"),
     ("ego", "#2ca02c"),

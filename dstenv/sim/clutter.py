@@ -29,7 +29,8 @@ import numpy as np
 from dstenv.sim.types import ObstacleKind as K
 from dstenv.sim.types import Obstacles
 
-__all__ = ["default_clutter_config", "place_clutter", "street_clutter", "Side"]
+__all__ = ["default_clutter_config", "place_clutter", "street_clutter", "median_clutter",
+           "obstacles_from", "concat_obstacles", "Side"]
 
 #: one block side: ``(start (2,), along (2,), inward (2,), length [m], has parking)``
 Side = tuple[np.ndarray, np.ndarray, np.ndarray, float, bool]
@@ -64,6 +65,64 @@ def _obstacles(rows: dict[str, list]) -> Obstacles:
                      np.array(rows["length"], f), np.array(rows["width"], f),
                      np.array(rows["z_min"], f), np.array(rows["z_max"], f),
                      np.array(rows["kind"], np.uint8))
+
+
+def obstacles_from(items: list[tuple]) -> Obstacles:
+    """:class:`Obstacles` from ``(xy, yaw, length, width, z_min, z_max, kind)`` tuples."""
+    rows = _rows()
+    for item in items:
+        _add(rows, *item)
+    return _obstacles(rows)
+
+
+def concat_obstacles(parts: list[Obstacles]) -> Obstacles:
+    """All boxes of ``parts`` in one :class:`Obstacles` (in order)."""
+    return Obstacles(*(np.concatenate([getattr(p, f) for p in parts])
+                       for f in ("xy", "yaw", "length", "width", "z_min", "z_max", "kind")))
+
+
+def median_clutter(boxes: list[tuple[np.ndarray, np.ndarray]], cfg: dict[str, Any],
+                   rng: np.random.Generator | None) -> Obstacles:
+    """Street furniture on raised medians: a row of trees on some (``tree_side_prob``),
+    poles every ``pole_spacing``, a keep-right sign post at each end.
+
+    Args:
+        boxes: axis-aligned medians as ``(low (2,), high (2,))`` corners [m].
+        cfg: the ``world.clutter`` section.
+
+    Returns:
+        :class:`Obstacles` on the median centre-lines (empty when ``density`` is 0).
+    """
+    dens = float(cfg["density"])
+    if dens <= 0 or not boxes or rng is None:
+        return Obstacles.empty()
+    rows = _rows()
+    for lo, hi in boxes:
+        ext = hi - lo
+        ax = int(np.argmax(ext))
+        along = np.eye(2)[ax]
+        start = lo + np.eye(2)[1 - ax] * ext[1 - ax] / 2
+        length, width = float(ext[ax]), float(ext[1 - ax])
+        yaw = float(np.arctan2(along[1], along[0]))
+        if length < 4.0:
+            continue
+        for s in (0.6, length - 0.6):
+            _add(rows, start + along * s, yaw, 0.1, 0.1, 0.0, 2.3, K.SIGN)
+        if width >= 1.5 and rng.random() < min(cfg["tree_side_prob"] * dens, 1.0):
+            sp = cfg["tree_spacing"]
+            for s in np.arange(3.0 + rng.uniform(0, sp / 2), length - 3.0, sp):
+                zc = rng.uniform(2.0, 3.0)
+                r_trunk = rng.uniform(0.12, min(0.25, width / 4))
+                c = rng.uniform(3.0, 6.0)
+                _add(rows, start + along * s, yaw, 2 * r_trunk, 2 * r_trunk, 0.0, zc + 0.5,
+                     K.TREE_TRUNK)
+                _add(rows, start + along * s, yaw, c, c, zc, zc + rng.uniform(3.0, 6.0),
+                     K.TREE_CROWN)
+        else:
+            spacing = cfg["pole_spacing"] / dens
+            for s in np.arange(2.0 + rng.uniform(0, spacing), length - 2.0, spacing):
+                _add(rows, start + along * s, yaw, 0.26, 0.26, 0.0, rng.uniform(6.0, 9.0), K.POLE)
+    return _obstacles(rows)
 
 
 def _add(rows, xy, yaw, length, width, z0, z1, kind) -> None:

@@ -67,6 +67,13 @@ def default_config() -> dict[str, Any]:
             "parking_mix": [0.25, 0.55, 0.15, 0.05],  # weights of small car, car, van, truck
             # [-] share of (small / normal) cars parked half on the sidewalk
             "half_on_sidewalk_prob": 0.08,
+            # -- geometry (0 everywhere: the straight Manhattan grid of the clean scenario)
+            "shear_deg": 15.0,  # [deg] streets meet at 90 +- up to this (drawn per map, 0..30)
+            "bend_amplitude": 7.0,  # [m] sideways bend of straight streets (0..30; 0: straight)
+            "bend_wavelength": 300.0,  # [m] length of one bend wave (slope 2 pi a / l <= 0.25)
+            "roundabout_prob": 0.15,  # [-] chance that a 4-way junction becomes a roundabout
+            "median_prob": 0.4,  # [-] chance that a street with >= 2 lanes per way has a median
+            "median_width": 2.0,  # [m] raised median strip between the two directions (0.5..8)
         },
         "traffic": {
             "cars": 70,  # moving cars (KITTI-like class mix: moving >= static)
@@ -187,6 +194,12 @@ RULES: dict[str, Any] = {
         "parking_heading_jitter": between(0.0, 15.0, "deg"),
         "parking_mix": between(0.0, 1e3),
         "half_on_sidewalk_prob": PROB,
+        "shear_deg": between(0.0, 30.0, "deg"),
+        "bend_amplitude": between(0.0, 30.0, _M),
+        "bend_wavelength": between(50.0, 5000.0, _M),
+        "roundabout_prob": PROB,
+        "median_prob": PROB,
+        "median_width": between(0.5, 8.0, _M),
     },
     "traffic": {
         "cars": between(0, 500),
@@ -267,6 +280,9 @@ SECTION = Section(default_config, RULES, (
     ("map.sidewalk_jitter", lambda c: _jitter_ok(c, "sidewalk_jitter", "sidewalk_width"),
      "must be in [0, min(1, sidewalk_width - 1)] m"),
     _mix("map.parking_mix", False),
+    ("map.bend_amplitude", lambda c: 2 * 3.14159 * c["map"]["bend_amplitude"]
+     <= 0.25 * c["map"]["bend_wavelength"],
+     "must be <= 0.25 * map.bend_wavelength / (2 pi) (gentle bends: slope <= 0.25)"),
     _mix("traffic.vehicle_mix", True),
     ("ego.wheelbase", lambda c: c["ego"]["wheelbase"] <= c["ego"]["length"],
      "must be <= ego.length"),

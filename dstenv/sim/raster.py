@@ -7,7 +7,7 @@ import numpy as np
 
 from dstenv.sim.types import MapClass, WorldMap
 
-__all__ = ["fill_polygon", "fill_rect", "lookup", "Surface"]
+__all__ = ["fill_polygon", "fill_polygons", "fill_rect", "fillet_corners", "lookup", "Surface"]
 
 
 class Surface:
@@ -19,6 +19,7 @@ class Surface:
     SIDEWALK = 3
     PARKING = 4
     CROSSWALK = 5
+    VERGE = 6  # raised grass: roundabout islands and medians
 
 
 @nb.njit(cache=True)
@@ -70,6 +71,28 @@ def fill_polygon(raster: np.ndarray, rings: list[np.ndarray], origin: tuple[floa
                 float(origin[0]), float(origin[1]), float(resolution), np.uint8(value))
 
 
+@nb.njit(cache=True)
+def _fill_each(raster, xs, ys, poly_ptr, x0, y0, res, value):  # pragma: no cover - numba
+    one = np.zeros(2, np.int64)
+    for k in range(poly_ptr.shape[0] - 1):
+        one[0], one[1] = 0, poly_ptr[k + 1] - poly_ptr[k]
+        _fill_rings(raster, xs[poly_ptr[k]:poly_ptr[k + 1]], ys[poly_ptr[k]:poly_ptr[k + 1]], one,
+                    x0, y0, res, value)
+
+
+def fill_polygons(raster: np.ndarray, polys: list[np.ndarray], origin: tuple[float, float],
+                  resolution: float, value: int) -> None:
+    """:func:`fill_polygon` of many simple polygons (each ``(K, 2)``, no holes) in one
+    call (a city's buildings), in place."""
+    polys = [np.asarray(p, np.float64) for p in polys if len(p) >= 3]
+    if not polys:
+        return
+    xy = np.concatenate(polys)
+    ptr = np.cumsum([0] + [len(p) for p in polys]).astype(np.int64)
+    _fill_each(raster, np.ascontiguousarray(xy[:, 0]), np.ascontiguousarray(xy[:, 1]), ptr,
+               float(origin[0]), float(origin[1]), float(resolution), np.uint8(value))
+
+
 def fill_rect(raster: np.ndarray, x_lo: float, x_hi: float, y_lo: float, y_hi: float,
               origin: tuple[float, float], resolution: float, value: int) -> None:
     """Set the cells whose centres lie in the axis-aligned box to ``value`` (in place)."""
@@ -102,3 +125,29 @@ def lookup(world_map: WorldMap, xy: np.ndarray) -> np.ndarray:
     out = np.full(c.shape, MapClass.NONE, np.uint8)
     out[ok] = world_map.raster[r[ok], c[ok]]
     return out
+
+
+def fillet_corners(raster: np.ndarray, surface: np.ndarray, face: tuple[float, ...], r: float,
+                   res: float) -> None:
+    """Round the kerb at the four corners of a block ``face = (x0, x1, y0, y1)`` [m]
+    (radius ``r`` [m]): the cut-off corners become road in both rasters (origin
+    ``(0, 0)``, cell size ``res``), in place."""
+    x0, x1, y0, y1 = face
+    for cx, cy, sx, sy in ((x0, y0, 1, 1), (x1, y0, -1, 1), (x0, y1, 1, -1), (x1, y1, -1, -1)):
+        c_lo, c_hi = (int(np.floor(min(cx, cx + sx * r) / res)),
+                      int(np.ceil(max(cx, cx + sx * r) / res)))
+        r_lo, r_hi = (int(np.floor(min(cy, cy + sy * r) / res)),
+                      int(np.ceil(max(cy, cy + sy * r) / res)))
+        cols, rows = np.arange(c_lo, c_hi), np.arange(r_lo, r_hi)
+        xc, yc = (cols + 0.5) * res, (rows + 0.5) * res
+        inside_x = (xc - cx) * sx >= 0
+        inside_y = (yc - cy) * sy >= 0
+        ox, oy = cx + sx * r, cy + sy * r
+        far = ((xc[None, :] - ox) ** 2 + (yc[:, None] - oy) ** 2 > r * r)
+        corner = ((xc[None, :] - ox) * sx < 0) & ((yc[:, None] - oy) * sy < 0)
+        m = far & corner & inside_x[None, :] & inside_y[:, None]
+        rr, cc = np.nonzero(m)
+        rr, cc = rows[rr], cols[cc]
+        ok = (rr >= 0) & (rr < raster.shape[0]) & (cc >= 0) & (cc < raster.shape[1])
+        raster[rr[ok], cc[ok]] = MapClass.ROAD
+        surface[rr[ok], cc[ok]] = Surface.ROAD

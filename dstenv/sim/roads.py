@@ -8,6 +8,7 @@ import numpy as np
 
 from dstenv.sim.lanes import (LaneKind, NetworkBuilder, Turn, bezier, cut_polyline, fillet_curve,
                               offset_polyline)
+from dstenv.sim.roundabout import add_ring
 
 __all__ = ["RoadEdge", "add_road_lanes", "signal_group", "balloon", "turning_circle"]
 
@@ -26,6 +27,7 @@ class RoadEdge:
         n_fwd: lanes in the direction u -> v (>= 1).
         n_bwd: lanes in the direction v -> u (0: one-way street).
         lane_width: lane width of this street [m] (None: the network's).
+        median: width of a raised median between the two directions [m] (0: none).
     """
 
     u: int
@@ -34,6 +36,7 @@ class RoadEdge:
     n_fwd: int
     n_bwd: int
     lane_width: float | None = None
+    median: float = 0.0
 
 
 def signal_group(heading: float) -> int:
@@ -68,7 +71,7 @@ def _wrap(a: float) -> float:
 
 def add_road_lanes(builder: NetworkBuilder, n_nodes: int, edges: list[RoadEdge],
                    trims: np.ndarray, lane_width: float, uturn_trim: float = 3.0,
-                   right_radius: float = 6.0) -> np.ndarray:
+                   right_radius: float = 6.0, roundabouts: list | None = None) -> np.ndarray:
     """Add the road and connector lanes of a street graph to ``builder``.
 
     Lanes keep to the right. Road lanes stop ``trims[node]`` metres before each
@@ -85,6 +88,8 @@ def add_road_lanes(builder: NetworkBuilder, n_nodes: int, edges: list[RoadEdge],
         uturn_trim: stop-line distance at dead ends [m].
         right_radius: radius of right turns from the kerb lane [m] (they hug the kerb
             corner; other manoeuvres are smooth cubic curves).
+        roundabouts: :class:`~dstenv.sim.roundabout.Roundabout` s replacing the
+            connectors of their nodes by a one-way ring.
 
     Returns:
         ``(n_nodes,) int64`` node degrees (streets meeting at each node).
@@ -109,13 +114,18 @@ def add_road_lanes(builder: NetworkBuilder, n_nodes: int, edges: list[RoadEdge],
                                          (1, e.n_bwd, centre[::-1], e.v, e.u)):
             lw = e.lane_width or lane_width
             for k in range(n):
-                off = -(k + 0.5) * lw if e.n_bwd > 0 else -(k - (n - 1) / 2) * lw
+                off = -(k + 0.5) * lw - e.median / 2 if e.n_bwd > 0 else \
+                    -(k - (n - 1) / 2) * lw
                 lane_poly = offset_polyline(line, off)
                 lid = builder.add(lane_poly, LaneKind.ROAD, rightmost=(k == n - 1))
                 d0, d1 = lane_poly[1] - lane_poly[0], lane_poly[-1] - lane_poly[-2]
                 out[a].append((lid, ei, k, n, float(np.arctan2(d0[1], d0[0])), lane_poly[0]))
                 inc[b].append((lid, ei, k, n, float(np.arctan2(d1[1], d1[0])), lane_poly[-1]))
+    rings = {r.node: r for r in roundabouts or []}
     for node in range(n_nodes):
+        if node in rings:
+            add_ring(builder, rings[node], inc[node], out[node])
+            continue
         by_edge: dict[int, list[tuple]] = {}
         for o in out[node]:
             by_edge.setdefault(o[1], []).append(o)

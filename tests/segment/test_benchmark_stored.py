@@ -14,7 +14,11 @@ def _generate(out, stride, warmup):
     from dstenv.data.sampling import scenario_config
 
     spec = GenerateSpec(
-        config=scenario_config(None, {"grid": {"height": 32, "width": 32}}), frames=6, seed=3,
+        # sparse beams with dropout: each sweep misses cells an earlier one saw, so the
+        # filter history observes more than the last sweep however the ego moves
+        config=scenario_config(None, {"grid": {"height": 32, "width": 32},
+                                      "lidar": {"beams": 120, "dropout": 0.3}}),
+        frames=6, seed=3,
         scenario="default", split="test", frames_per_shard=8, episode_length=6, stride=stride,
         warmup=warmup,
     )

@@ -151,13 +151,7 @@ def ground_heights(
     xyz = np.asarray(points, dtype=np.float64)[:, :3]
     if not cfg["local"] or len(xyz) == 0:
         return xyz @ plane[:3] + plane[3]
-    n_sec = max(round(360.0 / cfg["sector_deg"]), 1)
-    r, angle = polar or polar_coordinates(xyz)
-    return _local_ground(
-        xyz, np.asarray(plane, dtype=np.float64), r, angle, n_sec,
-        float(cfg["bin_size"]), float(cfg["ego_radius"]), float(cfg["max_slope"]),
-        float(cfg["step_tolerance"]), float(cfg["flat_spread"]), float(cfg["max_drop_slope"]),
-        float(cfg["drop_tolerance"]))
+    return _local_ground(*_walk_args(xyz, plane, cfg, polar))
 
 
 def ground_walk(
@@ -177,13 +171,18 @@ def ground_walk(
     xyz = np.asarray(points, dtype=np.float64)[:, :3]
     if not cfg["local"] or len(xyz) == 0:
         return xyz @ plane[:3] + plane[3], np.zeros(len(xyz), np.int64), np.zeros(1)
+    return _ground_walk(*_walk_args(xyz, plane, cfg, polar))
+
+
+def _walk_args(xyz: np.ndarray, plane: np.ndarray, cfg: dict[str, Any],
+               polar: tuple[np.ndarray, np.ndarray] | None) -> tuple:
+    """The arguments of the local-ground kernels (:func:`_local_ground`, :func:`_ground_walk`)."""
     n_sec = max(round(360.0 / cfg["sector_deg"]), 1)
     r, angle = polar or polar_coordinates(xyz)
-    return _ground_walk(
-        xyz, np.asarray(plane, dtype=np.float64), r, angle, n_sec,
-        float(cfg["bin_size"]), float(cfg["ego_radius"]), float(cfg["max_slope"]),
-        float(cfg["step_tolerance"]), float(cfg["flat_spread"]), float(cfg["max_drop_slope"]),
-        float(cfg["drop_tolerance"]))
+    return (xyz, np.asarray(plane, dtype=np.float64), r, angle, n_sec,
+            float(cfg["bin_size"]), float(cfg["ego_radius"]), float(cfg["max_slope"]),
+            float(cfg["step_tolerance"]), float(cfg["flat_spread"]), float(cfg["max_drop_slope"]),
+            float(cfg["drop_tolerance"]))
 
 
 def classify_points(

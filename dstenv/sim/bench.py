@@ -56,14 +56,18 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         def sweep():
             return lidar.sweep(world.map, world.agents, world.ego_pose, rng)
 
-        def chain():
-            world.step()
-            agents, pose = world.agents, world.ego_pose
-            s = lidar.sweep(world.map, agents, pose, rng)
-            sensor = s.sensor_grid(spec)
-            gis_grid(world.map, pose, spec)
-            label_grid(world.map, agents, pose, spec)
-            visible_mask(sensor)
+        def chain_of(w: World) -> Callable[[], None]:
+            def chain() -> None:
+                w.step()
+                agents, pose = w.agents, w.ego_pose
+                s = lidar.sweep(w.map, agents, pose, rng)
+                sensor = s.sensor_grid(spec)
+                gis_grid(w.map, pose, spec)
+                label_grid(w.map, agents, pose, spec)
+                visible_mask(sensor)
+            return chain
+
+        chain = chain_of(world)
 
         from dstenv.config import load_scenario, merge_config
         from dstenv.sim.config import default_config
@@ -73,14 +77,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
         for _ in range(20):
             clean.step()
 
-        def clean_chain():
-            clean.step()
-            agents, pose = clean.agents, clean.ego_pose
-            s = lidar.sweep(clean.map, agents, pose, rng)
-            sensor = s.sensor_grid(spec)
-            gis_grid(clean.map, pose, spec)
-            label_grid(clean.map, agents, pose, spec)
-            visible_mask(sensor)
+        clean_chain = chain_of(clean)
 
         last = sweep()
         cases.update({

@@ -104,18 +104,21 @@ class ShardReader:
         self.cell_size = float(a["cell_size"])
         self.classes: tuple[str, ...] = tuple(a["classes"])
         self.has_masses = bool(a.get("has_masses"))
-        self._scale = float(a["prob_scale"])
+        #: stored probability = round(p * prob_scale) (uint8 shards) or p (1.0, float32)
+        self.prob_scale = float(a["prob_scale"])
 
     def __len__(self) -> int:
         return self.n_frames
 
-    def get(self, index: int, names: Iterable[str]) -> dict[str, np.ndarray]:
+    def get(self, index: int, names: Iterable[str], stored: bool = False) -> dict[str, np.ndarray]:
         """Read selected arrays of frame ``index``.
 
         Args:
             index: frame index, ``-len <= index < len``.
             names: dataset names (see the module table); probabilities come back as
                 ``float32`` in [0, 1] whatever the stored dtype.
+            stored: return probabilities as stored (``uint8`` scaled by
+                :attr:`prob_scale`, or ``float32``) instead; see :meth:`dequantise`.
 
         Raises:
             IndexError: index out of range.
@@ -135,12 +138,18 @@ class ShardReader:
             except (OSError, ValueError) as exc:
                 raise ShardError(f"{self.path}: frame {index}: cannot read {name!r} "
                                  f"(corrupt chunk?): {short_error(exc)}") from None
-            if name in PROB_FIELDS:
-                value = value.astype(np.float32)
-                if self._scale != 1:
-                    value /= np.float32(self._scale)
-            out[name] = value
+            out[name] = value if stored else self.dequantise(name, value)
         return out
+
+    def dequantise(self, name: str, value: np.ndarray) -> np.ndarray:
+        """A stored array of dataset ``name`` as read by :meth:`get` (probabilities:
+        a new ``float32`` array in [0, 1]; other datasets: ``value`` itself)."""
+        if name not in PROB_FIELDS:
+            return value
+        value = value.astype(np.float32)
+        if self.prob_scale != 1:
+            value /= np.float32(self.prob_scale)
+        return value
 
     def __getitem__(self, index: int) -> Frame:
         names = [*FRAME_FIELDS] + (["masses"] if self.has_masses else [])

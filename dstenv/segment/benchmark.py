@@ -64,6 +64,10 @@ __all__ = [
 ]
 
 
+#: [bytes] largest train/val split kept in memory between epochs (ShardDataset cache)
+_CACHE_BYTES = 2 << 30
+
+
 def default_benchmark_config() -> dict[str, Any]:
     """Every benchmark option with its default (the presets override some)."""
     return {
@@ -406,6 +410,9 @@ def run_benchmark(
     if len(test_ds) == 0:
         raise ValueError(f"{data_dir}: no test frames (no shard of split {split!r})")
     datasets = {s: ShardDataset(data_dir, split=s, inputs="fcn10") for s in ("train", "val")}
+    cells = int(test_ds[0]["labels"].numel())
+    for ds in datasets.values():  # later epochs skip decompression when a split fits
+        ds.cache = len(ds) * (2 * 5 + 2) * cells <= _CACHE_BYTES
     t = time.perf_counter()
     drives = split_drives(test_ds, len(datasets["train"]) == 0, progress, log,
                           int(cfg["score_from_step"]))

@@ -57,6 +57,34 @@ def test_dataloader_with_two_workers(dataset_dir):
         torch.testing.assert_close(x[i], ds[i]["x"], rtol=0, atol=0)
 
 
+@pytest.mark.parametrize("quantize", [True, False])
+def test_cache_returns_the_same_items_without_reading_again(tmp_path, make_frame, shard_attrs,
+                                                            monkeypatch, quantize):
+    rng = np.random.default_rng(5)
+    path = tmp_path / "shard-00000.h5"
+    with ShardWriter(path, dict(shard_attrs, split="train"), quantize=quantize) as w:
+        for i in range(3):
+            w.add(make_frame(rng, step=i, seed=i))
+    plain, cached = ShardDataset(path), ShardDataset(path, cache=True)
+    first = [cached[i] for i in range(3)]
+    from dstenv.data.reader import ShardReader
+
+    def no_read(*args, **kwargs):
+        raise AssertionError("read from disk again")
+
+    monkeypatch.setattr(ShardReader, "get", no_read)
+    for i in range(3):
+        for key in ("x", "labels", "visible"):
+            torch.testing.assert_close(cached[i][key], first[i][key], rtol=0, atol=0)
+    monkeypatch.undo()
+    for i in range(3):  # dequantised exactly as an uncached read
+        torch.testing.assert_close(first[i]["x"], plain[i]["x"], rtol=0, atol=0)
+    assert first[0]["x"].dtype == torch.float32
+    with pytest.raises(AssertionError, match="again"):
+        monkeypatch.setattr(ShardReader, "get", no_read)
+        plain[0]
+
+
 def test_corrupt_shard_raises_or_is_skipped(dataset_dir):
     root, _ = dataset_dir
     bad = root / "train" / "shard-00000.h5"

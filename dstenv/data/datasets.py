@@ -147,6 +147,17 @@ class ShardDataset(Dataset):
             self._readers[k] = ShardReader(self.files[k])
         return self._readers[k]
 
+    def no_map_indices(self) -> list[int]:
+        """Indices of the frames fused without a map: their stored GIS grid is all
+        ``MapClass.NONE`` (drives of ``gis.source = "none"`` or ``gis.no_map_prob``)."""
+        out, start = [], 0
+        for k, end in enumerate(self._ends):
+            reader = self._reader(k)
+            out += [start + i for i in range(end - start)
+                    if not reader.get(i, ("gis",))["gis"].any()]
+            start = end
+        return out
+
     def locate(self, index: int) -> tuple[Path, int]:
         """``(shard file, frame index inside it)`` of a dataset index."""
         if not 0 <= index < len(self):

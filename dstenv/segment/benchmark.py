@@ -105,6 +105,13 @@ def default_benchmark_config() -> dict[str, Any]:
         "model_kwargs": {},  # model name -> builder options
         "train": {},  # overrides of dstenv.segment.train.default_train_config()
         "train_seeds": [0],  # one network per seed and model; rows pool the seeds
+        "no_map": {
+            # each trained network fine-tuned on the training drives fused without a map
+            # (gis.no_map_prob), for users without one (KITTI without OSM): rows
+            # "NAME no-map"; 0 epochs = off
+            "epochs": 0,
+            "lr": 5e-4,  # Adam learning rate of the fine-tuning
+        },
         "curve": {
             "frames": [],  # training-set sizes, e.g. [140, 1400, 14000]
             "model": "unet-light",
@@ -168,12 +175,14 @@ PRESETS: dict[str, dict[str, Any]] = {
             "stride": 5,
             "warmup": 5,
             "frames_per_shard": 32,
+            "overrides": {"gis": {"no_map_prob": 0.5}},
         },
         "tune": {"episodes": 2, "budget": 4},
         "complete": {"params": {"length_m": 4.5, "width_m": 1.8}},
         "models": ["unet-light"],
         "model_kwargs": {"unet-light": {"base": 8, "depth": 2}},
         "train": {"epochs": 1, "batch_size": 4},
+        "no_map": {"epochs": 1},
         "bootstrap": {"resamples": 200},
         "device": "cpu",
         "examples": 1,
@@ -182,7 +191,8 @@ PRESETS: dict[str, dict[str, Any]] = {
     # cores, docs/benchmark.md: not yet). Short episodes on many maps:
     # 2500 frames = 500 maps of 5 frames, about 50 test maps for the bootstrap; the 3-D
     # LIDAR (the same point-cloud road as KITTI scans), a quarter of the drives without
-    # a map (a network for users without an OSM file), three training seeds of 6 epochs
+    # a map, three training seeds of 6 epochs, each then fine-tuned on the drives without
+    # a map (the network for users without an OSM file, e.g. KITTI)
     "cpu": {
         "data": {
             "scenario": "dense",
@@ -205,6 +215,8 @@ PRESETS: dict[str, dict[str, Any]] = {
             "loss": "wce+lovasz",
             "weight_power": 0.5,  # not yet chosen by a recorded search (search.values runs one)
         },
+        # the no-map network for KITTI without OSM: +2 epochs on the ~500 map-free frames
+        "no_map": {"epochs": 2},
         "device": "cpu",
     },
     # the full benchmark for a GPU: the paper's FCN-8s, more data, full-size grids,
@@ -310,6 +322,9 @@ def _check(cfg: Mapping[str, Any]) -> None:
             f"search.key: {cfg['search']['key']!r} is not a training option; choose from "
             + ", ".join(default_train_config())
         )
+    nm = cfg["no_map"]
+    if not (isinstance(nm["epochs"], int) and nm["epochs"] >= 0) or not float(nm["lr"]) > 0:
+        raise ConfigError(f"no_map: epochs must be an integer >= 0 and lr > 0, got {dict(nm)}")
     if any(int(n) < 1 for n in cfg["curve"]["frames"]):
         raise ConfigError(f"curve.frames: sizes must be >= 1, got {cfg['curve']['frames']}")
     from dstenv.segment.score import SCOPES

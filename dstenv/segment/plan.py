@@ -5,7 +5,8 @@ drives (replayed through the simulator and checked against the stored BetP, or
 rebuilt from the stored frames of evaluation-only data). :func:`plan_segmenters`
 builds every segmenter of a benchmark configuration: DST presets, ``dst-tuned``
 and ``dst-complete`` (tuned on replayed *training* drives only), the networks
-(one per training seed), the training-set-size curve and given checkpoints.
+(one per training seed, and their ``no_map`` fine-tunes on the training drives fused
+without a map), the training-set-size curve and given checkpoints.
 Nothing here scores the test drives: :func:`dstenv.segment.score.score` does.
 """
 
@@ -328,8 +329,48 @@ def _networks(cfg: Mapping[str, Any], datasets: Mapping[str, Any], device: torch
         plan.add(seg, "learned", {**seg.describe(), "seed": seed, "checkpoint": str(mdir)})
         if n is not None:
             plan.curve[label] = n
-        elif len(seeds) > 1:
+            continue
+        if len(seeds) > 1:
             plan.seed_groups.setdefault(name, []).append(label)
+        if cfg["no_map"]["epochs"]:
+            _no_map_network(cfg, datasets, tcfg, name, seed, len(seeds) > 1, mdir, plan,
+                            progress, log, timings)
+
+
+def _no_map_network(cfg: Mapping[str, Any], datasets: Mapping[str, Any],
+                    tcfg: dict[str, Any], name: str, seed: int, seeded: bool, init: Path,
+                    plan: Plan, progress: bool, log: Callable[[str], None],
+                    timings: dict[str, float]) -> None:
+    """Fine-tune one trained network on the training frames fused without a map."""
+    from dstenv.segment.checkpoint import load_segmenter
+    from dstenv.segment.train import train
+
+    subsets = {}
+    for split in ("train", "val"):
+        idx = datasets[split].no_map_indices() if len(datasets[split]) else []
+        subsets[split] = torch.utils.data.Subset(datasets[split], idx) if idx else None
+    if subsets["train"] is None:
+        raise ConfigError("no_map.epochs > 0 but no training drive was fused without a map; "
+                          "set data.overrides gis.no_map_prob > 0")
+    t = time.perf_counter()
+    group = f"{name} no-map"
+    label = f"{group} (seed {seed})" if seeded else group
+    mdir = init.parent / f"{init.name}-no-map" if not seeded else \
+        init.parent.parent / f"{name}-no-map" / init.name
+    ncfg = {**tcfg, "init": str(init / "best.pt"), "epochs": int(cfg["no_map"]["epochs"]),
+            "lr": float(cfg["no_map"]["lr"]), "fixed_batches": 0}
+    log(f"{label}: fine-tuning on {len(subsets['train'])} training frames without a map")
+    _, plan.histories[label] = train(ncfg, subsets["train"], subsets["val"], mdir,
+                                     progress=progress, log=log)
+    timings[f"train_{label}_s"] = time.perf_counter() - t
+    seg = load_segmenter(mdir / "best.pt", torch.device(tcfg["device"]))
+    seg.label = label
+    plan.add(seg, "learned", {**seg.describe(), "seed": seed, "checkpoint": str(mdir),
+                              "init": str(init / "best.pt"),
+                              "no_map_frames": len(subsets["train"])})
+    if seeded:
+        plan.seed_groups.setdefault(group, []).append(label)
+
 
 
 def plan_segmenters(cfg: Mapping[str, Any], drives: Drives, datasets: Mapping[str, Any],

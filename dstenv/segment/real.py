@@ -9,7 +9,8 @@ observed cells accumulated) and scores, with the same
 * ``dst-tuned`` and ``dst-complete`` with the parameters the simulated run tuned
   on its training maps (never on real frames);
 * every network of the simulated run, trained only on simulated data;
-* with ``finetune_frames = N > 0``: the best simulated network fine-tuned
+* with ``finetune_frames = N > 0``: the best simulated network (without ``--osm``:
+  the best ``no-map`` network when the run trained one) fine-tuned
   (``train.init``) on the labelled frames ``0 .. N-1`` of each sequence. Only
   frames from step ``N + gap`` on are then scored, for every row, so no fine-tuning
   frame (nor its immediate neighbours) is a test frame; the filter still runs
@@ -51,7 +52,8 @@ def _convert(root: str, sequences: Sequence[str], osm: str | None, data: Path) -
 
 
 def _finetune(sim: Mapping[str, Any], ckpts: Mapping[str, Path], data: Path, frames: int,
-              epochs: int, out: Path, progress: bool, log: Callable[[str], None]) -> Path:
+              epochs: int, out: Path, no_map: bool, progress: bool,
+              log: Callable[[str], None]) -> Path:
     import torch
 
     from dstenv.data import ShardDataset
@@ -60,6 +62,8 @@ def _finetune(sim: Mapping[str, Any], ckpts: Mapping[str, Path], data: Path, fra
     from dstenv.segment.train import train
 
     learned = {k: v for k, v in sim["segmenters"].items() if k in ckpts}
+    if no_map and any(" no-map" in k for k in learned):  # real drives without a map
+        learned = {k: v for k, v in learned.items() if " no-map" in k}
     best = max(learned, key=lambda k: learned[k][HEADLINE]["miou"] or -1.0)
     ds = ShardDataset(data, split="test", inputs="fcn10")
     index, _ = split_index(ds.files)
@@ -121,7 +125,7 @@ def real_benchmark(
     if finetune_frames > 0:
         cfg["score_from_step"] = finetune_frames + gap
         tuned = _finetune(sim, ckpts, data, finetune_frames, finetune_epochs,
-                          kdir / "finetune", progress, log)
+                          kdir / "finetune", osm is None, progress, log)
         labelled.append((f"fine-tuned on {finetune_frames} real frames/sequence", tuned))
     res = run_benchmark(cfg, kdir, data_dir=data, progress=progress, log=log,
                         command=None, checkpoints=labelled)

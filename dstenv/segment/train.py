@@ -12,6 +12,7 @@ generator seeded by ``(seed, epoch)``, dropout from the restored torch RNG.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
@@ -203,7 +204,9 @@ def train(
         torch.set_rng_state(ckpt["rng"]["torch"])
         log(f"resuming from {last} after epoch {start}")
 
-    best = max((m for m in history["val_miou"] if m is not None), default=-1.0)
+    # best.pt: highest val mIoU, or lowest training loss without validation data
+    best = max((m if m is not None else -loss for m, loss in
+                zip(history["val_miou"], history["train_loss"])), default=-math.inf)
     for epoch in range(start, cfg["epochs"]):
         gen = torch.Generator().manual_seed(cfg["seed"] * 100_003 + epoch)
         if hasattr(train_data, "set_epoch"):  # streaming: a new episode stream per epoch

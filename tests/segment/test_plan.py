@@ -70,3 +70,36 @@ def test_cli_params_from_results_json(tmp_path):
     with pytest.raises(CLIError, match="expected a JSON object"):
         _params_value("alpha", "tune.params", "dst-tuned")
     assert argparse  # the CLI path itself is exercised in tests/kitti/test_benchmark.py
+
+
+def test_no_map_networks_fine_tune_on_the_map_free_training_frames(tmp_path):
+    from pathlib import Path
+
+    import torch
+
+    from dstenv.data import ShardDataset
+    from dstenv.segment.benchmark import preset_config, run_benchmark
+    from dstenv.segment.checkpoint import load_checkpoint
+
+    with pytest.raises(ConfigError, match="no_map: epochs"):
+        run_benchmark(preset_config("tiny", {"no_map": {"epochs": -1}}), tmp_path / "bad",
+                      progress=False, log=lambda m: None)
+    cfg = preset_config("tiny", {"data": {"overrides": {"gis": {"no_map_prob": 0.5}}},
+                                 "no_map": {"epochs": 1}, "tune": {"enabled": False},
+                                 "complete": {"enabled": False}})
+    res = run_benchmark(cfg, tmp_path, progress=False, log=lambda m: None)
+    train = ShardDataset(tmp_path / "data", split="train")
+    idx = train.no_map_indices()
+    assert 0 < len(idx) < len(train)
+    for i in range(len(train)):  # exactly the frames whose GIS grid is all MapClass.NONE
+        path, j = train.locate(i)
+        from dstenv.data.reader import ShardReader
+
+        with ShardReader(path) as r:
+            assert (i in idx) == (not r.get(j, ["gis"])["gis"].any())
+    row = res["segmenters"]["unet-light no-map"]
+    assert row["kind"] == "learned" and row["describe"]["no_map_frames"] == len(idx)
+    tuned = load_checkpoint(Path(row["describe"]["checkpoint"]) / "best.pt")
+    base = load_checkpoint(tmp_path / "models" / "unet-light" / "best.pt")
+    assert tuned["config"]["init"] == str(tmp_path / "models" / "unet-light" / "best.pt")
+    assert any(not torch.equal(tuned["model"][k], base["model"][k]) for k in base["model"])

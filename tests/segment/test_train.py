@@ -148,3 +148,14 @@ def test_fixed_batches_draws_the_same_steps_from_any_data_size(tmp_path, make_fr
         assert data.calls == 1 + 2 * 3 * 4
     with pytest.raises(ConfigError, match="fixed_batches"):
         train({**cfg, "fixed_batches": -1}, make_frames(2), progress=False)
+
+
+def test_best_checkpoint_without_validation_follows_the_training_loss(tmp_path, make_frames):
+    """Regression: without validation data best.pt was only written once the training
+    loss fell below 1 (the best score started at -1 instead of -inf)."""
+    quiet = {"progress": False, "log": lambda m: None}
+    cfg = {**SMALL, "epochs": 2, "lr": 1e-12, "loss": "wce+lovasz"}  # the loss stays > 1
+    _, hist = train(cfg, make_frames(4, seed=1), None, tmp_path, **quiet)
+    assert min(hist["train_loss"]) > 1 and hist["val_miou"] == [None, None]
+    best = load_checkpoint(tmp_path / "best.pt")
+    assert best["epoch"] == min(range(2), key=lambda e: hist["train_loss"][e])

@@ -100,6 +100,7 @@ def _end_cell(a, r, ox, oy, i0, j0, c):
 @numba.njit(cache=True)
 def _cast(angles, ranges, hit, c, max_range, ox, oy, out):  # pragma: no cover - numba
     h, w = out.shape
+    flat = out.reshape(h * w)
     i0 = h // 2
     j0 = w // 2
     u0 = i0 - ox / c + 0.5
@@ -107,62 +108,86 @@ def _cast(angles, ranges, hit, c, max_range, ox, oy, out):  # pragma: no cover -
     ist = int(math.floor(u0))
     jst = int(math.floor(v0))
     n = angles.shape[0]
+    ends = np.empty(n, np.int64)  # flat index of each occupied end cell, -1: none
     # pass 1: free cells (plain stores); pass 2: occupied end cells, which win.
     for k in range(n):
+        ends[k] = -1
         r = ranges[k]
         if r != r:
             continue
-        a = angles[k]
         occ = hit[k] and r <= max_range
-        rr = min(r, max_range)
-        ue, ve = _end_cell(a, rr, ox, oy, i0, j0, c)
+        ue, ve = _end_cell(angles[k], min(r, max_range), ox, oy, i0, j0, c)
         ie = int(math.floor(ue))
         je = int(math.floor(ve))
-        du = ue - u0
-        dv = ve - v0
-        si = 1 if du > 0 else -1
-        sj = 1 if dv > 0 else -1
-        ni = abs(ie - ist)
-        nj = abs(je - jst)
-        if du != 0.0:
-            tdu = 1.0 / abs(du)
-            tmu = ((ist + 1 - u0) if du > 0 else (u0 - ist)) * tdu
-        else:
-            tdu = np.inf
-            tmu = np.inf
-        if dv != 0.0:
-            tdv = 1.0 / abs(dv)
-            tmv = ((jst + 1 - v0) if dv > 0 else (v0 - jst)) * tdv
-        else:
-            tdv = np.inf
-            tmv = np.inf
-        i = ist
-        j = jst
-        inside = True
-        for _ in range(ni + nj):
-            out[i, j] = _FREE
-            if nj == 0 or (ni > 0 and tmu < tmv):
-                i += si
-                ni -= 1
-                tmu += tdu
-                if i < 0 or i >= h:
-                    inside = False
-                    break
-            else:
-                j += sj
-                nj -= 1
-                tmv += tdv
-                if j < 0 or j >= w:
-                    inside = False
-                    break
-        if inside and not occ:
-            out[i, j] = _FREE
+        if occ and 0 <= ie < h and 0 <= je < w:
+            ends[k] = ie * w + je
+        _walk(flat, h, w, ist, jst, u0, v0, ue, ve, ie, je, occ)
     for k in range(n):
-        r = ranges[k]
-        if r != r or not hit[k] or r > max_range:
-            continue
-        ue, ve = _end_cell(angles[k], r, ox, oy, i0, j0, c)
-        ie = int(math.floor(ue))
-        je = int(math.floor(ve))
-        if 0 <= ie < h and 0 <= je < w:
-            out[ie, je] = _OCC
+        if ends[k] >= 0:
+            flat[ends[k]] = _OCC
+
+
+@numba.njit(cache=True, inline="always")
+def _walk(flat, h, w, ist, jst, u0, v0, ue, ve, ie, je, occ):  # pragma: no cover - numba
+    """Mark free the cells of one ray from ``(ist, jst)`` to the end cell ``(ie, je)``.
+
+    The exact traversal: ``|ie - ist|`` row steps and ``|je - jst|`` column steps in
+    the order of the crossings (``tmu`` / ``tmv``: segment parameter of the next row /
+    column boundary). Phase A compares crossings while both axes have steps left;
+    phase B finishes the one axis left. A step that leaves the grid ends the ray
+    (``ei`` / ``ej``: row / column steps until that happens), so no step needs a
+    bounds check. The end cell itself is free unless the ray is a hit.
+    """
+    du = ue - u0
+    dv = ve - v0
+    ni = abs(ie - ist)
+    nj = abs(je - jst)
+    if du > 0:
+        di, ei = w, h - ist
+    else:
+        di, ei = -w, ist + 1
+    if dv > 0:
+        dj, ej = 1, w - jst
+    else:
+        dj, ej = -1, jst + 1
+    if du != 0.0:
+        tdu = 1.0 / abs(du)
+        tmu = ((ist + 1 - u0) if du > 0 else (u0 - ist)) * tdu
+    else:
+        tdu = np.inf
+        tmu = np.inf
+    if dv != 0.0:
+        tdv = 1.0 / abs(dv)
+        tmv = ((jst + 1 - v0) if dv > 0 else (v0 - jst)) * tdv
+    else:
+        tdv = np.inf
+        tmv = np.inf
+    ai = min(ni, ei)  # row steps left before the end row or the grid border
+    aj = min(nj, ej)
+    idx = ist * w + jst
+    while ai > 0 and aj > 0:
+        flat[idx] = _FREE
+        if tmu < tmv:
+            idx += di
+            ai -= 1
+            tmu += tdu
+        else:
+            idx += dj
+            aj -= 1
+            tmv += tdv
+    if (ai == 0 and ei <= ni) or (aj == 0 and ej <= nj):
+        return  # the last step left the grid
+    if ai > 0:
+        for _ in range(ai):
+            flat[idx] = _FREE
+            idx += di
+        if ei <= ni:
+            return
+    else:
+        for _ in range(aj):
+            flat[idx] = _FREE
+            idx += dj
+        if ej <= nj:
+            return
+    if not occ:
+        flat[idx] = _FREE

@@ -214,16 +214,26 @@ def _check_pose(pose: np.ndarray, where: str) -> tuple[float, float, float]:
 def _lookup(raster, x0, y0, res, px, py, yaw, c, lut, out):  # pragma: no cover - numba
     """``out[i, j] = lut[raster[cell under the centre of (i, j)]]`` (``lut[0]`` outside).
 
+    Along a grid row the raster coordinates ``fx = bx + ax[j]``, ``fy = by + ay[j]``
+    are monotone in ``j`` (float addition and multiplication by a constant are
+    monotone), so the cells inside the raster form one interval: it is found by
+    walking in from both ends, and the cells inside it need no bounds test.
+
     Returns the number of cells whose value became 255 (unknown codes, for callers
     whose ``lut`` flags them).
     """
     h, w = out.shape
     hm, wm = raster.shape
+    flat = raster.reshape(hm * wm)
+    oflat = out.reshape(h * w)
     i0 = h // 2
     j0 = w // 2
     cy = math.cos(yaw)
     sy = math.sin(yaw)
     inv = 1.0 / res
+    fwm = float(wm)
+    fhm = float(hm)
+    uwm = np.uint64(wm)
     # raster coordinates (column fx, row fy) are affine in the cell centre (x, y)
     ax = np.empty(w)
     ay = np.empty(w)
@@ -237,14 +247,30 @@ def _lookup(raster, x0, y0, res, px, py, yaw, c, lut, out):  # pragma: no cover 
         x = (i0 - i) * c
         bx = (px + cy * x - x0) * inv
         by = (py + sy * x - y0) * inv
-        for j in range(w):
-            fx = bx + ax[j]
-            fy = by + ay[j]
-            if 0.0 <= fx < wm and 0.0 <= fy < hm:
-                v = lut[raster[int(fy), int(fx)]]
-            else:
-                v = outside
-            out[i, j] = v
+        base = i * w
+        lo = 0
+        while lo < w:
+            fx = bx + ax[lo]
+            fy = by + ay[lo]
+            if 0.0 <= fx < fwm and 0.0 <= fy < fhm:
+                break
+            oflat[base + lo] = outside
+            lo += 1
+        hi = w
+        while hi > lo:
+            fx = bx + ax[hi - 1]
+            fy = by + ay[hi - 1]
+            if 0.0 <= fx < fwm and 0.0 <= fy < fhm:
+                break
+            hi -= 1
+            oflat[base + hi] = outside
+        if outside == 255:
+            bad += lo + w - hi
+        # unsigned indices: no negative-index wraparound code in the hot loop
+        ub = np.uint64(base)
+        for j in range(np.uint64(lo), np.uint64(hi)):
+            v = lut[flat[np.uint64(by + ay[j]) * uwm + np.uint64(bx + ax[j])]]
+            oflat[ub + j] = v
             bad += v == 255
     return bad
 

@@ -217,7 +217,8 @@ def _lookup(raster, x0, y0, res, px, py, yaw, c, lut, out):  # pragma: no cover 
     Along a grid row the raster coordinates ``fx = bx + ax[j]``, ``fy = by + ay[j]``
     are monotone in ``j`` (float addition and multiplication by a constant are
     monotone), so the cells inside the raster form one interval: it is found by
-    walking in from both ends, and the cells inside it need no bounds test.
+    walking in from both ends, and the cells inside it need no bounds test (their
+    coordinates are in ``[0, Wm)`` x ``[0, Hm)``, so int32 truncation is ``floor``).
 
     Returns the number of cells whose value became 255 (unknown codes, for callers
     whose ``lut`` flags them).
@@ -233,7 +234,10 @@ def _lookup(raster, x0, y0, res, px, py, yaw, c, lut, out):  # pragma: no cover 
     inv = 1.0 / res
     fwm = float(wm)
     fhm = float(hm)
-    uwm = np.uint64(wm)
+    if hm * wm >= 2**31:
+        raise ValueError("map raster too large for the lookup (2**31 cells or more)")
+    wm32 = np.int32(wm)
+    q = np.empty(w, np.int32)
     # raster coordinates (column fx, row fy) are affine in the cell centre (x, y)
     ax = np.empty(w)
     ay = np.empty(w)
@@ -266,12 +270,22 @@ def _lookup(raster, x0, y0, res, px, py, yaw, c, lut, out):  # pragma: no cover 
             oflat[base + hi] = outside
         if outside == 255:
             bad += lo + w - hi
-        # unsigned indices: no negative-index wraparound code in the hot loop
-        ub = np.uint64(base)
-        for j in range(np.uint64(lo), np.uint64(hi)):
-            v = lut[flat[np.uint64(by + ay[j]) * uwm + np.uint64(bx + ax[j])]]
-            oflat[ub + j] = v
-            bad += v == 255
+        # the raster cells of the interval: their flat indices first (a loop LLVM
+        # vectorises), then the gather; slices and unsigned indices keep numba's
+        # negative-index wraparound code out of both loops
+        n = hi - lo
+        axs = ax[lo:hi]
+        ays = ay[lo:hi]
+        qs = q[:n]
+        for j in range(n):
+            qs[j] = np.int32(by + ays[j]) * wm32 + np.int32(bx + axs[j])
+        row = oflat[base + lo:base + hi]
+        nb = 0
+        for j in range(n):
+            v = lut[flat[np.uint32(qs[j])]]
+            row[j] = v
+            nb += v == 255
+        bad += nb
     return bad
 
 

@@ -25,7 +25,8 @@ end cell. For a beam whose traced comparisons all keep a relative margin above
 decisions; the prefix is used only when the path's counts of row and column steps
 fit the ray's (``ni``, ``nj``), which puts the ray's end cell on the path. Beams
 without that margin (rays through cell corners: the diagonals, the axes) and rays
-that fail the count check are walked as before.
+that fail the count check are walked as before. Neighbouring beams share their first
+cells; a ray skips the part of its path that the previous ray already marked.
 """
 
 from __future__ import annotations
@@ -105,7 +106,7 @@ def sensor_grid(
     out = np.zeros(spec.shape, dtype=np.uint8)
     p = _paths(angles, spec, float(max_range), ox, oy)
     _cast(angles, ranges, hit, float(spec.cell_size), float(max_range), ox, oy, out,
-          p.cos, p.sin, p.safe, p.start, p.cells, p.isteps)
+          p.cos, p.sin, p.safe, p.start, p.cells, p.isteps, p.shared)
     return out
 
 
@@ -142,6 +143,8 @@ class _Paths:
         _trace(angles, c, far, ox, oy, h, w, self.cos, self.sin, margin, self.start,
                self.cells, self.isteps, True)
         self.safe = margin > _margin_needed(spec, far, ox, oy)
+        self.shared = np.zeros(n, np.int64)
+        _shared_prefix(self.start, self.cells, self.shared)
 
 
 class _NoPaths:
@@ -152,6 +155,7 @@ class _NoPaths:
     start = np.zeros(0, np.int64)
     cells = np.zeros(0, np.uint16)
     isteps = np.zeros(0, np.int32)
+    shared = np.zeros(0, np.int64)
 
 
 _paths_cache: dict[tuple, _Paths] = {}
@@ -215,7 +219,7 @@ def _check_rays(angles, ranges):  # pragma: no cover - numba
 
 @numba.njit(cache=True)
 def _cast(angles, ranges, hit, c, max_range, ox, oy, out, cos_a, sin_a, safe, start, cells,
-          isteps):  # pragma: no cover - numba
+          isteps, shared):  # pragma: no cover - numba
     h, w = out.shape
     flat = out.reshape(h * w)
     i0 = h // 2
@@ -227,10 +231,13 @@ def _cast(angles, ranges, hit, c, max_range, ox, oy, out, cos_a, sin_a, safe, st
     n = angles.shape[0]
     paths = start.shape[0] > 0
     ends = np.empty(n, np.int64)  # flat index of each occupied end cell, -1: none
+    done = 0  # cells of the previous beam's path already marked free (0: walked / none)
     # pass 1: free cells (plain stores); pass 2: occupied end cells, which win.
     for k in range(n):
         ends[k] = -1
         r = ranges[k]
+        prev = done
+        done = 0
         if r != r:
             continue
         occ = hit[k] and r <= max_range
@@ -255,15 +262,31 @@ def _cast(angles, ranges, hit, c, max_range, ox, oy, out, cos_a, sin_a, safe, st
             m = min(ni + nj, exit_at)
             a = isteps[s0 + k + m]
             if a <= ni and m - a <= nj:  # the ray's walk is this prefix of the path
-                for q in range(s0, s0 + m):
-                    flat[cells[q]] = _FREE
+                # the part shared with the previous beam's path is already free
+                skip = min(shared[k], prev, m)
+                path = cells[s0 + skip:s0 + m]  # a slice: no wraparound code in the loop
+                for q in range(m - skip):
+                    flat[path[q]] = _FREE
+                done = m
                 if m < exit_at and not occ:
                     flat[cells[s0 + m]] = _FREE
+                    done = m + 1
                 continue
         _walk(flat, h, w, ist, jst, u0, v0, ue, ve, ie, je, occ)
     for k in range(n):
         if ends[k] >= 0:
             flat[ends[k]] = _OCC
+
+
+@numba.njit(cache=True)
+def _shared_prefix(start, cells, shared):  # pragma: no cover - numba
+    for k in range(1, start.shape[0] - 1):
+        a, b = start[k - 1], start[k]
+        m = min(start[k] - a, start[k + 1] - b)
+        q = 0
+        while q < m and cells[a + q] == cells[b + q]:
+            q += 1
+        shared[k] = q
 
 
 @numba.njit(cache=True)

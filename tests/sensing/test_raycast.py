@@ -155,7 +155,8 @@ def _walk_only(angles, ranges, hit, spec, max_range, origin):
     out = np.zeros(spec.shape, np.uint8)
     none = raycast._NoPaths
     raycast._cast(angles, ranges, hit, spec.cell_size, max_range, origin[0], origin[1], out,
-                  none.cos, none.sin, none.safe, none.start, none.cells, none.isteps)
+                  none.cos, none.sin, none.safe, none.start, none.cells, none.isteps,
+                  none.shared)
     return out
 
 

@@ -151,9 +151,9 @@ def test_bad_input_is_rejected():
 def _walk_only(angles, ranges, hit, spec, max_range, origin):
     """The grid of the plain walk (no beam paths), from the kernel itself."""
     from dstenv.sensing import raycast
+    from dstenv.sensing.beampaths import NO_PATHS as none
 
     out = np.zeros(spec.shape, np.uint8)
-    none = raycast._NoPaths
     raycast._cast(angles, ranges, hit, spec.cell_size, max_range, origin[0], origin[1], out,
                   none.cos, none.sin, none.safe, none.start, none.cells, none.isteps,
                   none.shared)
@@ -191,7 +191,7 @@ def test_repeated_beams_use_their_paths_and_stay_exact(origin):
     bit for bit, for hits, clear rays, dropouts, rays leaving the grid, rays ending on
     cell borders and the beams through cell corners (diagonals, axes); and for beams
     off the corners it must be the geometric reference."""
-    from dstenv.sensing import raycast
+    from dstenv.sensing import beampaths
 
     spec = GridSpec(40, 30, 0.5)
     rng = np.random.default_rng(11)
@@ -211,5 +211,6 @@ def test_repeated_beams_use_their_paths_and_stay_exact(origin):
             if angles is generic and sweep < 3:
                 np.testing.assert_array_equal(
                     g, _reference_grid(angles, ranges, hit, spec, 12.0, origin))
-        paths = [p for p in raycast._paths_cache.values() if np.array_equal(p.angles, angles)]
-        assert paths and paths[0].safe.sum() >= n - 8  # at most the corner beams are walked
+        paths = beampaths.paths_for(angles, spec, 12.0, *origin)
+        assert np.array_equal(paths.angles, angles)  # traced, and reused
+        assert paths.safe.sum() >= n - 8  # at most the corner beams are walked

@@ -59,12 +59,12 @@ class BeamPaths:
         self.start = np.zeros(n + 1, np.int64)
         # beyond the grid from any origin inside it, and at least every ray's length
         far = max((h + w + 2) * c + abs(ox) + abs(oy), max_range)
-        dtype = np.uint16 if h * w <= 1 << 16 else np.int32
-        empty = np.zeros(0, dtype)
-        _trace(angles, c, far, ox, oy, h, w, self.cos, self.sin, margin, self.start, empty,
-               np.zeros(0, np.int32), False)
+        dtype = np.uint16 if h * w <= 1 << 16 else np.int32  # flat cell indices
+        steps = np.uint16 if h < 1 << 16 else np.int32  # row steps, at most h
+        _trace(angles, c, far, ox, oy, h, w, self.cos, self.sin, margin, self.start,
+               np.zeros(0, dtype), np.zeros(0, steps), False)
         self.cells = np.empty(self.start[-1], dtype)
-        self.isteps = np.empty(self.start[-1] + n, np.int32)
+        self.isteps = np.empty(self.start[-1] + n, steps)
         _trace(angles, c, far, ox, oy, h, w, self.cos, self.sin, margin, self.start,
                self.cells, self.isteps, True)
         self.safe = margin > _margin_needed(spec, far, ox, oy)
@@ -80,7 +80,7 @@ class BeamPaths:
         p.safe = np.zeros(0, np.bool_)
         p.start = p.shared = np.zeros(0, np.int64)
         p.cells = np.zeros(0, np.uint16)
-        p.isteps = np.zeros(0, np.int32)
+        p.isteps = np.zeros(0, np.uint16)
         return p
 
 

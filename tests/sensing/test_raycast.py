@@ -214,3 +214,18 @@ def test_repeated_beams_use_their_paths_and_stay_exact(origin):
         paths = beampaths.paths_for(angles, spec, 12.0, *origin)
         assert np.array_equal(paths.angles, angles)  # traced, and reused
         assert paths.safe.sum() >= n - 8  # at most the corner beams are walked
+
+
+def test_beam_paths_on_a_grid_of_more_than_65536_cells():
+    """Flat cell indices no longer fit uint16: the int32 tables give the walk's grid."""
+    from dstenv.sensing import beampaths
+
+    spec = GridSpec(300, 280, 0.3)
+    angles = -np.pi + 2 * np.pi / 720 * np.arange(720)
+    rng = np.random.default_rng(4)
+    for _ in range(3):
+        ranges = rng.uniform(0.0, 60.0, 720)
+        hit = rng.random(720) < 0.7
+        g = sensor_grid(angles, ranges, hit, spec, 50.0, origin=(0.1, 0.0))
+        np.testing.assert_array_equal(g, _walk_only(angles, ranges, hit, spec, 50.0, (0.1, 0.0)))
+    assert beampaths.paths_for(angles, spec, 50.0, 0.1, 0.0).cells.dtype == np.int32

@@ -34,6 +34,8 @@ _BUILDING = CLASSES.index("building")
 _STATIC = CLASSES.index("static")
 _MOVING = CLASSES.index("moving")
 _SKIP = 255  # _paint_boxes: a box that is not painted
+# a numpy scalar: comparing an array with the IntEnum member itself is ~10x slower
+_UNKNOWN = np.uint8(SensorState.UNKNOWN)
 
 #: ``(4,) uint8``: :class:`MapClass` code -> class index in ``CLASSES``.
 MAP_TO_CLASS: np.ndarray = np.zeros(len(MapClass), dtype=np.uint8)
@@ -100,7 +102,7 @@ def visible_mask(sensor: np.ndarray) -> np.ndarray:
     Returns:
         ``(H, W) bool``: true where the cell is free or occupied (not unknown).
     """
-    return np.asarray(sensor) != SensorState.UNKNOWN
+    return np.asarray(sensor) != _UNKNOWN
 
 
 def _f64(*arrays: np.ndarray) -> tuple[np.ndarray, ...]:

@@ -214,16 +214,30 @@ def _check_pose(pose: np.ndarray, where: str) -> tuple[float, float, float]:
 def _lookup(raster, x0, y0, res, px, py, yaw, c, lut, out):  # pragma: no cover - numba
     """``out[i, j] = lut[raster[cell under the centre of (i, j)]]`` (``lut[0]`` outside).
 
+    Along a grid row the raster coordinates ``fx = bx + ax[j]``, ``fy = by + ay[j]``
+    are monotone in ``j`` (float addition and multiplication by a constant are
+    monotone), so the cells inside the raster form one interval: it is found by
+    walking in from both ends, and the cells inside it need no bounds test (their
+    coordinates are in ``[0, Wm)`` x ``[0, Hm)``, so int32 truncation is ``floor``).
+
     Returns the number of cells whose value became 255 (unknown codes, for callers
     whose ``lut`` flags them).
     """
     h, w = out.shape
     hm, wm = raster.shape
+    flat = raster.reshape(hm * wm)
+    oflat = out.reshape(h * w)
     i0 = h // 2
     j0 = w // 2
     cy = math.cos(yaw)
     sy = math.sin(yaw)
     inv = 1.0 / res
+    fwm = float(wm)
+    fhm = float(hm)
+    if hm * wm >= 2**31:
+        raise ValueError("map raster too large for the lookup (2**31 cells or more)")
+    wm32 = np.int32(wm)
+    q = np.empty(w, np.int32)
     # raster coordinates (column fx, row fy) are affine in the cell centre (x, y)
     ax = np.empty(w)
     ay = np.empty(w)
@@ -237,15 +251,41 @@ def _lookup(raster, x0, y0, res, px, py, yaw, c, lut, out):  # pragma: no cover 
         x = (i0 - i) * c
         bx = (px + cy * x - x0) * inv
         by = (py + sy * x - y0) * inv
-        for j in range(w):
-            fx = bx + ax[j]
-            fy = by + ay[j]
-            if 0.0 <= fx < wm and 0.0 <= fy < hm:
-                v = lut[raster[int(fy), int(fx)]]
-            else:
-                v = outside
-            out[i, j] = v
-            bad += v == 255
+        base = i * w
+        lo = 0
+        while lo < w:
+            fx = bx + ax[lo]
+            fy = by + ay[lo]
+            if 0.0 <= fx < fwm and 0.0 <= fy < fhm:
+                break
+            oflat[base + lo] = outside
+            lo += 1
+        hi = w
+        while hi > lo:
+            fx = bx + ax[hi - 1]
+            fy = by + ay[hi - 1]
+            if 0.0 <= fx < fwm and 0.0 <= fy < fhm:
+                break
+            hi -= 1
+            oflat[base + hi] = outside
+        if outside == 255:
+            bad += lo + w - hi
+        # the raster cells of the interval: their flat indices first (a loop LLVM
+        # vectorises), then the gather; slices and unsigned indices keep numba's
+        # negative-index wraparound code out of both loops
+        n = hi - lo
+        axs = ax[lo:hi]
+        ays = ay[lo:hi]
+        qs = q[:n]
+        for j in range(n):
+            qs[j] = np.int32(by + ays[j]) * wm32 + np.int32(bx + axs[j])
+        row = oflat[base + lo:base + hi]
+        nb = 0
+        for j in range(n):
+            v = lut[flat[np.uint32(qs[j])]]
+            row[j] = v
+            nb += v == 255
+        bad += nb
     return bad
 
 

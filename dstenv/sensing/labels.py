@@ -33,6 +33,9 @@ _NONNAV = CLASSES.index("non_navigable")
 _BUILDING = CLASSES.index("building")
 _STATIC = CLASSES.index("static")
 _MOVING = CLASSES.index("moving")
+_SKIP = 255  # _paint_boxes: a box that is not painted
+# a numpy scalar: comparing an array with the IntEnum member itself is ~10x slower
+_UNKNOWN = np.uint8(SensorState.UNKNOWN)
 
 #: ``(4,) uint8``: :class:`MapClass` code -> class index in ``CLASSES``.
 MAP_TO_CLASS: np.ndarray = np.zeros(len(MapClass), dtype=np.uint8)
@@ -75,30 +78,18 @@ def label_grid(
     if bad:
         codes = sorted(set(np.unique(raster).tolist()) - set(int(m) for m in MapClass))
         raise ValueError(f"label_grid: the map raster holds codes that are no MapClass: {codes}")
+    c, s = math.cos(yaw), math.sin(yaw)
     obs = world_map.obstacles
     if len(obs):
         reach = 0.75 * spec.cell_size * max(spec.shape) + 10.0  # > half diagonal + box size
-        rel = obs.xy - (px, py)
-        k = np.flatnonzero((obs.z_min < GROUND_CLEARANCE) & (np.abs(rel[:, 0]) < reach)
-                           & (np.abs(rel[:, 1]) < reach))
-        if len(k):
-            c, s = math.cos(yaw), math.sin(yaw)
-            _paint_boxes(out, c * rel[k, 0] + s * rel[k, 1], -s * rel[k, 0] + c * rel[k, 1],
-                         obs.yaw[k] - yaw, obs.length[k] / 2, obs.width[k] / 2,
-                         np.full(len(k), _NONNAV, np.uint8), float(spec.cell_size),
-                         np.uint8(_MOVING))
-    n = len(agents)
-    if n:
-        c, s = math.cos(yaw), math.sin(yaw)
-        rel = np.asarray(agents.xy, dtype=np.float64) - (px, py)
-        ex = c * rel[:, 0] + s * rel[:, 1]
-        ey = -s * rel[:, 0] + c * rel[:, 1]
-        moving = np.asarray(agents.speed) > moving_threshold
-        cls = np.where(moving, _MOVING, _STATIC).astype(np.uint8)
-        _paint_boxes(out, ex, ey, np.asarray(agents.yaw, dtype=np.float64) - yaw,
-                     np.asarray(agents.length, dtype=np.float64) / 2,
-                     np.asarray(agents.width, dtype=np.float64) / 2,
-                     cls, float(spec.cell_size), np.uint8(_MOVING))
+        cls = np.where(obs.z_min < GROUND_CLEARANCE, _NONNAV, _SKIP).astype(np.uint8)
+        _paint_boxes(out, *_f64(obs.xy, obs.yaw, obs.length, obs.width), cls,
+                     px, py, yaw, c, s, reach, float(spec.cell_size), np.uint8(_MOVING))
+    if len(agents):
+        cls = np.where(np.asarray(agents.speed) > moving_threshold, _MOVING, _STATIC)
+        _paint_boxes(out, *_f64(agents.xy, agents.yaw, agents.length, agents.width),
+                     cls.astype(np.uint8), px, py, yaw, c, s, np.inf, float(spec.cell_size),
+                     np.uint8(_MOVING))
     return out
 
 
@@ -111,40 +102,65 @@ def visible_mask(sensor: np.ndarray) -> np.ndarray:
     Returns:
         ``(H, W) bool``: true where the cell is free or occupied (not unknown).
     """
-    return np.asarray(sensor) != SensorState.UNKNOWN
+    return np.asarray(sensor) != _UNKNOWN
+
+
+def _f64(*arrays: np.ndarray) -> tuple[np.ndarray, ...]:
+    return tuple(np.ascontiguousarray(x, dtype=np.float64) for x in arrays)
 
 
 @numba.njit(cache=True)
-def _paint_boxes(out, ex, ey, eyaw, hl, hw, cls, c, moving):  # pragma: no cover - numba
+def _paint_boxes(out, xy, yaw, length, width, cls, px, py, pyaw, c, s, reach, cell,
+                 moving):  # pragma: no cover - numba
+    """Paint oriented boxes given in the world frame into the ego grid ``out``.
+
+    Box ``k`` (centre ``xy[k]``, heading ``yaw[k]``, full ``length`` / ``width``)
+    gets class ``cls[k]`` (:data:`_SKIP`: not painted) on the cells whose centre it
+    holds, only in the rows and columns of its hull; ``moving`` is never
+    overwritten. Boxes whose centre is ``reach`` [m] or more from the ego along a
+    world axis are skipped (the caller's bound on what can touch the grid).
+    ``c``, ``s``: cosine and sine of the ego heading ``pyaw``.
+    """
     h, w = out.shape
     i0 = h // 2
     j0 = w // 2
-    for k in range(ex.shape[0]):
-        ca = math.cos(eyaw[k])
-        sa = math.sin(eyaw[k])
+    for k in range(xy.shape[0]):
+        if cls[k] == _SKIP:
+            continue
+        rx = xy[k, 0] - px
+        ry = xy[k, 1] - py
+        if not (abs(rx) < reach and abs(ry) < reach):
+            continue
+        ex = c * rx + s * ry  # centre and heading in the ego frame
+        ey = -s * rx + c * ry
+        eyaw = yaw[k] - pyaw
+        hl = length[k] / 2
+        hw = width[k] / 2
+        ca = math.cos(eyaw)
+        sa = math.sin(eyaw)
         # half extents of the box's axis-aligned hull in the ego frame
-        rx = abs(ca) * hl[k] + abs(sa) * hw[k]
-        ry = abs(sa) * hl[k] + abs(ca) * hw[k]
+        rhx = abs(ca) * hl + abs(sa) * hw
+        rhy = abs(sa) * hl + abs(ca) * hw
         # x = (i0 - i) c  =>  i = i0 - x / c ; hull rows / columns, clipped to the grid
         # (one cell of margin: the exact test below decides boundary cells)
-        i_lo = max(int(math.floor(i0 - (ex[k] + rx) / c)), 0)
-        i_hi = min(int(math.ceil(i0 - (ex[k] - rx) / c)), h - 1)
-        j_lo = max(int(math.floor(j0 - (ey[k] + ry) / c)), 0)
-        j_hi = min(int(math.ceil(j0 - (ey[k] - ry) / c)), w - 1)
+        i_lo = max(int(math.floor(i0 - (ex + rhx) / cell)), 0)
+        i_hi = min(int(math.ceil(i0 - (ex - rhx) / cell)), h - 1)
+        j_lo = max(int(math.floor(j0 - (ey + rhy) / cell)), 0)
+        j_hi = min(int(math.ceil(j0 - (ey - rhy) / cell)), w - 1)
         painted = False
         for i in range(i_lo, i_hi + 1):
-            dx = (i0 - i) * c - ex[k]
+            dx = (i0 - i) * cell - ex
             for j in range(j_lo, j_hi + 1):
-                dy = (j0 - j) * c - ey[k]
+                dy = (j0 - j) * cell - ey
                 lx = ca * dx + sa * dy
                 ly = -sa * dx + ca * dy
-                if abs(lx) <= hl[k] and abs(ly) <= hw[k]:
+                if abs(lx) <= hl and abs(ly) <= hw:
                     painted = True
                     if out[i, j] != moving:
                         out[i, j] = cls[k]
         if not painted:
             # smaller than a cell: label the cell holding its centre (GridSpec.to_cell)
-            i = int(math.floor(i0 - ex[k] / c + 0.5))
-            j = int(math.floor(j0 - ey[k] / c + 0.5))
+            i = int(math.floor(i0 - ex / cell + 0.5))
+            j = int(math.floor(j0 - ey / cell + 0.5))
             if 0 <= i < h and 0 <= j < w and out[i, j] != moving:
                 out[i, j] = cls[k]

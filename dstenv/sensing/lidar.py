@@ -220,17 +220,18 @@ class Lidar:
 
 
 @numba.njit(cache=True, inline="always")
-def _cast_segment(ax, ay, bx, by, hid, theta0, dtheta, periodic, max_range, cos_t, sin_t,
-                  best, best_id):  # pragma: no cover - numba
-    """Nearest hits of the beams with one segment given in the sensor frame."""
+def _cast_segment(ax, ay, bx, by, aa, ab, hid, theta0, dtheta, periodic, max_range, cos_t,
+                  sin_t, best, best_id):  # pragma: no cover - numba
+    """Nearest hits of the beams with one segment given in the sensor frame; ``aa``,
+    ``ab``: ``atan2`` of its ends (a vertex shared by two segments costs one)."""
     nb = cos_t.shape[0]
     two_pi = 2.0 * math.pi
     period = two_pi / dtheta  # beams per full turn (== nb when periodic)
     ex = bx - ax
     ey = by - ay
     # beam-index interval covered by the segment (the short arc between its ends)
-    fa = (math.atan2(ay, ax) - theta0) % two_pi
-    fb = (math.atan2(by, bx) - theta0) % two_pi
+    fa = (aa - theta0) % two_pi
+    fb = (ab - theta0) % two_pi
     d = fb - fa
     if d > math.pi:
         d -= two_pi
@@ -269,14 +270,25 @@ def _cast_edges(edges, starts, boxes, sx, sy, cyaw, syaw, theta0, dtheta, period
         dy = max(boxes[g, 1] - sy, 0.0, sy - boxes[g, 3])
         if dx * dx + dy * dy > r2:
             continue
+        px = py = pa = np.nan  # end of the previous edge in the sensor frame, its atan2
         for e in range(starts[g], starts[g + 1]):
             x1 = edges[e, 0] - sx
             y1 = edges[e, 1] - sy
             x2 = edges[e, 2] - sx
             y2 = edges[e, 3] - sy
-            _cast_segment(cyaw * x1 + syaw * y1, -syaw * x1 + cyaw * y1,
-                          cyaw * x2 + syaw * y2, -syaw * x2 + cyaw * y2, -2,
-                          theta0, dtheta, periodic, max_range, cos_t, sin_t, best, best_id)
+            ax = cyaw * x1 + syaw * y1
+            ay = -syaw * x1 + cyaw * y1
+            bx = cyaw * x2 + syaw * y2
+            by = -syaw * x2 + cyaw * y2
+            # a polygon's edges chain: the start is the previous end, the same numbers
+            # (equal non-zero floats are the same bits; atan2 tells -0.0 from 0.0)
+            same = ax == px and ay == py and ax != 0.0 and ay != 0.0
+            aa = pa if same else math.atan2(ay, ax)
+            pa = math.atan2(by, bx)
+            px = bx
+            py = by
+            _cast_segment(ax, ay, bx, by, aa, pa, -2, theta0, dtheta, periodic, max_range,
+                          cos_t, sin_t, best, best_id)
 
 
 @numba.njit(cache=True)
@@ -286,6 +298,7 @@ def _cast_boxes(xy, yaw, length, width, ids, sx, sy, cyaw, syaw, theta0, dtheta,
     ``ids[k]``, or the box index ``k`` when ``ids`` is empty."""
     cx = np.empty(4)
     cy = np.empty(4)
+    ca4 = np.empty(4)  # atan2 of each corner
     for k in range(xy.shape[0]):
         hl = 0.5 * length[k]
         hw = 0.5 * width[k]
@@ -303,11 +316,12 @@ def _cast_boxes(xy, yaw, length, width, ids, sx, sy, cyaw, syaw, theta0, dtheta,
             ow = hw if q < 2 else -hw
             cx[q] = lx + ca * ol - sa * ow
             cy[q] = ly + sa * ol + ca * ow
+            ca4[q] = math.atan2(cy[q], cx[q])
         hid = ids[k] if ids.shape[0] else k
         for q in range(4):
             p = (q + 1) % 4
-            _cast_segment(cx[q], cy[q], cx[p], cy[p], hid, theta0, dtheta, periodic, max_range,
-                          cos_t, sin_t, best, best_id)
+            _cast_segment(cx[q], cy[q], cx[p], cy[p], ca4[q], ca4[p], hid, theta0, dtheta,
+                          periodic, max_range, cos_t, sin_t, best, best_id)
 
 
 @numba.njit(cache=True)

@@ -146,3 +146,86 @@ def test_bad_input_is_rejected():
         sensor_grid(np.zeros(1), np.ones(1), np.zeros(1, bool), SPEC, 10.0, origin=(100.0, 0.0))
     with pytest.raises(ValueError, match="max_range"):
         sensor_grid(np.zeros(1), np.ones(1), np.zeros(1, bool), SPEC, 0.0)
+
+
+def _walk_only(angles, ranges, hit, spec, max_range, origin):
+    """The grid of the plain walk (no beam paths), from the kernel itself."""
+    from dstenv.sensing import raycast
+    from dstenv.sensing.beampaths import NO_PATHS as none
+
+    out = np.zeros(spec.shape, np.uint8)
+    raycast._cast(angles, ranges, hit, spec.cell_size, max_range, origin[0], origin[1], out,
+                  none.cos, none.sin, none.safe, none.start, none.cells, none.isteps,
+                  none.shared)
+    return out
+
+
+def _reference_grid(angles, ranges, hit, spec, max_range, origin):
+    """Union of the exact cells of every ray (``_cells_crossed``), occupied ends last."""
+    ox, oy = origin
+    expected = np.zeros(spec.shape, np.uint8)
+    ends = []
+    for a, r, h in zip(angles, ranges, hit):
+        if np.isnan(r):
+            continue
+        rr = min(r, max_range)
+        end = ox + rr * np.cos(a), oy + rr * np.sin(a)
+        cells = _cells_crossed(spec, ox, oy, *end)
+        if h and r <= max_range:
+            cells = cells[:-1]
+            ends.append(spec.to_cell(*end))
+        for i, j in cells:
+            if not (0 <= i < spec.height and 0 <= j < spec.width):
+                break  # the walk stops at the border
+            expected[i, j] = F
+    for i, j in ends:
+        if spec.inside(i, j):
+            expected[i, j] = O
+    return expected
+
+
+@pytest.mark.parametrize("origin", [(0.0, 0.0), (0.37, -0.21)])
+def test_repeated_beams_use_their_paths_and_stay_exact(origin):
+    """A LIDAR's beams come back every sweep: from the second sweep on, each ray
+    writes a prefix of its beam's traced path. The grid must stay the exact walk's,
+    bit for bit, for hits, clear rays, dropouts, rays leaving the grid, rays ending on
+    cell borders and the beams through cell corners (diagonals, axes); and for beams
+    off the corners it must be the geometric reference."""
+    from dstenv.sensing import beampaths
+
+    spec = GridSpec(40, 30, 0.5)
+    rng = np.random.default_rng(11)
+    regular = -np.pi + 2 * np.pi / 360 * np.arange(360)  # axes and diagonals included
+    generic = rng.uniform(-np.pi, np.pi, 300)
+    for angles in (regular, generic):
+        n = len(angles)
+        for sweep in range(4):
+            ranges = rng.uniform(0.0, 16.0, n)
+            if sweep == 3:  # end points on cell borders
+                ranges = np.round(ranges / 0.25) * 0.25
+            ranges[rng.random(n) < 0.1] = np.nan
+            hit = rng.random(n) < 0.6
+            g = sensor_grid(angles, ranges, hit, spec, 12.0, origin=origin)
+            np.testing.assert_array_equal(
+                g, _walk_only(angles, ranges, hit, spec, 12.0, origin), err_msg=f"sweep {sweep}")
+            if angles is generic and sweep < 3:
+                np.testing.assert_array_equal(
+                    g, _reference_grid(angles, ranges, hit, spec, 12.0, origin))
+        paths = beampaths.paths_for(angles, spec, 12.0, *origin)
+        assert np.array_equal(paths.angles, angles)  # traced, and reused
+        assert paths.safe.sum() >= n - 8  # at most the corner beams are walked
+
+
+def test_beam_paths_on_a_grid_of_more_than_65536_cells():
+    """Flat cell indices no longer fit uint16: the int32 tables give the walk's grid."""
+    from dstenv.sensing import beampaths
+
+    spec = GridSpec(300, 280, 0.3)
+    angles = -np.pi + 2 * np.pi / 720 * np.arange(720)
+    rng = np.random.default_rng(4)
+    for _ in range(3):
+        ranges = rng.uniform(0.0, 60.0, 720)
+        hit = rng.random(720) < 0.7
+        g = sensor_grid(angles, ranges, hit, spec, 50.0, origin=(0.1, 0.0))
+        np.testing.assert_array_equal(g, _walk_only(angles, ranges, hit, spec, 50.0, (0.1, 0.0)))
+    assert beampaths.paths_for(angles, spec, 50.0, 0.1, 0.0).cells.dtype == np.int32

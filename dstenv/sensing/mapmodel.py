@@ -27,7 +27,7 @@ from typing import Any
 import numba
 import numpy as np
 
-from dstenv.sim.raster import fill_polygon
+from dstenv.sim.raster import fill_polygons_flat
 from dstenv.sim.types import MapClass, WorldMap
 
 __all__ = ["draw_known_map"]
@@ -46,78 +46,221 @@ def draw_known_map(world_map: WorldMap, cfg: Mapping[str, Any], rng: np.random.G
 
     Returns:
         ``(Hm, Wm) uint8`` :class:`MapClass` raster on the grid of ``world_map.raster``.
+
+    The whole raster is touched twice at most (the class remap, and the true roads
+    again for ``road_width = "true"``); buildings and street bands are painted by one
+    numba call each, over flat vertex arrays.
     """
     truth = np.ascontiguousarray(world_map.raster, dtype=np.uint8)
     res, org = float(world_map.resolution), world_map.origin
     by_lanes = cfg["road_width"] == "lanes" and len(world_map.streets) > 0
-    out = truth.copy()
-    out[out == MapClass.BUILDING] = MapClass.INTERMEDIATE
+    # what the map knows before anything is drawn: buildings (and, drawn by lanes,
+    # roads) become the background, as do the unknown open spaces
+    bg = MapClass.NONE if cfg["background"] == "none" else MapClass.INTERMEDIATE
+    lut = np.arange(4, dtype=np.uint8)
+    lut[[MapClass.BUILDING, MapClass.INTERMEDIATE]] = bg
     if by_lanes:
-        out[out == MapClass.ROAD] = MapClass.INTERMEDIATE
+        lut[MapClass.ROAD] = bg
+    out = _remap(truth, lut)
     kept = np.ones(len(world_map.buildings), bool)
     kept[np.asarray(drop, np.int64)] = False
-    for b in np.flatnonzero(kept):
-        poly = np.asarray(world_map.buildings[b], np.float64)
-        shift = rng.normal(0.0, cfg["outline_shift_std"], 2) if cfg["outline_shift_std"] > 0 \
-            else np.zeros(2)
-        scale = 1.0 + (rng.normal(0.0, cfg["outline_scale_std"]) if cfg["outline_scale_std"] > 0
-                       else 0.0)
-        c = poly.mean(0)
-        fill_polygon(out, [c + (poly - c) * max(scale, 0.5) + shift], org, res, MapClass.BUILDING)
+    xy, ptr = _moved_outlines([world_map.buildings[b] for b in np.flatnonzero(kept)], cfg, rng)
+    fill_polygons_flat(out, xy, ptr, org, res, MapClass.BUILDING)
     n_extra = rng.poisson(cfg["extra_building_rate"] * len(world_map.buildings)) \
         if cfg["extra_building_rate"] > 0 else 0
-    for _ in range(n_extra):
-        _extra_building(out, truth, org, res, rng)
+    _extra_buildings(out, truth, res, rng, int(n_extra))
     if by_lanes:
-        for line, lanes in zip(world_map.streets, world_map.street_lanes):
-            half = 0.5 * max(int(lanes), 1) * cfg["nominal_lane_width"]
-            _paint_band(out, np.ascontiguousarray(line, np.float64), half, float(org[0]),
-                        float(org[1]), res, np.uint8(MapClass.ROAD))
+        lines = [np.asarray(line, np.float64) for line in world_map.streets]
+        half = np.array([0.5 * max(int(n), 1) * cfg["nominal_lane_width"]
+                         for n in world_map.street_lanes], np.float64)
+        line_ptr = np.cumsum([0] + [len(line) for line in lines]).astype(np.int64)
+        _paint_bands(out, np.concatenate(lines), line_ptr, half, float(org[0]), float(org[1]),
+                     res, np.uint8(MapClass.ROAD))
     else:
-        out[truth == MapClass.ROAD] = MapClass.ROAD
-    if cfg["background"] == "none":
-        out[out == MapClass.INTERMEDIATE] = MapClass.NONE
+        _restore(out, truth, np.uint8(MapClass.ROAD))
     return out
 
 
-def _extra_building(out: np.ndarray, truth: np.ndarray, org, res: float,
-                    rng: np.random.Generator, tries: int = 20) -> None:
-    """A building in the map where the world has open ground (>= 4 m from any road or
-    building)."""
-    h, w = truth.shape
-    pad = int(math.ceil(4.0 / res))
-    for _ in range(tries):
-        lx, ly = rng.uniform(6.0, 18.0, 2)
-        nx, ny = int(lx / res), int(ly / res)
-        if nx + 2 * pad >= w or ny + 2 * pad >= h:
-            return
-        c0 = int(rng.integers(0, w - nx - 2 * pad))
-        r0 = int(rng.integers(0, h - ny - 2 * pad))
-        window = truth[r0:r0 + ny + 2 * pad, c0:c0 + nx + 2 * pad]
-        if np.all(window == MapClass.INTERMEDIATE):
-            out[r0 + pad:r0 + pad + ny, c0 + pad:c0 + pad + nx] = MapClass.BUILDING
-            return
+def _moved_outlines(polys: list[np.ndarray], cfg: Mapping[str, Any], rng: np.random.Generator
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """Building outlines shifted and scaled about their vertex mean, as traced.
+
+    Draws per outline (in order) 2 normals of the shift, then 1 of the scale (each
+    only when its std > 0). Returns ``xy (V, 2) float64`` and ``ptr (P + 1,) int64``:
+    outline ``k`` is ``xy[ptr[k]:ptr[k + 1]]``; outlines of < 3 vertices are left out.
+    """
+    shift_std, scale_std = cfg["outline_shift_std"], cfg["outline_scale_std"]
+    n = len(polys)
+    z = rng.standard_normal((n, int(shift_std > 0) * 2 + int(scale_std > 0)))
+    # == rng.normal(0, std) per building: loc + scale * standard normal
+    shift = shift_std * z[:, :2] if shift_std > 0 else np.zeros((n, 2))
+    scale = 1.0 + (scale_std * z[:, -1] if scale_std > 0 else np.zeros(n))
+    keep = [k for k in range(n) if len(polys[k]) >= 3]
+    if not keep:
+        return np.zeros((0, 2)), np.zeros(1, np.int64)
+    polys = [np.asarray(polys[k], np.float64) for k in keep]
+    shift, scale = shift[keep], np.maximum(scale[keep], 0.5)
+    cnt = np.array([len(p) for p in polys], np.int64)
+    ptr = np.concatenate([[0], np.cumsum(cnt)]).astype(np.int64)
+    xy = np.concatenate(polys)
+    # vertex means summed vertex by vertex, as ``poly.mean(0)`` sums (bit-identical)
+    c = np.zeros((len(polys), 2))
+    for j in range(int(cnt.max())):
+        c += np.where((j < cnt)[:, None], xy[np.minimum(ptr[:-1] + j, len(xy) - 1)], 0.0)
+    c /= cnt[:, None]
+    c_v = np.repeat(c, cnt, 0)
+    xy = c_v + (xy - c_v) * np.repeat(scale, cnt)[:, None] + np.repeat(shift, cnt, 0)
+    return xy, ptr
 
 
 @numba.njit(cache=True)
-def _paint_band(out, line, half, x0, y0, res, value):  # pragma: no cover - numba
-    """Cells whose centre lies within ``half`` [m] of the polyline ``line (K, 2)``."""
+def _extra_buildings(out, truth, res, rng, n, tries=20):  # pragma: no cover - numba
+    """``n`` buildings in the map where the world has open ground (>= 4 m from any road
+    or building): per building up to ``tries`` drawn boxes (2 uniform sizes, then the
+    column and row of the corner; numba draws these from ``rng``'s own stream exactly
+    as numpy would), the first box on open ground is painted."""
+    h, w = truth.shape
+    pad = int(math.ceil(4.0 / res))
+    open_ground = np.uint8(MapClass.INTERMEDIATE)
+    for _ in range(n):
+        for _ in range(tries):
+            size = rng.uniform(6.0, 18.0, 2)
+            nx, ny = int(size[0] / res), int(size[1] / res)
+            if nx + 2 * pad >= w or ny + 2 * pad >= h:
+                break
+            c0 = rng.integers(0, w - nx - 2 * pad)
+            r0 = rng.integers(0, h - ny - 2 * pad)
+            if _all_equal(truth, r0, r0 + ny + 2 * pad, c0, c0 + nx + 2 * pad, open_ground):
+                out[r0 + pad:r0 + pad + ny, c0 + pad:c0 + pad + nx] = np.uint8(MapClass.BUILDING)
+                break
+
+
+@numba.njit(cache=True)
+def _remap(truth, lut):  # pragma: no cover - numba
+    """``lut[truth]`` of a ``(H, W) uint8`` raster whose ``lut`` differs from the
+    identity only at codes 1, 2, 3 (selects, which vectorise, instead of a gather)."""
+    out = np.empty_like(truth)
+    t, o = truth.ravel(), out.ravel()
+    b, rd, it = lut[1], lut[2], lut[3]
+    for i in range(t.shape[0]):
+        v = t[i]
+        o[i] = b if v == 1 else (rd if v == 2 else (it if v == 3 else v))
+    return out
+
+
+@numba.njit(cache=True)
+def _restore(out, truth, value):  # pragma: no cover - numba
+    """``out[truth == value] = value`` in place (both C-contiguous)."""
+    t, o = truth.ravel(), out.ravel()
+    for i in range(t.shape[0]):
+        o[i] = value if t[i] == value else o[i]
+
+
+@numba.njit(cache=True)
+def _all_equal(a, r0, r1, c0, c1, value):  # pragma: no cover - numba
+    """``(a[r0:r1, c0:c1] == value).all()``, stopping at the first other cell."""
+    for r in range(r0, r1):
+        for c in range(c0, c1):
+            if a[r, c] != value:
+                return False
+    return True
+
+
+_SLACK = 1e-3  # [m] band around a street's edge where cells get the exact distance test
+
+
+@numba.njit(cache=True)
+def _capsule_rows(ax, ay, bx, by, rad, ys):  # pragma: no cover - numba
+    """``lo, hi (R,) float64``: the x-interval [m] of each line ``y = ys[i]`` within
+    ``rad`` of the segment ``a-b`` (``lo > hi``: none). The union of the two end discs
+    and the rectangle between them, each crossing computed without ill-conditioned
+    divisions (error ~1e-8 m)."""
+    n = ys.shape[0]
+    lo = np.full(n, np.inf)
+    hi = np.full(n, -np.inf)
+    for px, py in ((ax, ay), (bx, by)):
+        for i in range(n):
+            d = ys[i] - py
+            if abs(d) <= rad:
+                half_w = math.sqrt(rad * rad - d * d)
+                lo[i] = min(lo[i], px - half_w)
+                hi[i] = max(hi[i], px + half_w)
+    ex, ey = bx - ax, by - ay
+    ln = math.sqrt(ex * ex + ey * ey)
+    if ln > 0.0:
+        nx, ny = -ey / ln * rad, ex / ln * rad
+        qx = np.array([ax + nx, bx + nx, bx - nx, ax - nx])
+        qy = np.array([ay + ny, by + ny, by - ny, ay - ny])
+        for k in range(4):
+            j = (k + 1) % 4
+            if qy[k] == qy[j]:
+                continue
+            slope = (qx[j] - qx[k]) / (qy[j] - qy[k])
+            y_lo, y_hi = min(qy[k], qy[j]), max(qy[k], qy[j])
+            for i in range(n):
+                if y_lo <= ys[i] <= y_hi:
+                    x = qx[k] + (ys[i] - qy[k]) * slope
+                    lo[i] = min(lo[i], x)
+                    hi[i] = max(hi[i], x)
+    return lo, hi
+
+
+@numba.njit(cache=True)
+def _paint_bands(out, pts, ptr, halves, x0, y0, res, value):  # pragma: no cover - numba
+    """Cells whose centre lies within ``halves[k]`` [m] of the polyline
+    ``pts[ptr[k]:ptr[k + 1]]`` (``(V, 2) float64``), for every line ``k``.
+
+    Per segment and row, cells whose centres lie within ``half - _SLACK`` are painted
+    outright, cells beyond ``half + _SLACK`` are skipped, and the few in between get
+    the exact test ``distance^2 <= half^2`` that decides every cell (same result as
+    testing every cell; the interval arithmetic errs by ~1e-8 m << ``_SLACK``).
+    """
     h, w = out.shape
-    for k in range(line.shape[0] - 1):
-        ax, ay, bx, by = line[k, 0], line[k, 1], line[k + 1, 0], line[k + 1, 1]
-        ex, ey = bx - ax, by - ay
-        ll = ex * ex + ey * ey
-        c_lo = max(int(math.floor((min(ax, bx) - half - x0) / res)), 0)
-        c_hi = min(int(math.ceil((max(ax, bx) + half - x0) / res)), w - 1)
-        r_lo = max(int(math.floor((min(ay, by) - half - y0) / res)), 0)
-        r_hi = min(int(math.ceil((max(ay, by) + half - y0) / res)), h - 1)
-        for r in range(r_lo, r_hi + 1):
-            yc = y0 + (r + 0.5) * res
-            for c in range(c_lo, c_hi + 1):
-                xc = x0 + (c + 0.5) * res
-                t = 0.0 if ll == 0.0 else ((xc - ax) * ex + (yc - ay) * ey) / ll
-                t = min(max(t, 0.0), 1.0)
-                dx = ax + t * ex - xc
-                dy = ay + t * ey - yc
-                if dx * dx + dy * dy <= half * half:
-                    out[r, c] = value
+    for li in range(ptr.shape[0] - 1):
+        half = halves[li]
+        hh = half * half
+        r_in, r_out = half - _SLACK, half + _SLACK
+        for k in range(ptr[li], ptr[li + 1] - 1):
+            ax, ay, bx, by = pts[k, 0], pts[k, 1], pts[k + 1, 0], pts[k + 1, 1]
+            ex, ey = bx - ax, by - ay
+            ll = ex * ex + ey * ey
+            r_lo = max(int(math.floor((min(ay, by) - r_out - y0) / res)), 0)
+            r_hi = min(int(math.ceil((max(ay, by) + r_out - y0) / res)), h - 1)
+            if r_hi < r_lo:
+                continue
+            ys = y0 + (np.arange(r_lo, r_hi + 1) + 0.5) * res
+            o_lo, o_hi = _capsule_rows(ax, ay, bx, by, r_out, ys)
+            if r_in > 0.0:
+                i_lo, i_hi = _capsule_rows(ax, ay, bx, by, r_in, ys)
+            else:
+                i_lo, i_hi = o_hi, o_lo
+            for q in range(ys.shape[0]):
+                if o_lo[q] > o_hi[q]:
+                    continue
+                r, yc = r_lo + q, ys[q]
+                c_lo = max(int(math.ceil((o_lo[q] - x0) / res - 0.5)), 0)
+                c_hi = min(int(math.floor((o_hi[q] - x0) / res - 0.5)), w - 1)
+                p_lo, p_hi = c_hi + 1, c_hi  # run painted outright (cells inside r_in)
+                if i_lo[q] <= i_hi[q]:
+                    p_lo = max(int(math.ceil((i_lo[q] - x0) / res - 0.5)), c_lo)
+                    p_hi = min(int(math.floor((i_hi[q] - x0) / res - 0.5)), c_hi)
+                out[r, p_lo:p_hi + 1] = value
+                _test_cells(out, r, c_lo, min(p_lo, c_hi + 1), yc, ax, ay, ex, ey, ll, hh, x0,
+                            res, value)
+                _test_cells(out, r, max(p_hi + 1, c_lo), c_hi + 1, yc, ax, ay, ex, ey, ll, hh,
+                            x0, res, value)
+
+
+@numba.njit(cache=True, inline="always")
+def _test_cells(out, r, c0, c1, yc, ax, ay, ex, ey, ll, hh, x0, res, value
+                ):  # pragma: no cover - numba
+    """The exact test of cells ``out[r, c0:c1]``: centre within ``sqrt(hh)`` of the
+    segment ``a, a + e`` (``ll = |e|^2``)."""
+    for c in range(c0, c1):
+        xc = x0 + (c + 0.5) * res
+        t = 0.0 if ll == 0.0 else ((xc - ax) * ex + (yc - ay) * ey) / ll
+        t = min(max(t, 0.0), 1.0)
+        dx = ax + t * ex - xc
+        dy = ay + t * ey - yc
+        if dx * dx + dy * dy <= hh:
+            out[r, c] = value

@@ -7,7 +7,8 @@ import numpy as np
 
 from dstenv.sim.types import MapClass, WorldMap
 
-__all__ = ["fill_polygon", "fill_polygons", "fill_rect", "fillet_corners", "lookup", "Surface"]
+__all__ = ["fill_polygon", "fill_polygons", "fill_polygons_flat", "fill_rect", "fillet_corners",
+           "lookup", "Surface"]
 
 
 class Surface:
@@ -43,10 +44,16 @@ def _fill_rings(raster, xs, ys, ring_ptr, x0, y0, res, value):
                     n += 1
         if n < 2:
             continue
-        c = np.sort(cross[:n])
+        for p in range(1, n):  # insertion sort in place (a handful of crossings)
+            v = cross[p]
+            q = p - 1
+            while q >= 0 and cross[q] > v:
+                cross[q + 1] = cross[q]
+                q -= 1
+            cross[q + 1] = v
         for p in range(0, n - 1, 2):
-            c_lo = max(int(np.ceil((c[p] - x0) / res - 0.5)), 0)
-            c_hi = min(int(np.floor((c[p + 1] - x0) / res - 0.5)), w - 1)
+            c_lo = max(int(np.ceil((cross[p] - x0) / res - 0.5)), 0)
+            c_hi = min(int(np.floor((cross[p + 1] - x0) / res - 0.5)), w - 1)
             for cc in range(c_lo, c_hi + 1):
                 raster[r, cc] = value
 
@@ -87,10 +94,26 @@ def fill_polygons(raster: np.ndarray, polys: list[np.ndarray], origin: tuple[flo
     polys = [np.asarray(p, np.float64) for p in polys if len(p) >= 3]
     if not polys:
         return
-    xy = np.concatenate(polys)
     ptr = np.cumsum([0] + [len(p) for p in polys]).astype(np.int64)
-    _fill_each(raster, np.ascontiguousarray(xy[:, 0]), np.ascontiguousarray(xy[:, 1]), ptr,
-               float(origin[0]), float(origin[1]), float(resolution), np.uint8(value))
+    fill_polygons_flat(raster, np.concatenate(polys), ptr, origin, resolution, value)
+
+
+def fill_polygons_flat(raster: np.ndarray, xy: np.ndarray, ptr: np.ndarray,
+                       origin: tuple[float, float], resolution: float, value: int) -> None:
+    """:func:`fill_polygons` of flat vertices: polygon ``k`` is ``xy[ptr[k]:ptr[k + 1]]``.
+
+    Args:
+        raster: ``(H, W) uint8``, modified in place.
+        xy: ``(V, 2) float64`` vertices [m]; ptr: ``(P + 1,) int64`` offsets, each
+            polygon with >= 3 vertices.
+        origin, resolution, value: as for :func:`fill_polygon`.
+    """
+    if len(ptr) < 2:
+        return
+    xy = np.asarray(xy, np.float64)
+    _fill_each(raster, np.ascontiguousarray(xy[:, 0]), np.ascontiguousarray(xy[:, 1]),
+               np.asarray(ptr, np.int64), float(origin[0]), float(origin[1]), float(resolution),
+               np.uint8(value))
 
 
 def fill_rect(raster: np.ndarray, x_lo: float, x_hi: float, y_lo: float, y_hi: float,

@@ -18,10 +18,10 @@ from typing import Any
 
 import numpy as np
 
-from dstenv.sim.ego import box_corners, boxes_overlap
 from dstenv.sim.lanes import LaneKind, LaneNetwork, lane_pose, project_on_lane
 from dstenv.sim.traffic import choose_successor
-from dstenv.sim.parking import draw_vehicles
+from dstenv.sim.parking import VEHICLE_CLASSES
+from dstenv.sim.placement import free_spot, near_any, place_mobile
 from dstenv.sim.types import AGENT_HEIGHT, AgentKind, WorldMap
 
 __all__ = ["populate", "respawn", "pull_out", "plan_route", "nearest_lane", "add_row", "net_tuple",
@@ -37,6 +37,9 @@ _TRAFFIC_FIELDS = ("xy", "yaw", "v", "hl", "hw", "akind", "mobile", "parked", "r
                    "lat", "grant", "req_t", "stop_clock", "halt", "stuck", "still", "lat_goal",
                    "lc", "hazard")
 _FIELDS = (*_TRAFFIC_FIELDS, "idm", "height")
+#: size ranges of the vehicle classes: (C, 3) low and high length, width, height [m]
+_CLASS_LO = np.array([[VEHICLE_CLASSES[c][d][0] for d in range(3)] for c in VEHICLE_CLASSES])
+_CLASS_HI = np.array([[VEHICLE_CLASSES[c][d][1] for d in range(3)] for c in VEHICLE_CLASSES])
 
 
 def net_tuple(net: LaneNetwork) -> tuple:
@@ -79,10 +82,10 @@ def plan_route(net: LaneNetwork, lane: int, rng: np.random.Generator, k: int,
 def nearest_lane(net: LaneNetwork, x: float, y: float, yaw: float,
                  max_dist: float = 6.0) -> tuple[int, float] | None:
     """Closest vehicle lane point heading within 60 deg of ``yaw``: ``(lane, s)`` or None."""
-    lane_of = np.repeat(np.arange(len(net)), net.npts)
-    ok = (net.kind[lane_of] <= LaneKind.CONNECTOR) & \
-        (np.cos(net.hdg - yaw) > 0.5) & (np.abs(net.pts[:, 0] - x) < max_dist)
-    idx = np.flatnonzero(ok)
+    idx = np.flatnonzero(np.abs(net.pts[:, 0] - x) < max_dist)  # cheap test first
+    lane_of = np.searchsorted(net.start, idx, side="right") - 1  # lanes are stored in order
+    ok = (net.kind[lane_of] <= LaneKind.CONNECTOR) & (np.cos(net.hdg[idx] - yaw) > 0.5)
+    idx, lane_of = idx[ok], lane_of[ok]
     if len(idx) == 0:
         return None
     d = np.hypot(net.pts[idx, 0] - x, net.pts[idx, 1] - y)
@@ -90,7 +93,7 @@ def nearest_lane(net: LaneNetwork, x: float, y: float, yaw: float,
     if d[k] > max_dist:
         return None
     p = int(idx[k])
-    lane = int(lane_of[p])
+    lane = int(lane_of[k])
     return lane, float((p - net.start[lane]) * net.ds[lane])
 
 
@@ -155,64 +158,61 @@ def _add_parked(st: dict[str, np.ndarray], slots: np.ndarray, rng: np.random.Gen
         st[f] = np.concatenate([st[f], rows[f].astype(st[f].dtype)])
 
 
-def _weighted(items: np.ndarray, cdf: np.ndarray, rng: np.random.Generator) -> int:
-    """``rng.choice(items, p=p)`` given ``cdf = p.cumsum() / p.sum()`` (the same draw,
-    without validating ``p`` on every call)."""
-    return int(items[cdf.searchsorted(rng.random(), side="right")])
-
-
 def _free(st, xy, yaw, length, width, gap) -> bool:
-    if len(st["v"]) == 0:
-        return True
-    box = box_corners(xy[0], xy[1], yaw, length + 2 * gap, width + 0.4)
-    # only bodies that can touch the box (half diagonals + margin)
-    reach = 0.5 * np.hypot(length + 2 * gap, width + 0.4) + np.hypot(st["hl"], st["hw"])
-    k = np.flatnonzero(np.hypot(st["xy"][:, 0] - xy[0], st["xy"][:, 1] - xy[1]) <= reach + 0.1)
-    if len(k) == 0:
-        return True
-    c, s_ = np.cos(st["yaw"][k]), np.sin(st["yaw"][k])
-    hl, hw = st["hl"][k], st["hw"][k]
-    local = np.stack([np.stack([hl, hw], -1), np.stack([-hl, hw], -1),
-                      np.stack([-hl, -hw], -1), np.stack([hl, -hw], -1)], 1)
-    rot = np.stack([np.stack([c, -s_], -1), np.stack([s_, c], -1)], 1)
-    others = np.einsum("nij,nkj->nki", rot, local) + st["xy"][k, None, :]
-    return not boxes_overlap(box, others).any()
+    """No body of ``st`` overlaps the box at ``xy``, ``yaw`` of ``length + 2 gap`` by
+    ``width + 0.4`` [m] (:func:`dstenv.sim.placement.free_spot`)."""
+    return bool(free_spot(st["xy"], st["yaw"], st["hl"], st["hw"], len(st["v"]), float(xy[0]),
+                          float(xy[1]), float(yaw), float(length), float(width), float(gap)))
 
 
 def _mobile(world_map, st, rng, cfg, kind, lanes, cdf, k, *, lane=None, s=None, fixed=(),
-            at=None, min_ego_dist=0.0) -> int | None:
-    """Place one moving agent on a random (or the given) lane, clear of others."""
+            at=None, min_ego_dist=0.0, count=1) -> int:
+    """Place ``count`` moving agents, each on a random (or the given) lane, clear of
+    the others (inserted before row ``at``, default: appended). Returns how many
+    were placed (each gets :data:`~dstenv.sim.placement.TRIES` tries)."""
     net, tr = world_map.lanes, cfg["traffic"]
     (l_lo, l_hi), (w_lo, w_hi), amax, bcomf, headway, jam = BODY[kind]
-    length, width = rng.uniform(l_lo, l_hi), rng.uniform(w_lo, w_hi)
-    height = None
-    if kind == AgentKind.CAR and len(tr["vehicle_mix"]):
-        cls, size = draw_vehicles(tr["vehicle_mix"], 1, rng)
-        length, width, height = (float(v) for v in size[0])
-        if cls[0] >= 2:  # vans and trucks: gentler acceleration and braking
-            amax, bcomf = amax * 0.7, bcomf * 0.8
-    v0 = {AgentKind.CAR: tr["speed_limit"] * rng.uniform(0.8, 1.2),
-          AgentKind.CYCLIST: tr["cyclist_speed"] * rng.uniform(0.8, 1.2),
-          AgentKind.PEDESTRIAN: tr["pedestrian_speed"] * rng.uniform(0.75, 1.25)}[kind]
+    mix = tr["vehicle_mix"] if kind == AgentKind.CAR else []
+    if len(mix):
+        p = np.asarray(mix, np.float64)
+        p = p / p.sum()
+        mix_cdf = p.cumsum()  # as rng.choice(p=p) builds it
+        mix_cdf /= mix_cdf[-1]
+    else:
+        mix_cdf = np.zeros(0)
     lat = -(net.lane_width / 2 - 0.8) if kind == AgentKind.CYCLIST else 0.0
-    for _ in range(30):
-        ln = _weighted(lanes, cdf, rng) if lane is None else lane
-        lo, hi = length / 2 + 0.5, net.length[ln] - length / 2 - 0.5
-        if hi <= lo:
-            continue
-        pos = rng.uniform(lo, hi) if s is None else min(max(s, lo), hi)
-        x, y, h = lane_pose(net.pts, net.hdg, net.start, net.npts, net.ds, ln, pos)
-        x, y = x - lat * np.sin(h), y + lat * np.cos(h)
-        if min_ego_dist > 0 and np.hypot(x - st["xy"][-1, 0], y - st["xy"][-1, 1]) < min_ego_dist:
-            continue
-        gap = 0.3 if kind == AgentKind.PEDESTRIAN else 3.0
-        if not _free(st, (x, y), h, length, width, gap):
-            continue
-        route = plan_route(net, ln, rng, k, tr["crossing_prob"], fixed)
-        v = min(v0, net.vmax[ln]) * rng.uniform(0.3, 0.8)
-        return add_row(st, kind, (x, y), h, length, width, speed=v, route=route, s=pos, lat=lat,
-                       idm=(v0, amax, bcomf, headway, jam), at=at, height=height)
-    return None
+    speeds = np.array([[tr["speed_limit"], 0.8, 1.2], [tr["cyclist_speed"], 0.8, 1.2],
+                       [tr["pedestrian_speed"], 0.75, 1.25]], np.float64)
+    placed = place_mobile(
+        rng, int(count), int(kind), np.array([l_lo, l_hi, w_lo, w_hi, amax, bcomf, headway, jam],
+                                             np.float64),
+        speeds, float(lat), 0.3 if kind == AgentKind.PEDESTRIAN else 3.0,
+        np.zeros(0, np.int64) if lanes is None else np.asarray(lanes, np.int64),
+        np.zeros(0) if cdf is None else np.asarray(cdf, np.float64),
+        -1 if lane is None else int(lane), np.nan if s is None else float(s),
+        np.asarray(fixed, np.int64).reshape(-1), float(min_ego_dist), mix_cdf, _CLASS_LO,
+        _CLASS_HI, float(AGENT_HEIGHT[int(kind)]), int(k), float(tr["crossing_prob"]),
+        st["xy"], st["yaw"], st["hl"], st["hw"], net.pts, net.hdg, net.start, net.npts, net.ds,
+        net.length, net.vmax, net.succ_ptr, net.succ, net.kind, net.turn)
+    m, xy, yaw, v, hl, hw, route, s_arc, idm, height = placed
+    if m:
+        lat_a = np.full(m, lat)
+        _insert(st, {"xy": xy, "yaw": yaw, "v": v, "hl": hl, "hw": hw,
+                     "akind": np.full(m, int(kind), np.uint8), "mobile": np.ones(m, bool),
+                     "parked": np.zeros(m, bool), "route": route, "s": s_arc, "lat": lat_a,
+                     "grant": np.full(m, -1, np.int64), "req_t": np.full(m, np.inf),
+                     "stop_clock": np.zeros(m), "halt": np.zeros(m), "stuck": np.zeros(m, bool),
+                     "still": np.zeros(m), "lat_goal": lat_a.copy(), "lc": np.zeros(m),
+                     "hazard": np.zeros(m, bool), "idm": idm, "height": height},
+                len(st["v"]) if at is None else at)
+    return int(m)
+
+
+def _insert(st: dict[str, np.ndarray], rows: dict[str, np.ndarray], at: int) -> None:
+    """Insert the rows (one array per field of :data:`_FIELDS`) before row ``at``."""
+    for f in _FIELDS:
+        a = st[f]
+        st[f] = np.concatenate([a[:at], rows[f].astype(a.dtype, copy=False), a[at:]])
 
 
 def populate(world_map: WorldMap, cfg: dict[str, Any], rng: np.random.Generator,
@@ -256,8 +256,7 @@ def populate(world_map: WorldMap, cfg: dict[str, Any], rng: np.random.Generator,
         w = net.length[lanes] / net.length[lanes].sum()
         cdf = w.cumsum()
         cdf /= cdf[-1]
-        for _ in range(count):
-            _mobile(world_map, st, rng, cfg, kind, lanes, cdf, k, at=len(st["v"]) - 1)
+        _mobile(world_map, st, rng, cfg, kind, lanes, cdf, k, at=len(st["v"]) - 1, count=count)
     return st
 
 
@@ -320,12 +319,11 @@ def _task(world_map, st, rng, cfg, k, slots, taken) -> None:
                 break
             s = net.length[a] - rng.uniform(6.0, 30.0)
             if _mobile(world_map, st, rng, cfg, AgentKind.CAR, None, None, k, lane=int(a), s=s,
-                       at=len(st["v"]) - 1) is not None:
+                       at=len(st["v"]) - 1):
                 placed += 1
     pts = np.vstack([net.polyline(l) for l in route_lanes])
     if task["parked_near_route"] > 0 and len(slots):
-        d = np.hypot(slots[:, None, 0] - pts[None, :, 0], slots[:, None, 1] - pts[None, :, 1])
-        near = np.flatnonzero((d.min(1) < 6.0) & ~taken)
+        near = np.flatnonzero(near_any(slots[:, :2], pts, 6.0, False) & ~taken)
         for i in rng.permutation(near)[:task["parked_near_route"]]:
             x, y, yaw = slots[i, :3]
             if _free(st, (x, y), yaw, 4.5, 1.8, 0.3):
@@ -333,7 +331,7 @@ def _task(world_map, st, rng, cfg, k, slots, taken) -> None:
                         rng.uniform(1.7, 1.95), parked=True, at=0)
     cross = np.flatnonzero(net.kind == LaneKind.CROSSING)
     first = net.pts[net.start[cross]]  # (C, 2) first point of each crossing
-    near = (((first[:, None, :] - pts[None, :, :]) ** 2).sum(-1) < 15.0 ** 2).any(1)
+    near = near_any(first, pts, 15.0 ** 2, True)
     crossings = [int(c) for c in cross[near]] if len(cross) else []
     placed = 0
     for c in rng.permutation(crossings) if crossings else []:
@@ -343,7 +341,7 @@ def _task(world_map, st, rng, cfg, k, slots, taken) -> None:
         if len(pred):
             s = net.length[pred[0]] - rng.uniform(0.5, 4.0)
             if _mobile(world_map, st, rng, cfg, AgentKind.PEDESTRIAN, None, None, k,
-                       lane=int(pred[0]), s=s, fixed=(int(c),), at=len(st["v"]) - 1) is not None:
+                       lane=int(pred[0]), s=s, fixed=(int(c),), at=len(st["v"]) - 1):
                 placed += 1
 
 

@@ -60,6 +60,7 @@ class World:
         self._fixed_map = world_map
         self._base_dir = Path(base_dir) if base_dir is not None else None
         self._pool: dict[int, WorldMap] = {}  # map pool: index -> map (map.pool > 0)
+        self._pool_nbr: dict[int, Any] = {}  # map pool: index -> its lane neighbours
         self.map_index = -1  # index of the episode's map in the pool (-1: no pool)
         self._map: WorldMap | None = None
         if world_map is None and self.config["map"]["kind"] == "osm":
@@ -104,7 +105,11 @@ class World:
         self.steps = 0
         self.route_progress = 0.0
         if getattr(self, "_nbr_of", None) is not self._map.lanes:  # once per lane network
-            self._nbr, self._nbr_of = lane_neighbours(self._map.lanes), self._map.lanes
+            nbr = self._pool_nbr.get(self.map_index)  # (a pool map keeps its neighbours)
+            self._nbr = lane_neighbours(self._map.lanes) if nbr is None else nbr
+            self._nbr_of = self._map.lanes
+            if self.map_index >= 0:
+                self._pool_nbr[self.map_index] = self._nbr
         self._state = spawn.populate(self._map, self.config, self.rng, ROUTE_LEN)
         self._steer = 0.0
         self._lane_offset = 0.0

@@ -22,8 +22,10 @@ The result is an :class:`~dstenv.sim.types.Obstacles` (boxes with heights, see
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
+import numba as nb
 import numpy as np
 
 from dstenv.sim.types import ObstacleKind as K
@@ -164,6 +166,7 @@ def place_clutter(sides: list[Side], buildings: list[np.ndarray], slots: np.ndar
         near_avoid = avoid[np.all((avoid >= lo) & (avoid <= hi), 1)] if len(avoid) else avoid
         near_slots = slots[np.all((slots[:, :2] >= lo) & (slots[:, :2] <= hi), 1)] \
             if len(slots) else slots
+        foot = _footprints(near_slots)
         taken: list[tuple[float, float]] = []  # (centre, half length) along the kerb line
 
         def put(s: float, lat: float, half_len: float, half_wid: float, z0: float, z1: float,
@@ -175,7 +178,7 @@ def place_clutter(sides: list[Side], buildings: list[np.ndarray], slots: np.ndar
             xy = start + along * s + inward * lat
             if len(near_avoid) and np.hypot(*(near_avoid - xy).T).min() < 2.5 + half_len:
                 return False
-            if _under_vehicle(xy, max(half_len, half_wid), near_slots):
+            if _under_vehicle(float(xy[0]), float(xy[1]), max(half_len, half_wid), *foot):
                 return False
             if check:
                 taken.append((s, half_len))
@@ -282,22 +285,29 @@ def street_clutter(world_map: Any, cfg: dict[str, Any], rng: np.random.Generator
     return _obstacles(rows)
 
 
-def _under_vehicle(xy: np.ndarray, radius: float, slots: np.ndarray) -> bool:
-    """``xy`` (with ``radius`` [m]) touches the footprint of a parking slot."""
-    if not len(slots):
-        return False
-    d = xy - slots[:, :2]
-    near = np.hypot(d[:, 0], d[:, 1]) < 5.0
-    if not near.any():
-        return False
-    s = slots[near]
-    c, sn = np.cos(s[:, 2]), np.sin(s[:, 2])
-    lon = d[near, 0] * c + d[near, 1] * sn
-    lat = -d[near, 0] * sn + d[near, 1] * c
-    half_l = np.where(s[:, 3] > 0, s[:, 3] / 2, 3.0)
-    half_w = np.where(s[:, 4] > 0, s[:, 4] / 2, 1.0)
-    return bool(np.any((np.abs(lon) < half_l + radius + 0.2)
-                       & (np.abs(lat) < half_w + radius + 0.2)))
+def _footprints(slots: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Parking slots ``(S, 6)`` as :func:`_under_vehicle` reads them: centres ``x, y``,
+    ``cos``/``sin`` of the heading, half length and half width (a standard 6 x 2 m
+    slot where the row gives no size)."""
+    s = np.asarray(slots, np.float64).reshape(-1, 6)
+    return (np.ascontiguousarray(s[:, 0]), np.ascontiguousarray(s[:, 1]), np.cos(s[:, 2]),
+            np.sin(s[:, 2]), np.where(s[:, 3] > 0, s[:, 3] / 2, 3.0),
+            np.where(s[:, 4] > 0, s[:, 4] / 2, 1.0))
+
+
+@nb.njit(cache=True)
+def _under_vehicle(x, y, radius, sx, sy, c, sn, half_l, half_w):  # pragma: no cover - numba
+    """``(x, y)`` (with ``radius`` [m]) touches the footprint of a parking slot (as
+    given by :func:`_footprints`)."""
+    for i in range(sx.shape[0]):
+        dx, dy = x - sx[i], y - sy[i]
+        if not math.hypot(dx, dy) < 5.0:
+            continue
+        lon = dx * c[i] + dy * sn[i]
+        lat = -dx * sn[i] + dy * c[i]
+        if abs(lon) < half_l[i] + radius + 0.2 and abs(lat) < half_w[i] + radius + 0.2:
+            return True
+    return False
 
 
 def _hits_building(start, along, inward, lo, hi, d0, d1, bbox) -> bool:

@@ -52,13 +52,20 @@ class Turn(IntEnum):
 
 def resample(poly: np.ndarray, spacing: float = SPACING) -> np.ndarray:
     """Evenly spaced points along a polyline: ``(K, 2) -> (M, 2) float64``, same ends."""
-    poly = np.asarray(poly, np.float64)
-    seg = np.hypot(*np.diff(poly, axis=0).T)
-    keep = np.concatenate([[True], seg > 1e-9])
-    poly, seg = poly[keep], seg[seg > 1e-9]
+    poly = _distinct(np.ascontiguousarray(poly, np.float64))
     if len(poly) < 2:
         raise ValueError("lane polyline needs two distinct points")
-    return _resample(np.ascontiguousarray(poly), float(spacing))
+    return _resample(poly, float(spacing))
+
+
+@nb.njit(cache=True)
+def _distinct(poly):  # pragma: no cover - numba
+    """The points of ``poly (K, 2)`` more than 1e-9 m from their predecessor in
+    ``poly`` (the first is always kept)."""
+    keep = np.ones(poly.shape[0], np.bool_)
+    for i in range(1, poly.shape[0]):
+        keep[i] = np.hypot(poly[i, 0] - poly[i - 1, 0], poly[i, 1] - poly[i - 1, 1]) > 1e-9
+    return poly[keep]
 
 
 @nb.njit(cache=True)
@@ -283,14 +290,20 @@ class NetworkBuilder:
         npts = np.array([len(p) for p in self.polys], np.int64)
         start = np.concatenate([[0], np.cumsum(npts)[:-1]]).astype(np.int64)
         pts = np.concatenate(self.polys) if self.polys else np.zeros((0, 2))
-        hdg = np.zeros(len(pts))
         length = np.zeros(len(npts))
         vmax = np.full(len(npts), 30.0)
-        for i, p in enumerate(self.polys):
-            d = np.diff(p, axis=0)
-            h = np.arctan2(d[:, 1], d[:, 0])
-            hdg[start[i]:start[i] + npts[i]] = np.append(h, h[-1])
-            length[i] = float(np.hypot(d[:, 0], d[:, 1]).sum())
+        # segment headings and lengths of all lanes at once (a lane's last point keeps
+        # its last segment's heading; the segments across lane ends are not used)
+        d_all = np.diff(pts, axis=0)
+        h_all = np.arctan2(d_all[:, 1], d_all[:, 0])
+        seg_all = np.hypot(d_all[:, 0], d_all[:, 1])
+        hdg = np.append(h_all, 0.0) if len(pts) else np.zeros(0)
+        if len(npts):
+            hdg[start + npts - 1] = hdg[start + npts - 2]
+        for i in range(len(npts)):
+            a, b = start[i], start[i] + npts[i] - 1
+            length[i] = float(seg_all[a:b].sum())
+            h = h_all[a:b]
             if self.attrs[i][0] == LaneKind.CONNECTOR and len(h) > 4:
                 dh = np.abs(np.angle(np.exp(1j * (h[4:] - h[:-4]))))  # over ~2 m
                 kappa = dh.max() / (4 * length[i] / len(h))
@@ -321,17 +334,38 @@ class NetworkBuilder:
         by_node: dict[int, list[int]] = {}
         for c in conn:
             by_node.setdefault(int(attrs[c, 1]), []).append(int(c))
+        pred_of = {b: set(a) for b, a in pred.items()}
+        empty: set[int] = set()
         for members in by_node.values():
+            pts = [self.polys[m][::2] for m in members]
+            ptr = np.cumsum([0] + [len(q) for q in pts]).astype(np.int64)
+            d2 = _pair_dist2(np.concatenate(pts), ptr)  # (M, M) least squared distances
             for ia, a in enumerate(members):
-                for b in members[ia + 1:]:
+                for ib in range(ia + 1, len(members)):
+                    b = members[ib]
                     # from the same lane: one behind the other, car following keeps them
                     # apart; into the same lane: they merge, so they conflict
-                    if set(pred.get(a, [])) & set(pred.get(b, [])):
+                    if pred_of.get(a, empty) & pred_of.get(b, empty):
                         continue
                     merge = set(self.links[a]) & set(self.links[b])
-                    pa, pb = self.polys[a][::2], self.polys[b][::2]
-                    d2 = ((pa[:, None, :] - pb[None, :, :]) ** 2).sum(-1).min()
-                    if merge or d2 < CONFLICT_DIST ** 2:
+                    if merge or d2[ia, ib] < CONFLICT_DIST ** 2:
                         out[a].append(b)
                         out[b].append(a)
         return out
+
+
+@nb.njit(cache=True)
+def _pair_dist2(pts, ptr):  # pragma: no cover - numba
+    """``(M, M)`` least squared distance between the point sets ``pts[ptr[i]:ptr[i+1]]``
+    (``pts (P, 2)``) of every pair ``i < j`` (upper triangle; the rest is inf)."""
+    m = ptr.shape[0] - 1
+    out = np.full((m, m), np.inf)
+    for a in range(m):
+        for b in range(a + 1, m):
+            best = np.inf
+            for i in range(ptr[a], ptr[a + 1]):
+                for j in range(ptr[b], ptr[b + 1]):
+                    dx, dy = pts[i, 0] - pts[j, 0], pts[i, 1] - pts[j, 1]
+                    best = min(best, dx * dx + dy * dy)
+            out[a, b] = best
+    return out

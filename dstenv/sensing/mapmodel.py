@@ -27,7 +27,7 @@ from typing import Any
 import numba
 import numpy as np
 
-from dstenv.sim.raster import fill_polygons_flat
+from dstenv.sim.raster import fill_polygons_flat, paint_where
 from dstenv.sim.types import MapClass, WorldMap
 
 __all__ = ["draw_known_map"]
@@ -77,7 +77,7 @@ def draw_known_map(world_map: WorldMap, cfg: Mapping[str, Any], rng: np.random.G
         _paint_bands(out, np.concatenate(lines), line_ptr, half, float(org[0]), float(org[1]),
                      res, np.uint8(MapClass.ROAD))
     else:
-        _restore(out, truth, np.uint8(MapClass.ROAD))
+        paint_where(out, truth, MapClass.ROAD, MapClass.ROAD)
     return out
 
 
@@ -146,14 +146,6 @@ def _remap(truth, lut):  # pragma: no cover - numba
         v = t[i]
         o[i] = b if v == 1 else (rd if v == 2 else (it if v == 3 else v))
     return out
-
-
-@numba.njit(cache=True)
-def _restore(out, truth, value):  # pragma: no cover - numba
-    """``out[truth == value] = value`` in place (both C-contiguous)."""
-    t, o = truth.ravel(), out.ravel()
-    for i in range(t.shape[0]):
-        o[i] = value if t[i] == value else o[i]
 
 
 @numba.njit(cache=True)

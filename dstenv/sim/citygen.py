@@ -22,7 +22,7 @@ import numpy as np
 
 from dstenv.sim.lanes import Control, NetworkBuilder
 from dstenv.sim.medians import draw_medians, median_box
-from dstenv.sim.raster import Surface, fill_polygons, fill_rect, fillet_corners
+from dstenv.sim.raster import Surface, fill_polygons, fill_rect, fillet_corners, paint_where
 from dstenv.sim.roads import RoadEdge, add_road_lanes
 from dstenv.sim.roundabout import (island_clutter, paint_roundabout, pick_roundabouts,
                                    ring_nodes)
@@ -262,7 +262,7 @@ def generate_city(cfg: dict[str, Any], traffic: dict[str, Any], rng: np.random.G
         buildings = [b[:-1] for b in warp.polylines([np.vstack([b, b[:1]]) for b in buildings],
                                                     BUILDING_STEP)]
         fill_polygons(raster, buildings, org, res, MapClass.BUILDING)
-        surface[raster == MapClass.BUILDING] = Surface.BUILDING
+        paint_where(surface, raster, MapClass.BUILDING, Surface.BUILDING)
         slots = warp_boxes(warp, slots)
         obstacles = warp_obstacles(warp, obstacles)
         streets = warp.polylines(streets)

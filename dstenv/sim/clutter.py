@@ -167,6 +167,9 @@ def place_clutter(sides: list[Side], buildings: list[np.ndarray], slots: np.ndar
         near_slots = slots[np.all((slots[:, :2] >= lo) & (slots[:, :2] <= hi), 1)] \
             if len(slots) else slots
         foot = _footprints(near_slots)
+        near_avoid = np.asarray(near_avoid, np.float64).reshape(-1, 2)
+        avoid_x, avoid_y = near_avoid[:, 0].copy(), near_avoid[:, 1].copy()
+        (sx, sy), (ax, ay), (ix, iy) = start, along, inward
         taken: list[tuple[float, float]] = []  # (centre, half length) along the kerb line
 
         def put(s: float, lat: float, half_len: float, half_wid: float, z0: float, z1: float,
@@ -175,14 +178,14 @@ def place_clutter(sides: list[Side], buildings: list[np.ndarray], slots: np.ndar
                 return False
             if check and any(abs(s - c) < half_len + h + 0.4 for c, h in taken):
                 return False
-            xy = start + along * s + inward * lat
-            if len(near_avoid) and np.hypot(*(near_avoid - xy).T).min() < 2.5 + half_len:
-                return False
-            if _under_vehicle(float(xy[0]), float(xy[1]), max(half_len, half_wid), *foot):
+            # start + along * s + inward * lat, in scalars (the same operations)
+            x, y = sx + ax * s + ix * lat, sy + ay * s + iy * lat
+            if _blocked(float(x), float(y), max(half_len, half_wid), 2.5 + half_len, avoid_x,
+                        avoid_y, *foot):
                 return False
             if check:
                 taken.append((s, half_len))
-            _add(rows, xy, yaw + yaw_off, 2 * half_len, 2 * half_wid, z0, z1, kind)
+            _add(rows, (x, y), yaw + yaw_off, 2 * half_len, 2 * half_wid, z0, z1, kind)
             return True
 
         # poles, then rows of trees, then the rest at random places
@@ -286,7 +289,7 @@ def street_clutter(world_map: Any, cfg: dict[str, Any], rng: np.random.Generator
 
 
 def _footprints(slots: np.ndarray) -> tuple[np.ndarray, ...]:
-    """Parking slots ``(S, 6)`` as :func:`_under_vehicle` reads them: centres ``x, y``,
+    """Parking slots ``(S, 6)`` as :func:`_blocked` reads them: centres ``x, y``,
     ``cos``/``sin`` of the heading, half length and half width (a standard 6 x 2 m
     slot where the row gives no size)."""
     s = np.asarray(slots, np.float64).reshape(-1, 6)
@@ -296,9 +299,14 @@ def _footprints(slots: np.ndarray) -> tuple[np.ndarray, ...]:
 
 
 @nb.njit(cache=True)
-def _under_vehicle(x, y, radius, sx, sy, c, sn, half_l, half_w):  # pragma: no cover - numba
-    """``(x, y)`` (with ``radius`` [m]) touches the footprint of a parking slot (as
-    given by :func:`_footprints`)."""
+def _blocked(x, y, radius, clear, avoid_x, avoid_y, sx, sy, c, sn, half_l,
+             half_w):  # pragma: no cover - numba
+    """``(x, y)`` is nearer than ``clear`` [m] to a crosswalk end ``(avoid_x, avoid_y)``,
+    or (with ``radius`` [m]) touches the footprint of a parking slot (as given by
+    :func:`_footprints`)."""
+    for i in range(avoid_x.shape[0]):
+        if math.hypot(avoid_x[i] - x, avoid_y[i] - y) < clear:
+            return True
     for i in range(sx.shape[0]):
         dx, dy = x - sx[i], y - sy[i]
         if not math.hypot(dx, dy) < 5.0:

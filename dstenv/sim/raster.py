@@ -8,7 +8,7 @@ import numpy as np
 from dstenv.sim.types import MapClass, WorldMap
 
 __all__ = ["fill_polygon", "fill_polygons", "fill_polygons_flat", "fill_rect", "fillet_corners",
-           "lookup", "Surface"]
+           "lookup", "paint_where", "Surface"]
 
 
 class Surface:
@@ -127,6 +127,24 @@ def fill_rect(raster: np.ndarray, x_lo: float, x_hi: float, y_lo: float, y_hi: f
     r_hi = min(int(np.floor((y_hi - y0) / resolution - 0.5)), h - 1)
     if c_hi >= c_lo and r_hi >= r_lo:
         raster[r_lo:r_hi + 1, c_lo:c_hi + 1] = value
+
+
+def paint_where(dst: np.ndarray, src: np.ndarray, code: int, value: int) -> None:
+    """``dst[src == code] = value`` in place, in one pass without temporaries.
+
+    Args:
+        dst, src: ``(H, W) uint8`` rasters of one grid (``dst`` C-contiguous).
+    """
+    if not dst.flags.c_contiguous:
+        raise ValueError("paint_where: dst must be C-contiguous")
+    _paint_where(dst.reshape(-1), np.ascontiguousarray(src).reshape(-1), np.uint8(code),
+                 np.uint8(value))
+
+
+@nb.njit(cache=True)
+def _paint_where(dst, src, code, value):  # pragma: no cover - numba
+    for i in range(src.shape[0]):
+        dst[i] = value if src[i] == code else dst[i]
 
 
 def lookup(world_map: WorldMap, xy: np.ndarray) -> np.ndarray:

@@ -8,6 +8,7 @@ the two walking directions of a crosswalk use separate lines 1.2 m apart.
 
 from __future__ import annotations
 
+import numba as nb
 import numpy as np
 
 from dstenv.sim.lanes import LaneKind, NetworkBuilder
@@ -33,14 +34,24 @@ def rounded_rect(x0: float, x1: float, y0: float, y1: float,
 
 def _arc(ring: np.ndarray, p: np.ndarray) -> tuple[float, float]:
     """Arc length of the projection of ``p`` on a ring and the distance to it."""
-    a, b = ring[:-1], ring[1:]
-    d = b - a
-    seg = np.hypot(d[:, 0], d[:, 1])
-    t = np.clip(np.einsum("ij,ij->i", p - a, d) / np.maximum(seg ** 2, 1e-12), 0, 1)
-    q = a + t[:, None] * d
-    dist = np.hypot(*(q - p).T)
-    k = int(np.argmin(dist))
-    return float(np.concatenate([[0], np.cumsum(seg)])[k] + t[k] * seg[k]), float(dist[k])
+    return _arc_nb(np.ascontiguousarray(ring, np.float64), float(p[0]), float(p[1]))
+
+
+@nb.njit(cache=True)
+def _arc_nb(ring, px, py):  # pragma: no cover - numba
+    """:func:`_arc` in one pass: the nearest point over the segments (the first of
+    equals), its arc length and distance."""
+    best, s_best, cum = np.inf, 0.0, 0.0
+    for i in range(ring.shape[0] - 1):
+        dx, dy = ring[i + 1, 0] - ring[i, 0], ring[i + 1, 1] - ring[i, 1]
+        seg = np.hypot(dx, dy)
+        t = ((px - ring[i, 0]) * dx + (py - ring[i, 1]) * dy) / max(seg * seg, 1e-12)
+        t = min(max(t, 0.0), 1.0)
+        dist = np.hypot(ring[i, 0] + t * dx - px, ring[i, 1] + t * dy - py)
+        if dist < best:
+            best, s_best = dist, cum + t * seg
+        cum += seg
+    return s_best, best
 
 
 def _split(ring: np.ndarray, cuts: list[float]) -> list[np.ndarray]:

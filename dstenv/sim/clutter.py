@@ -22,13 +22,12 @@ The result is an :class:`~dstenv.sim.types.Obstacles` (boxes with heights, see
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
-import numba as nb
 import numpy as np
 
 from dstenv.sim.types import ObstacleKind as K
+from dstenv.sim.kerbside import kerb_clutter
 from dstenv.sim.types import Obstacles
 
 __all__ = ["default_clutter_config", "place_clutter", "street_clutter", "median_clutter",
@@ -150,100 +149,26 @@ def place_clutter(sides: list[Side], buildings: list[np.ndarray], slots: np.ndar
         :class:`Obstacles` (empty when ``density`` is 0).
     """
     dens = float(cfg["density"])
-    rows = _rows()
     if dens <= 0 or not sides:
         return Obstacles.empty()
     bbox = np.array([[*np.min(b, 0), *np.max(b, 0)] for b in buildings]).reshape(-1, 4)
-    for start, along, inward, length, parking in sides:
-        keep = curb + sidewalk + 2.0  # clear of the corner's crosswalks and kerb radius
-        if length < 2 * keep + 2.0:
-            continue
-        yaw = float(np.arctan2(along[1], along[0]))
-        line = curb + 0.25 if parking else curb / 2
-        # the crosswalk ends and parking slots near this side (checked for every item)
-        lo = np.minimum(start, start + along * length) - 8.0
-        hi = np.maximum(start, start + along * length) + 8.0 + np.abs(inward) * (curb + sidewalk)
-        near_avoid = avoid[np.all((avoid >= lo) & (avoid <= hi), 1)] if len(avoid) else avoid
-        near_slots = slots[np.all((slots[:, :2] >= lo) & (slots[:, :2] <= hi), 1)] \
-            if len(slots) else slots
-        foot = _footprints(near_slots)
-        near_avoid = np.asarray(near_avoid, np.float64).reshape(-1, 2)
-        avoid_x, avoid_y = near_avoid[:, 0].copy(), near_avoid[:, 1].copy()
-        (sx, sy), (ax, ay), (ix, iy) = start, along, inward
-        taken: list[tuple[float, float]] = []  # (centre, half length) along the kerb line
-
-        def put(s: float, lat: float, half_len: float, half_wid: float, z0: float, z1: float,
-                kind: int, yaw_off: float = 0.0, check: bool = True) -> bool:
-            if not keep <= s <= length - keep:
-                return False
-            if check and any(abs(s - c) < half_len + h + 0.4 for c, h in taken):
-                return False
-            # start + along * s + inward * lat, in scalars (the same operations)
-            x, y = sx + ax * s + ix * lat, sy + ay * s + iy * lat
-            if _blocked(float(x), float(y), max(half_len, half_wid), 2.5 + half_len, avoid_x,
-                        avoid_y, *foot):
-                return False
-            if check:
-                taken.append((s, half_len))
-            _add(rows, (x, y), yaw + yaw_off, 2 * half_len, 2 * half_wid, z0, z1, kind)
-            return True
-
-        # poles, then rows of trees, then the rest at random places
-        spacing = cfg["pole_spacing"] / dens
-        for s in np.arange(keep + rng.uniform(0, spacing), length - keep, spacing):
-            put(s + rng.normal(0, 0.1 * spacing), line, 0.13, 0.13, 0.0,
-                rng.uniform(6.0, 9.0), K.POLE)
-        if rng.random() < min(cfg["tree_side_prob"] * dens, 1.0):
-            sp = cfg["tree_spacing"]
-            for s in np.arange(keep + rng.uniform(0, sp), length - keep, sp):
-                s = s + rng.uniform(-0.2, 0.2) * sp
-                r_trunk = rng.uniform(0.12, 0.25)
-                z_crown = rng.uniform(2.0, 3.0)
-                if put(s, line, r_trunk, r_trunk, 0.0, z_crown + 0.5, K.TREE_TRUNK):
-                    d = rng.uniform(3.0, 6.5)
-                    _add(rows, start + along * s + inward * line, yaw, d, d, z_crown,
-                         z_crown + rng.uniform(3.0, 7.0), K.TREE_CROWN)
-        per_m = dens * length / 100.0
-        for _ in range(rng.poisson(cfg["sign_rate"] * per_m)):
-            s = rng.uniform(keep, length - keep)
-            if put(s, line, 0.05, 0.05, 0.0, 2.3, K.SIGN):
-                _add(rows, start + along * s + inward * line, yaw, 0.65, 0.06, 2.0, 2.8, K.SIGN)
-        for _ in range(rng.poisson(cfg["bin_rate"] * per_m)):
-            big = rng.random() < 0.25  # a container instead of a bin
-            put(rng.uniform(keep, length - keep), line, 0.6 if big else 0.3, 0.45 if big else 0.3,
-                0.0, 1.3 if big else 1.0, K.BIN)
-        for _ in range(rng.poisson(cfg["bicycle_rate"] * per_m)):
-            n = int(rng.integers(2, 7))
-            s0 = rng.uniform(keep, length - keep)
-            if all(abs(s0 + 0.95 * n - c) > 0.95 * n + h + 0.4 for c, h in taken):
-                for b in range(n):  # one behind the other along the kerb, slightly askew
-                    put(s0 + 1.9 * b, line, 0.85, 0.3, 0.0, 1.1, K.BICYCLE,
-                        rng.normal(0.0, 0.1), check=False)
-                taken.append((s0 + 0.95 * n, 0.95 * n))
-        for end in (keep, length - keep - 6.0):
-            if rng.random() < min(cfg["bollard_prob"] * dens, 1.0):
-                for b in range(int(rng.integers(3, 7))):
-                    put(end + 1.2 * b + 0.5, curb + 0.2 if parking else curb - 0.3, 0.1, 0.1,
-                        0.0, 0.9, K.BOLLARD, check=False)
-        if not parking and curb > 1.0 and rng.random() < min(cfg["shelter_prob"] * dens, 1.0):
-            put(rng.uniform(keep, length - keep), curb / 2, 2.0, min(0.75, curb / 2 - 0.1), 0.0,
-                2.5, K.SHELTER)
-        # hedges and fences along the front yards
-        front = curb + sidewalk + 0.4
-        s = keep - 2.0
-        while s < length - keep + 2.0:
-            seg = rng.uniform(6.0, 20.0)
-            if rng.random() < min(cfg["front_prob"] * dens, 1.0):
-                hedge = rng.random() < 0.6
-                wid = rng.uniform(0.5, 0.9) if hedge else 0.08
-                lo, hi = s + 0.3, min(s + seg - 0.3, length - keep + 2.0)
-                if hi - lo > 1.5 and not _hits_building(start, along, inward, lo, hi, front,
-                                                        front + wid, bbox):
-                    _add(rows, start + along * (lo + hi) / 2 + inward * (front + wid / 2), yaw,
-                         hi - lo, wid, 0.0, rng.uniform(0.8, 1.8) if hedge else
-                         rng.uniform(1.0, 1.8), K.HEDGE if hedge else K.FENCE)
-            s += seg
-    return _obstacles(rows)
+    geo = np.array([[*start, *along, *inward, length] for start, along, inward, length, _ in sides],
+                   np.float64).reshape(-1, 7)
+    yaws = np.arctan2(geo[:, 3], geo[:, 2])
+    slots = np.asarray(slots, np.float64).reshape(-1, 6)
+    params = np.array([cfg[k] for k in ("pole_spacing", "tree_side_prob", "tree_spacing",
+                                        "sign_rate", "bin_rate", "bicycle_rate", "bollard_prob",
+                                        "shelter_prob", "front_prob")], np.float64)
+    rows = kerb_clutter(rng, geo, np.array([bool(s[4]) for s in sides]), yaws, bbox, slots,
+                        np.cos(slots[:, 2]), np.sin(slots[:, 2]),
+                        np.where(slots[:, 3] > 0, slots[:, 3] / 2, 3.0),
+                        np.where(slots[:, 4] > 0, slots[:, 4] / 2, 1.0),
+                        np.asarray(avoid, np.float64).reshape(-1, 2), float(curb),
+                        float(sidewalk), dens, params)
+    if not len(rows):
+        return Obstacles.empty()
+    return Obstacles(rows[:, :2].copy(), rows[:, 2].copy(), rows[:, 3].copy(), rows[:, 4].copy(),
+                     rows[:, 5].copy(), rows[:, 6].copy(), rows[:, 7].astype(np.uint8))
 
 
 def street_clutter(world_map: Any, cfg: dict[str, Any], rng: np.random.Generator) -> Obstacles:
@@ -286,45 +211,3 @@ def street_clutter(world_map: Any, cfg: dict[str, Any], rng: np.random.Generator
                     _add(rows, p, yaw, size, size, 0.0,
                          {K.POLE: 7.0, K.SIGN: 2.3, K.BIN: 1.0}[kind], kind)
     return _obstacles(rows)
-
-
-def _footprints(slots: np.ndarray) -> tuple[np.ndarray, ...]:
-    """Parking slots ``(S, 6)`` as :func:`_blocked` reads them: centres ``x, y``,
-    ``cos``/``sin`` of the heading, half length and half width (a standard 6 x 2 m
-    slot where the row gives no size)."""
-    s = np.asarray(slots, np.float64).reshape(-1, 6)
-    return (np.ascontiguousarray(s[:, 0]), np.ascontiguousarray(s[:, 1]), np.cos(s[:, 2]),
-            np.sin(s[:, 2]), np.where(s[:, 3] > 0, s[:, 3] / 2, 3.0),
-            np.where(s[:, 4] > 0, s[:, 4] / 2, 1.0))
-
-
-@nb.njit(cache=True)
-def _blocked(x, y, radius, clear, avoid_x, avoid_y, sx, sy, c, sn, half_l,
-             half_w):  # pragma: no cover - numba
-    """``(x, y)`` is nearer than ``clear`` [m] to a crosswalk end ``(avoid_x, avoid_y)``,
-    or (with ``radius`` [m]) touches the footprint of a parking slot (as given by
-    :func:`_footprints`)."""
-    for i in range(avoid_x.shape[0]):
-        if math.hypot(avoid_x[i] - x, avoid_y[i] - y) < clear:
-            return True
-    for i in range(sx.shape[0]):
-        dx, dy = x - sx[i], y - sy[i]
-        if not math.hypot(dx, dy) < 5.0:
-            continue
-        lon = dx * c[i] + dy * sn[i]
-        lat = -dx * sn[i] + dy * c[i]
-        if abs(lon) < half_l[i] + radius + 0.2 and abs(lat) < half_w[i] + radius + 0.2:
-            return True
-    return False
-
-
-def _hits_building(start, along, inward, lo, hi, d0, d1, bbox) -> bool:
-    """The band ``[lo, hi]`` along x ``[d0, d1]`` inward overlaps a building box."""
-    if not len(bbox):
-        return False
-    a = start + along * lo + inward * d0
-    b = start + along * hi + inward * d1
-    x0, x1 = min(a[0], b[0]) - 0.2, max(a[0], b[0]) + 0.2
-    y0, y1 = min(a[1], b[1]) - 0.2, max(a[1], b[1]) + 0.2
-    return bool(np.any((bbox[:, 0] < x1) & (bbox[:, 2] > x0)
-                       & (bbox[:, 1] < y1) & (bbox[:, 3] > y0)))

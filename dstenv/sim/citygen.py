@@ -22,7 +22,8 @@ import numpy as np
 
 from dstenv.sim.lanes import Control, NetworkBuilder
 from dstenv.sim.medians import draw_medians, median_box
-from dstenv.sim.raster import Surface, fill_polygons, fill_rect, fillet_corners, paint_where
+from dstenv.sim.raster import (Surface, fill_polygons, fill_rect, fill_rects, fillet_corners,
+                               paint_where)
 from dstenv.sim.roads import RoadEdge, add_road_lanes
 from dstenv.sim.roundabout import (island_clutter, paint_roundabout, pick_roundabouts,
                                    ring_nodes)
@@ -310,11 +311,12 @@ def _degree(vseg: np.ndarray, hseg: np.ndarray, i: int, j: int) -> int:
 def _zebra(surface, centre, d, hw, res):
     """Paint a zebra crossing 3 m wide across a street (drawing only)."""
     p = np.array([-d[1], d[0]])
-    for k in np.arange(-hw + 0.25, hw, 1.0):
-        a = centre + p * k - d * 1.5
-        b = centre + p * (k + 0.5) + d * 1.5
-        fill_rect(surface, min(a[0], b[0]), max(a[0], b[0]), min(a[1], b[1]), max(a[1], b[1]),
-                  (0.0, 0.0), res, Surface.CROSSWALK)
+    k = np.arange(-hw + 0.25, hw, 1.0)[:, None]  # one stripe per row
+    a = centre + p * k - d * 1.5
+    b = centre + p * (k + 0.5) + d * 1.5
+    fill_rects(surface, np.stack([np.minimum(a[:, 0], b[:, 0]), np.maximum(a[:, 0], b[:, 0]),
+                                  np.minimum(a[:, 1], b[:, 1]), np.maximum(a[:, 1], b[:, 1])], -1),
+               (0.0, 0.0), res, Surface.CROSSWALK)
 
 
 def _sides(face):
@@ -340,13 +342,14 @@ def _parking(surface, face, cfg, rng, res, avoid: np.ndarray,
             continue
         rows = side_slots(start, along, inward, length, cfg, rng, avoid)
         parked_sides.append(k)
-        for x, y, _, ln, _, _ in rows:
-            c = np.array([x, y])
-            half = (ln or SLOT_LENGTH) / 2
-            a = c - along * half - inward * curb / 2
-            b = c + along * half + inward * curb / 2
-            fill_rect(surface, min(a[0], b[0]), max(a[0], b[0]), min(a[1], b[1]),
-                      max(a[1], b[1]), (0.0, 0.0), res, Surface.PARKING)
+        c = rows[:, :2]
+        half = (np.where(rows[:, 3] != 0, rows[:, 3], SLOT_LENGTH) / 2)[:, None]
+        a = c - along * half - inward * curb / 2
+        b = c + along * half + inward * curb / 2
+        fill_rects(surface, np.stack([np.minimum(a[:, 0], b[:, 0]), np.maximum(a[:, 0], b[:, 0]),
+                                      np.minimum(a[:, 1], b[:, 1]),
+                                      np.maximum(a[:, 1], b[:, 1])], -1),
+                   (0.0, 0.0), res, Surface.PARKING)
         slots.append(rows)
     return slots, parked_sides
 

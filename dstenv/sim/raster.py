@@ -7,8 +7,8 @@ import numpy as np
 
 from dstenv.sim.types import MapClass, WorldMap
 
-__all__ = ["fill_polygon", "fill_polygons", "fill_polygons_flat", "fill_rect", "fillet_corners",
-           "lookup", "paint_where", "Surface"]
+__all__ = ["fill_polygon", "fill_polygons", "fill_polygons_flat", "fill_rect", "fill_rects",
+           "fillet_corners", "lookup", "paint_where", "Surface"]
 
 
 class Surface:
@@ -119,14 +119,34 @@ def fill_polygons_flat(raster: np.ndarray, xy: np.ndarray, ptr: np.ndarray,
 def fill_rect(raster: np.ndarray, x_lo: float, x_hi: float, y_lo: float, y_hi: float,
               origin: tuple[float, float], resolution: float, value: int) -> None:
     """Set the cells whose centres lie in the axis-aligned box to ``value`` (in place)."""
-    x0, y0 = origin
+    _fill_box(raster, float(x_lo), float(x_hi), float(y_lo), float(y_hi), float(origin[0]),
+              float(origin[1]), float(resolution), np.uint8(value))
+
+
+def fill_rects(raster: np.ndarray, boxes: np.ndarray, origin: tuple[float, float],
+               resolution: float, value: int) -> None:
+    """:func:`fill_rect` of every row ``x_lo, x_hi, y_lo, y_hi`` of ``boxes (N, 4)``
+    [m], in order, in one call."""
+    _fill_boxes(raster, np.ascontiguousarray(boxes, np.float64).reshape(-1, 4),
+                float(origin[0]), float(origin[1]), float(resolution), np.uint8(value))
+
+
+@nb.njit(cache=True)
+def _fill_box(raster, x_lo, x_hi, y_lo, y_hi, x0, y0, res, value):  # pragma: no cover
     h, w = raster.shape
-    c_lo = max(int(np.ceil((x_lo - x0) / resolution - 0.5)), 0)
-    c_hi = min(int(np.floor((x_hi - x0) / resolution - 0.5)), w - 1)
-    r_lo = max(int(np.ceil((y_lo - y0) / resolution - 0.5)), 0)
-    r_hi = min(int(np.floor((y_hi - y0) / resolution - 0.5)), h - 1)
+    c_lo = max(int(np.ceil((x_lo - x0) / res - 0.5)), 0)
+    c_hi = min(int(np.floor((x_hi - x0) / res - 0.5)), w - 1)
+    r_lo = max(int(np.ceil((y_lo - y0) / res - 0.5)), 0)
+    r_hi = min(int(np.floor((y_hi - y0) / res - 0.5)), h - 1)
     if c_hi >= c_lo and r_hi >= r_lo:
         raster[r_lo:r_hi + 1, c_lo:c_hi + 1] = value
+
+
+@nb.njit(cache=True)
+def _fill_boxes(raster, boxes, x0, y0, res, value):  # pragma: no cover - numba
+    for i in range(boxes.shape[0]):
+        _fill_box(raster, boxes[i, 0], boxes[i, 1], boxes[i, 2], boxes[i, 3], x0, y0, res,
+                  value)
 
 
 def paint_where(dst: np.ndarray, src: np.ndarray, code: int, value: int) -> None:

@@ -19,9 +19,8 @@ from typing import Any
 import numpy as np
 
 from dstenv.sim.lanes import LaneKind, LaneNetwork, lane_pose, project_on_lane
-from dstenv.sim.traffic import choose_successor
 from dstenv.sim.parking import VEHICLE_CLASSES
-from dstenv.sim.placement import free_spot, near_any, place_mobile
+from dstenv.sim.placement import free_spot, near_any, place_mobile, plan_route_nb
 from dstenv.sim.types import AGENT_HEIGHT, AgentKind, WorldMap
 
 __all__ = ["populate", "respawn", "pull_out", "plan_route", "nearest_lane", "add_row", "net_tuple",
@@ -67,16 +66,10 @@ def rules_tuple(tr: dict[str, Any], lane_width: float) -> tuple:
 
 def plan_route(net: LaneNetwork, lane: int, rng: np.random.Generator, k: int,
                cross_prob: float = 0.0, fixed: tuple[int, ...] = ()) -> np.ndarray:
-    """``(k,) int64`` route starting with ``lane`` (then ``fixed``), random successors after."""
-    route = np.full(k, -1, np.int64)
-    head = (lane, *fixed)
-    route[:len(head)] = head
-    for i in range(len(head), k):
-        if route[i - 1] < 0:
-            break
-        route[i] = choose_successor(route[i - 1], rng.random(), net.succ_ptr, net.succ, net.kind,
-                                    net.turn, cross_prob)
-    return route
+    """``(k,) int64`` route starting with ``lane`` (then ``fixed``), random successors after
+    (:func:`dstenv.sim.placement.plan_route_nb`)."""
+    return plan_route_nb(int(lane), np.asarray(fixed, np.int64).reshape(-1), int(k), rng,
+                         net.succ_ptr, net.succ, net.kind, net.turn, float(cross_prob))
 
 
 def nearest_lane(net: LaneNetwork, x: float, y: float, yaw: float,

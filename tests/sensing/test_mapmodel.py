@@ -72,3 +72,30 @@ def test_default_error_is_drawn_once_per_episode_and_is_deterministic():
     assert np.array_equal(a.offset, b.offset) and a.rotation == b.rotation
     assert np.array_equal(a.raster, b.raster) and a.raster is not None
     assert 0 < np.hypot(*a.offset) < 5.0 and abs(a.rotation) < 0.1
+
+
+def test_street_bands_are_the_cells_within_half_a_width_of_the_line():
+    """The row-interval painter equals testing every cell's distance to every segment
+    (a polyline with short, long, diagonal and degenerate segments)."""
+    from dstenv.sensing.mapmodel import _paint_bands
+
+    rng = np.random.default_rng(4)
+    lines = [np.cumsum(rng.normal(0, 3, (12, 2)), 0) + 20, np.array([[2.0, 3.0], [2.0, 3.0],
+                                                                      [30.0, 3.0], [30.0, 35.0]]),
+             np.cumsum(rng.uniform(-1, 1, (40, 2)), 0) + 15]
+    halves = np.array([2.3, 1.5, 3.7])
+    ptr = np.cumsum([0] + [len(line) for line in lines]).astype(np.int64)
+    out = np.zeros((180, 200), np.uint8)
+    _paint_bands(out, np.concatenate(lines), ptr, halves, -1.0, -2.0, 0.25, np.uint8(2))
+    yc, xc = np.mgrid[0:180, 0:200] * 0.25 + 0.125
+    xc, yc = xc - 1.0, yc - 2.0
+    ref = np.zeros(out.shape, bool)
+    for line, half in zip(lines, halves):
+        for (ax, ay), (bx, by) in zip(line[:-1], line[1:]):
+            ex, ey = bx - ax, by - ay
+            ll = ex * ex + ey * ey
+            t = np.zeros_like(xc) if ll == 0 else ((xc - ax) * ex + (yc - ay) * ey) / ll
+            t = np.clip(t, 0.0, 1.0)
+            ref |= (ax + t * ex - xc) ** 2 + (ay + t * ey - yc) ** 2 <= half * half
+    assert ref.sum() > 1000
+    assert np.array_equal(out == 2, ref)

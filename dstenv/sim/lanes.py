@@ -8,6 +8,8 @@ lanes carry pedestrians. ``WorldMap.lanes`` holds a :class:`LaneNetwork`.
 
 from __future__ import annotations
 
+import functools
+
 from dataclasses import dataclass
 from enum import IntEnum
 
@@ -122,8 +124,19 @@ def bezier(p0, h0: float, p1, h1: float, n: int = 24, k: float = 0.42) -> np.nda
     d = k * np.hypot(*(p1 - p0))
     c0 = p0 + d * np.array([np.cos(h0), np.sin(h0)])
     c1 = p1 - d * np.array([np.cos(h1), np.sin(h1)])
+    b0, b1, b2, b3 = _bernstein(n)
+    return b0 * p0 + b1 * c0 + b2 * c1 + b3 * p1
+
+
+@functools.lru_cache(maxsize=8)
+def _bernstein(n: int) -> tuple[np.ndarray, ...]:
+    """The cubic Bernstein weights of :func:`bezier` at ``n`` steps, each ``(n, 1)``
+    (read-only; computed as the curve's own expression would)."""
     t = np.linspace(0, 1, n)[:, None]
-    return (1 - t) ** 3 * p0 + 3 * (1 - t) ** 2 * t * c0 + 3 * (1 - t) * t ** 2 * c1 + t ** 3 * p1
+    out = ((1 - t) ** 3, 3 * (1 - t) ** 2 * t, 3 * (1 - t) * t ** 2, t ** 3)
+    for a in out:
+        a.flags.writeable = False
+    return out
 
 
 def fillet_curve(p0, h0: float, p1, h1: float, r: float) -> np.ndarray | None:

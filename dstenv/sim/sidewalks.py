@@ -17,13 +17,15 @@ __all__ = ["rounded_rect", "add_block_rings"]
 
 LANE_OFFSET = 0.6  # [m] half the distance between the two walking lines of a sidewalk
 CORNER_RADIUS = 1.0  # [m] rounding of a ring's corners
+_QUARTER = np.linspace(0, np.pi / 2, 5)  # corner arc angles [rad]
+_QUARTER.flags.writeable = False
 
 
 def rounded_rect(x0: float, x1: float, y0: float, y1: float,
                  r: float = CORNER_RADIUS) -> np.ndarray:
     """Closed counter-clockwise ring around a box with rounded corners: ``(K, 2)``."""
     r = min(r, (x1 - x0) / 3, (y1 - y0) / 3)
-    a = np.linspace(0, np.pi / 2, 5)
+    a = _QUARTER
     pts = []
     for cx, cy, a0 in ((x1 - r, y0 + r, -np.pi / 2), (x1 - r, y1 - r, 0.0),
                        (x0 + r, y1 - r, np.pi / 2), (x0 + r, y0 + r, np.pi)):

@@ -33,7 +33,8 @@ import numpy as np
 from dstenv.config import Validated, merge_config
 
 __all__ = ["CloudError", "default_ground_config", "fit_ground_plane", "ground_heights",
-           "classify_points", "ground_config", "ground_walk", "polar_coordinates"]
+           "classify_points", "ground_config", "ground_walk", "polar_coordinates",
+           "prepare_points"]
 
 
 class CloudError(ValueError):
@@ -103,20 +104,11 @@ def fit_ground_plane(points: np.ndarray, config: dict[str, Any] | None = None, *
     rng = np.random.default_rng(cfg["seed"])
     if len(pick) > cfg["sample"]:
         pick = pick[rng.choice(len(pick), cfg["sample"], replace=False)]
-    cand = _rows(xyz, pick)
-    tri = cand[rng.integers(0, len(cand), size=(cfg["iterations"], 3))]  # (I, 3, 3)
-    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    norm = np.linalg.norm(normal, axis=1)
-    ok = norm > 1e-9
-    normal[ok] /= norm[ok, None]
-    normal *= np.where(normal[:, 2:3] < 0, -1.0, 1.0)  # point up
-    ok &= normal[:, 2] >= np.cos(np.deg2rad(cfg["max_tilt_deg"]))
-    if not ok.any():
+    tri = rng.integers(0, len(pick), size=(cfg["iterations"], 3))  # (I, 3) candidate triplets
+    cand, best, plane = _ransac(xyz, pick, tri, math.cos(math.radians(cfg["max_tilt_deg"])),
+                                float(cfg["inlier_distance"]))
+    if best < 0:
         raise CloudError("ground fit: no near-horizontal plane among the RANSAC hypotheses")
-    d = -np.einsum("ij,ij->i", normal, tri[:, 0])
-    columns = np.ascontiguousarray(cand.T)  # (3, K): the scoring loop vectorises
-    score = np.where(ok, _inlier_counts(normal, d, columns, cfg["inlier_distance"]), -1)
-    plane = np.append(normal[np.argmax(score)], d[np.argmax(score)])
     for _ in range(2):  # least-squares refit on the inliers: the normal is the
         # eigenvector of the smallest eigenvalue of their scatter matrix
         count, centre, scatter = _inlier_moments(cand, plane, cfg["inlier_distance"])
@@ -242,29 +234,49 @@ def _candidates(xyz, r, fit_range, ego_radius, max_z):  # pragma: no cover - num
 
 
 @numba.njit(cache=True)
-def _rows(xyz, pick):  # pragma: no cover - numba
-    """``(K, 3)`` C-ordered rows ``xyz[pick]`` (NumPy's fancy indexing of a column-major
-    array is several times slower)."""
-    out = np.empty((pick.shape[0], 3))
-    for k in range(pick.shape[0]):
+def _ransac(xyz, pick, tri, min_cos, dist):  # pragma: no cover - numba
+    """The hypotheses of :func:`fit_ground_plane`: ``(cand, best, plane)``, the ``(K, 3)``
+    candidate rows ``xyz[pick]``, the index of the best plane through the triplets
+    ``tri (I, 3)`` of candidates (most candidates within ``dist``; of equal ones the
+    first; -1 if no plane is within the tilt, ``normal_z >= min_cos``) and that plane
+    ``(4,)``, unit normal up. One kernel: NumPy's fancy indexing of a column-major
+    array and its small per-batch calls cost more than the scoring."""
+    k = pick.shape[0]
+    cand = np.empty((k, 3))
+    columns = np.empty((3, k))  # x, y, z rows: the scoring loop vectorises
+    for q in range(k):
         for i in range(3):
-            out[k, i] = xyz[pick[k], i]
-    return out
-
-
-@numba.njit(cache=True)
-def _inlier_counts(normal, d, columns, dist):  # pragma: no cover - numba
-    """``(I,) int64`` candidates (``columns``: ``(3, K)`` x, y, z rows) within ``dist``
-    of each plane hypothesis."""
-    out = np.zeros(normal.shape[0], np.int64)
+            v = xyz[pick[q], i]
+            cand[q, i] = v
+            columns[i, q] = v
     x, y, z = columns[0], columns[1], columns[2]
-    for k in range(normal.shape[0]):
-        a, b, c, e = normal[k, 0], normal[k, 1], normal[k, 2], d[k]
-        n = 0
-        for p in range(x.shape[0]):
-            n += abs(a * x[p] + b * y[p] + c * z[p] + e) < dist
-        out[k] = n
-    return out
+    best = -1
+    top = -1
+    plane = np.zeros(4)
+    for h in range(tri.shape[0]):
+        p0, p1, p2 = cand[tri[h, 0]], cand[tri[h, 1]], cand[tri[h, 2]]
+        a0, a1, a2 = p1[0] - p0[0], p1[1] - p0[1], p1[2] - p0[2]
+        b0, b1, b2 = p2[0] - p0[0], p2[1] - p0[1], p2[2] - p0[2]
+        n0 = a1 * b2 - a2 * b1  # the cross product, as np.cross
+        n1 = a2 * b0 - a0 * b2
+        n2 = a0 * b1 - a1 * b0
+        norm = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+        if not norm > 1e-9:
+            continue
+        n0, n1, n2 = n0 / norm, n1 / norm, n2 / norm
+        if n2 < 0:  # point up
+            n0, n1, n2 = -n0, -n1, -n2
+        if not n2 >= min_cos:
+            continue
+        e = -(n0 * p0[0] + n1 * p0[1] + n2 * p0[2])
+        count = 0
+        for q in range(k):
+            count += abs(n0 * x[q] + n1 * y[q] + n2 * z[q] + e) < dist
+        if count > top:
+            top = count
+            best = h
+            plane[0], plane[1], plane[2], plane[3] = n0, n1, n2, e
+    return cand, best, plane
 
 
 def polar_coordinates(xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -275,6 +287,46 @@ def polar_coordinates(xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     about five times faster than the C library's)."""
     xyz = np.asarray(xyz, dtype=np.float64)
     return _polar_kernel(np.ascontiguousarray(xyz[:, 0]), np.ascontiguousarray(xyz[:, 1]))
+
+
+def prepare_points(points: np.ndarray, offset: tuple[float, float] = (0.0, 0.0)
+                   ) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]:
+    """The copy of a scan the stages of the road read, and its polar coordinates.
+
+    Args:
+        points: ``(P, 3+) float32 or float64`` Velodyne points (KITTI ``.bin`` rows).
+        offset: ``(dx, dy)`` [m] added to x and y (a sensor's mount in the ego frame);
+            ``(0, 0)`` leaves the points as they are.
+
+    Returns:
+        ``(xyz, (r, angle))``: ``(P, 3) float64`` column-major (each coordinate
+        contiguous) and :func:`polar_coordinates` of it; one pass over ``points``.
+    """
+    pts = np.asarray(points)
+    if pts.ndim != 2 or pts.shape[1] < 3:
+        raise ValueError(f"prepare_points: points must be (P, 3+), got shape {pts.shape}")
+    if pts.dtype != np.float32 and pts.dtype != np.float64:
+        pts = pts.astype(np.float64)
+    dx, dy = float(offset[0]), float(offset[1])
+    rows, r, a = _prepare_kernel(pts, dx, dy, dx != 0.0 or dy != 0.0)
+    return rows.T, (r, a)
+
+
+@numba.njit(cache=True)
+def _prepare_kernel(pts, dx, dy, shift):  # pragma: no cover - numba
+    """``(3, P)`` rows x + dx, y + dy, z as float64 and their polar coordinates."""
+    n = pts.shape[0]
+    rows = np.empty((3, n))
+    for p in range(n):
+        rows[0, p] = pts[p, 0]
+        rows[1, p] = pts[p, 1]
+        rows[2, p] = pts[p, 2]
+    if shift:
+        for p in range(n):
+            rows[0, p] += dx
+            rows[1, p] += dy
+    r, a = _polar_kernel(rows[0], rows[1])
+    return rows, r, a
 
 
 # Cephes' atan on [0, 0.66] (rational approximation, relative error ~2e-16)

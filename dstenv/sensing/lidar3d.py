@@ -100,13 +100,8 @@ class Cloud:
         """``(H, W) uint8`` sensor grid by :func:`dstenv.sensing.cloud.cloud_sensor_grid`
         (ground removal, one ray per point), the road KITTI scans take; the points are
         shifted by the mount so the grid stays ego-centred."""
-        pts = np.empty((len(self), 3), order="F")  # columns contiguous, as the road reads them
-        pts[:, 0] = self.points[:, 0]
-        pts[:, 0] += self.mount[0]
-        pts[:, 1] = self.points[:, 1]
-        pts[:, 1] += self.mount[1]
-        pts[:, 2] = self.points[:, 2]
-        return cloud_sensor_grid(pts, spec, self.config["ground"], self.config["rays"])[0]
+        return cloud_sensor_grid(self.points, spec, self.config["ground"], self.config["rays"],
+                                 offset=(float(self.mount[0]), float(self.mount[1])))[0]
 
 
 class Hdl64:

@@ -49,7 +49,7 @@ from dstenv.grid import GridSpec
 from dstenv.sensing.cast3d import cast_boxes, cast_ground, cast_walls, column_index, raised_distance
 from dstenv.sensing.cloud import cloud_sensor_grid
 from dstenv.sensing.config import lidar_config
-from dstenv.sensing.draws import beam_normal, beam_uniform, stream_keys
+from dstenv.sensing.draws import beam_dropout, beam_normal_pair, stream_keys
 from dstenv.sim.types import Agents, MapClass, WorldMap
 
 __all__ = ["Hdl64", "Cloud", "SURFACES", "REFLECTANCE"]
@@ -135,7 +135,7 @@ class Hdl64:
         self._raster = np.zeros((0, 0), np.uint8)
         self._dist = np.zeros((0, 0), np.uint8)
         self._best = np.empty((self.columns, n))  # nearest hit per beam [m], horizontal
-        self._surf = np.empty((self.columns, n), np.int16)
+        self._surf = np.empty((self.columns, n), np.int16)  # read only where best < inf
         self._idx = np.empty((self.columns, n), np.int32)
 
     @property
@@ -184,9 +184,7 @@ class Hdl64:
             self._map = world_map
         edges, starts, circles, heights = self._walls
         best, surf, idx = self._best, self._surf, self._idx  # reused: no page faults
-        best.fill(np.inf)
-        surf.fill(-1)
-        idx.fill(-1)
+        best.fill(np.inf)  # surf and idx are written with every finite best
         h_max = c["max_range"]  # a slant range bounds the horizontal one
         mount = float(c["mount_height"])
         cols = column_index(ox, oy, world_az)
@@ -204,15 +202,17 @@ class Hdl64:
                  rng: np.random.Generator) -> Cloud:
         c = self.config
         n = _count_returns(best)  # returns before noise, column-major
-        # the sweep's whole use of ``rng``: three stream keys of counter-based draws
-        # (draws.beam_*: NumPy's distributions, one vectorised loop each)
-        k_noise, k_drop, k_int = stream_keys(rng, 3)
-        noise = (beam_normal(k_noise, n, float(c["range_noise"])) if c["range_noise"] > 0
-                 else np.zeros(n))
-        keep = (beam_uniform(k_drop, n) >= c["dropout"] if c["dropout"] > 0
-                else np.ones(n, bool))
-        inoise = (beam_normal(k_int, n, float(c["intensity_noise"]))
-                  if c["intensity_noise"] > 0 else np.zeros(n))
+        # the sweep's whole use of ``rng``: stream keys of counter-based draws (draws.py:
+        # NumPy's distributions; both noises from one word a beam, the dropout by its
+        # geometric gaps); three keys, the third unused, so that the caller's generator
+        # advances as it always did
+        k_noise, k_drop, _ = stream_keys(rng, 3)
+        if c["range_noise"] > 0 or c["intensity_noise"] > 0:
+            noise, inoise = beam_normal_pair(k_noise, n, float(c["range_noise"]),
+                                             float(c["intensity_noise"]))
+        else:
+            noise = inoise = np.zeros(n)
+        keep = beam_dropout(k_drop, n, float(c["dropout"]))
         pts = np.empty((n, 4), np.float32)
         out_ch = np.empty(n, np.int16)
         out_col = np.empty(n, np.int32)

@@ -101,10 +101,7 @@ def fit_ground_plane(points: np.ndarray, config: dict[str, Any] | None = None, *
                        float(cfg["max_candidate_z"]))
     if len(pick) < 3:
         raise CloudError(f"ground fit: only {len(pick)} candidate points near the road")
-    rng = np.random.default_rng(cfg["seed"])
-    if len(pick) > cfg["sample"]:
-        pick = pick[rng.choice(len(pick), cfg["sample"], replace=False)]
-    tri = rng.integers(0, len(pick), size=(cfg["iterations"], 3))  # (I, 3) candidate triplets
+    pick, tri = _sample(pick, int(cfg["sample"]), int(cfg["iterations"]), cfg["seed"])
     cand, best, plane = _ransac(xyz, pick, tri, math.cos(math.radians(cfg["max_tilt_deg"])),
                                 float(cfg["inlier_distance"]))
     if best < 0:
@@ -231,6 +228,81 @@ def _candidates(xyz, r, fit_range, ego_radius, max_z):  # pragma: no cover - num
             out[k] = p
             k += 1
     return out[:k]
+
+
+def _sample(pick: np.ndarray, size: int, iterations: int, seed: int
+            ) -> tuple[np.ndarray, np.ndarray]:
+    """RANSAC's draws: at most ``size`` of the candidates ``pick`` (a uniform sample
+    without replacement, ``Generator.choice``) and ``(iterations, 3)`` triplets of them
+    (``Generator.integers``), from ``default_rng(seed)``.
+
+    Where NumPy's ``choice`` takes a partial Fisher-Yates shuffle (more than 10,000
+    candidates, ``size`` above 1/50 of them: the simulated and the real KITTI scans),
+    :func:`_tail_sample` replays it and the triplets on the generator's raw words
+    (Lemire's bounded draws on its 32-bit stream, as NumPy 2 does): the same picks,
+    without ``choice``'s full index array and Python overhead
+    (``tests/sensing/test_ground.py`` checks them against NumPy)."""
+    k = len(pick)
+    if 10000 < k and k // 50 < size < k:
+        rng = np.random.default_rng(seed)
+        # each pick and each triplet index takes one 32-bit half (rejections are ~1e-5)
+        words = rng.bit_generator.random_raw((size + 3 * iterations) // 2 + 64)
+        sub, tri, ok = _tail_sample(words, k, size, 3 * iterations)
+        if ok:
+            return pick[sub], tri.reshape(iterations, 3)
+    rng = np.random.default_rng(seed)
+    if k > size:
+        pick = pick[rng.choice(k, size, replace=False)]
+    return pick, rng.integers(0, len(pick), size=(iterations, 3))
+
+
+@numba.njit(cache=True)
+def _tail_sample(words, k, size, n_tri):  # pragma: no cover - numba
+    """NumPy's ``choice(k, size, replace=False)`` by tail shuffle, then
+    ``integers(0, size, n_tri)``, on the raw 64-bit ``words`` of a fresh generator
+    (its 32-bit stream: the low half of a word, then the high half). Returns
+    ``(sub, tri, ok)``; ``ok`` is False if the words ran out."""
+    data = np.arange(k)
+    state = np.zeros(3, np.uint64)  # next word, a half pending, that half
+    for i in range(k - 1, k - size - 1, -1):  # NumPy's _shuffle_int
+        j = _lemire(words, state, np.uint64(i))
+        t = data[j]
+        data[j] = data[i]
+        data[i] = t
+    tri = np.empty(n_tri, np.int64)
+    for i in range(n_tri):
+        tri[i] = _lemire(words, state, np.uint64(size - 1))
+    return data[k - size:].copy(), tri, state[0] <= words.shape[0]
+
+
+@numba.njit(cache=True, inline="always")
+def _lemire(words, state, rng):  # pragma: no cover - numba
+    """NumPy's buffered_bounded_lemire_uint32: a draw in ``[0, rng]``."""
+    excl = rng + np.uint64(1)
+    m = _next_u32(words, state) * excl
+    left = m & np.uint64(0xFFFFFFFF)
+    if left < excl:
+        threshold = (np.uint64(0xFFFFFFFF) - rng) % excl
+        while left < threshold and state[0] <= words.shape[0]:  # (no words: give up)
+            m = _next_u32(words, state) * excl
+            left = m & np.uint64(0xFFFFFFFF)
+    return m >> np.uint64(32)
+
+
+@numba.njit(cache=True, inline="always")
+def _next_u32(words, state):  # pragma: no cover - numba
+    """The generator's next_uint32 on ``words``; past their end, 0 (and the count says so)."""
+    if state[1]:
+        state[1] = 0
+        return state[2]
+    if state[0] >= words.shape[0]:
+        state[0] = words.shape[0] + 1
+        return np.uint64(0)
+    w = words[state[0]]
+    state[0] += 1
+    state[1] = 1
+    state[2] = w >> np.uint64(32)
+    return w & np.uint64(0xFFFFFFFF)
 
 
 @numba.njit(cache=True)

@@ -140,6 +140,7 @@ def _classify_bins(r, angle, h, cell, flat, ego_radius, ground_height, low, high
     obstacle = np.empty(n, np.bool_)
     b = np.empty(n, np.int64)
     nearest = np.full(n_bins, np.inf)
+    to_bin = n_bins / (2 * math.pi)  # a product, as _azimuth_bins
     for p in range(n):
         away = r[p] > ego_radius
         hp = h[p] - flat[cell[p]]
@@ -147,7 +148,7 @@ def _classify_bins(r, angle, h, cell, flat, ego_radius, ground_height, low, high
         ground[p] = away and -3.0 < hp < ground_height
         o = away and low <= hp <= high
         obstacle[p] = o
-        k = min(int((angle[p] + math.pi) / (2 * math.pi) * n_bins), n_bins - 1)
+        k = min(int((angle[p] + math.pi) * to_bin), n_bins - 1)
         b[p] = k
         if o and hp >= block_height and r[p] < nearest[k]:
             nearest[k] = r[p]
@@ -160,8 +161,9 @@ def _azimuth_bins(rng, angle, block, n_bins):  # pragma: no cover - numba
     n = rng.shape[0]
     b = np.empty(n, np.int64)
     nearest = np.full(n_bins, np.inf)
+    to_bin = n_bins / (2 * math.pi)  # a product by the reciprocal: no division a point
     for p in range(n):
-        k = int((angle[p] + math.pi) / (2 * math.pi) * n_bins)
+        k = int((angle[p] + math.pi) * to_bin)
         b[p] = min(k, n_bins - 1)
         if block[p] and rng[p] < nearest[b[p]]:
             nearest[b[p]] = rng[p]
@@ -178,6 +180,7 @@ def _extent_marks(x, y, b, rng, ground, obstacle, nearest, occluded_hits, max_ra
     ext = np.zeros(nearest.shape[0])
     occ = np.uint8(SensorState.OCCUPIED)
     free = np.uint8(SensorState.FREE)
+    inv_cell = 1.0 / cell  # a product, not a division a point
     for p in range(x.shape[0]):
         k = b[p]
         first = rng[p] <= nearest[k]
@@ -187,8 +190,8 @@ def _extent_marks(x, y, b, rng, ground, obstacle, nearest, occluded_hits, max_ra
             continue
         if not ((ground[p] and first) or (obstacle[p] and (first or occluded_hits))):
             continue
-        i = int(math.floor(i0 - x[p] / cell + 0.5))
-        j = int(math.floor(j0 - y[p] / cell + 0.5))
+        i = int(math.floor(i0 - x[p] * inv_cell + 0.5))
+        j = int(math.floor(j0 - y[p] * inv_cell + 0.5))
         if 0 <= i < h and 0 <= j < w:
             if obstacle[p]:
                 marks[i, j] = occ

@@ -497,13 +497,17 @@ def _ground_walk(xyz, plane, r_all, angle, n_sec, bin_size, ego_radius, max_slop
     for p in range(n):  # its own loop: it vectorises
         h[p] = a * xyz[p, 0] + b * xyz[p, 1] + c * xyz[p, 2] + d
     n_bin = int(math.ceil(np.max(r_all) / bin_size)) + 1
+    # products by reciprocals, not divisions: this loop's cost (bins may differ from
+    # the quotients' only for a value within an ulp of a bin edge)
+    to_sec = n_sec / (2 * math.pi)
+    inv_bin = 1.0 / bin_size
     cell = np.empty(n, np.int64)  # sector * n_bin + range bin of every point
     lowest = np.full((n_sec, n_bin), np.inf)
     highest = np.full((n_sec, n_bin), -np.inf)
     for p in range(n):
         hp = h[p]
-        s = min(int((angle[p] + math.pi) / (2 * math.pi) * n_sec), n_sec - 1)
-        k = int(r_all[p] / bin_size)
+        s = min(int((angle[p] + math.pi) * to_sec), n_sec - 1)
+        k = int(r_all[p] * inv_bin)
         cell[p] = s * n_bin + k
         lowest[s, k] = min(lowest[s, k], hp)
         highest[s, k] = max(highest[s, k], hp)

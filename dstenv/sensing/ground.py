@@ -305,6 +305,9 @@ def _next_u32(words, state):  # pragma: no cover - numba
     return w & np.uint64(0xFFFFFFFF)
 
 
+_BLOCK = 256  # candidates scored between two checks of a RANSAC hypothesis
+
+
 @numba.njit(cache=True)
 def _ransac(xyz, pick, tri, min_cos, dist):  # pragma: no cover - numba
     """The hypotheses of :func:`fit_ground_plane`: ``(cand, best, plane)``, the ``(K, 3)``
@@ -312,7 +315,9 @@ def _ransac(xyz, pick, tri, min_cos, dist):  # pragma: no cover - numba
     ``tri (I, 3)`` of candidates (most candidates within ``dist``; of equal ones the
     first; -1 if no plane is within the tilt, ``normal_z >= min_cos``) and that plane
     ``(4,)``, unit normal up. One kernel: NumPy's fancy indexing of a column-major
-    array and its small per-batch calls cost more than the scoring."""
+    array and its small per-batch calls cost more than the scoring. A hypothesis is
+    dropped once even its remaining candidates could not lift it above the best so
+    far (it could not replace it: the same result as scoring it in full)."""
     k = pick.shape[0]
     cand = np.empty((k, 3))
     columns = np.empty((3, k))  # x, y, z rows: the scoring loop vectorises
@@ -342,8 +347,11 @@ def _ransac(xyz, pick, tri, min_cos, dist):  # pragma: no cover - numba
             continue
         e = -(n0 * p0[0] + n1 * p0[1] + n2 * p0[2])
         count = 0
-        for q in range(k):
-            count += abs(n0 * x[q] + n1 * y[q] + n2 * z[q] + e) < dist
+        for q0 in range(0, k, _BLOCK):  # blocks that vectorise; a plane that cannot
+            for q in range(q0, min(q0 + _BLOCK, k)):  # beat the best any more is dropped
+                count += abs(n0 * x[q] + n1 * y[q] + n2 * z[q] + e) < dist
+            if count + k - q0 - _BLOCK <= top:
+                break
         if count > top:
             top = count
             best = h

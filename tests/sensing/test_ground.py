@@ -98,20 +98,3 @@ def test_real_ground_split(real_root):
     # the road ahead (5-15 m, within 2 m of the lane centre) is ground
     ahead = (pts[:, 0] > 5) & (pts[:, 0] < 15) & (np.abs(pts[:, 1]) < 2) & (pts[:, 2] < -1.3)
     assert ground[ahead].mean() > 0.98
-
-
-
-@pytest.mark.parametrize(("k", "size", "iterations", "seed"), [
-    (101_701, 4000, 200, 0), (85_000, 4000, 200, 3), (10_001, 201, 5, 1), (10_001, 200, 5, 1),
-    (10_000, 4000, 50, 2), (5000, 4000, 20, 0), (3000, 4000, 20, 0)])
-def test_ransac_sample_is_numpys_choice_and_integers(k, size, iterations, seed):
-    """The replayed tail shuffle (and the cases left to NumPy) draw exactly what
-    ``default_rng(seed).choice(k, size, replace=False)`` then ``.integers`` draw."""
-    from dstenv.sensing.ground import _sample
-
-    pick = np.arange(k) * 3 + 7  # any candidate indices
-    rng = np.random.default_rng(seed)
-    want = pick[rng.choice(k, size, replace=False)] if k > size else pick
-    want_tri = rng.integers(0, len(want), size=(iterations, 3))
-    got, tri = _sample(pick, size, iterations, seed)
-    assert np.array_equal(got, want) and np.array_equal(tri, want_tri)

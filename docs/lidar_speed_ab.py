@@ -2,9 +2,10 @@
 
 On a loaded machine wall-clock medians and separate processes hide differences of a
 few per cent; this times a copy of an older ``dstenv`` (renamed ``dstenv_old``)
-against the current one in turns, in one process (``docs/realism-lidar.md``)::
+against the current one in turns, in one process (``docs/realism-lidar.md``; its
+second round used OLD = aa76a0a, its third 997b2d4)::
 
-    mkdir -p /tmp/old && git archive aa76a0a dstenv | tar -x -C /tmp/old
+    mkdir -p /tmp/old && git archive OLD dstenv | tar -x -C /tmp/old   # OLD: a commit
     cd /tmp/old && mv dstenv dstenv_old
     grep -rl dstenv dstenv_old --include=*.py | xargs sed -i 's/\\bdstenv\\b/dstenv_old/g'
     cd /tmp && PYTHONPATH=/path/to/dstenv python /path/to/dstenv/docs/lidar_speed_ab.py \\

@@ -259,25 +259,32 @@ def cast_ground(raster, dist, raised, x0, y0, res, kerb, ox, oy, ux, uy, slope, 
     for c in range(n):
         t_top[c] = (kerb - mount) / slope[c] if slope[c] < 0.0 else np.inf
         t_road[c] = -mount / slope[c] if slope[c] < 0.0 else np.inf
-    # channel by channel: neighbouring columns read neighbouring raster cells
-    for c in range(n):
-        if slope[c] >= 0.0 or t_top[c] > h_max:
-            continue
-        for j in range(ux.shape[0]):
-            if t_top[c] >= best[j, c]:
+    # per column, once a sweep: divisions in the beam loop cost more than its lookups
+    inv_res = 1.0 / res
+    tdcs = np.empty(ux.shape[0])
+    tdrs = np.empty(ux.shape[0])
+    for j in range(ux.shape[0]):
+        tdcs[j] = res / abs(ux[j]) if ux[j] != 0.0 else np.inf
+        tdrs[j] = res / abs(uy[j]) if uy[j] != 0.0 else np.inf
+    # column by column: a column's row of ``best`` is contiguous, and the raster cells
+    # of its channels stay cached for the next column (measured faster than channel
+    # by channel, whose ``best`` reads stride a row apart)
+    for j in range(ux.shape[0]):
+        for c in range(n):
+            if slope[c] >= 0.0 or t_top[c] > h_max or t_top[c] >= best[j, c]:
                 continue
             dxj = ux[j]
             dyj = uy[j]
             sc = 1 if dxj > 0 else -1
             sr = 1 if dyj > 0 else -1
-            tdc = res / abs(dxj) if dxj != 0.0 else np.inf
-            tdr = res / abs(dyj) if dyj != 0.0 else np.inf
+            tdc = tdcs[j]
+            tdr = tdrs[j]
             hit = min(t_road[c], best[j, c])
             kind = 0
             t = t_top[c]
             while kerb > 0.0 and t < hit:
-                u = (ox[j] + dxj * t - x0) / res
-                v = (oy[j] + dyj * t - y0) / res
+                u = (ox[j] + dxj * t - x0) * inv_res
+                v = (oy[j] + dyj * t - y0) * inv_res
                 col = int(math.floor(u))
                 row = int(math.floor(v))
                 if 0 <= row < hm and 0 <= col < wm:

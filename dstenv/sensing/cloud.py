@@ -36,6 +36,7 @@ from dstenv.sensing.ground import (
     ground_config,
     ground_walk,
     polar_coordinates,
+    prepare_points,
 )
 from dstenv.sensing.raycast import sensor_grid
 
@@ -114,13 +115,15 @@ def _rays(xyz: np.ndarray, rng: np.ndarray, b: np.ndarray, nearest: np.ndarray,
     half = round(0.5 * block_window_deg / azimuth_bin_deg)
     if half > 0:
         nearest = minimum_filter1d(nearest, 2 * half + 1, mode="wrap")
-    extent = _free_extent(b, rng, ground, obstacle, nearest, n_bins)
+    i0, j0 = spec.ego_cell
+    marks = np.zeros(spec.shape, np.uint8)  # the points' own cells
+    extent = _extent_marks(x, y, b, rng, ground, obstacle, nearest, occluded_hits, max_range,
+                           float(spec.cell_size), i0, j0, marks)
     angles = -np.pi + (np.arange(n_bins) + 0.5) * (2 * np.pi / n_bins)
     grid = sensor_grid(angles, extent, np.zeros(n_bins, bool), spec, max_range)
-    i0, j0 = spec.ego_cell
-    _mark_points(grid, x, y, b, rng, ground, obstacle, nearest, occluded_hits, max_range,
-                 float(spec.cell_size), i0, j0)
-    return grid
+    # the rays only clear (no hits): own cells after them, occupied > free > unknown,
+    # is the larger code of the two
+    return np.maximum(grid, marks, out=grid)
 
 
 @numba.njit(cache=True)
@@ -137,6 +140,7 @@ def _classify_bins(r, angle, h, cell, flat, ego_radius, ground_height, low, high
     obstacle = np.empty(n, np.bool_)
     b = np.empty(n, np.int64)
     nearest = np.full(n_bins, np.inf)
+    to_bin = n_bins / (2 * math.pi)  # a product, as _azimuth_bins
     for p in range(n):
         away = r[p] > ego_radius
         hp = h[p] - flat[cell[p]]
@@ -144,7 +148,7 @@ def _classify_bins(r, angle, h, cell, flat, ego_radius, ground_height, low, high
         ground[p] = away and -3.0 < hp < ground_height
         o = away and low <= hp <= high
         obstacle[p] = o
-        k = min(int((angle[p] + math.pi) / (2 * math.pi) * n_bins), n_bins - 1)
+        k = min(int((angle[p] + math.pi) * to_bin), n_bins - 1)
         b[p] = k
         if o and hp >= block_height and r[p] < nearest[k]:
             nearest[k] = r[p]
@@ -157,8 +161,9 @@ def _azimuth_bins(rng, angle, block, n_bins):  # pragma: no cover - numba
     n = rng.shape[0]
     b = np.empty(n, np.int64)
     nearest = np.full(n_bins, np.inf)
+    to_bin = n_bins / (2 * math.pi)  # a product by the reciprocal: no division a point
     for p in range(n):
-        k = int((angle[p] + math.pi) / (2 * math.pi) * n_bins)
+        k = int((angle[p] + math.pi) * to_bin)
         b[p] = min(k, n_bins - 1)
         if block[p] and rng[p] < nearest[b[p]]:
             nearest[b[p]] = rng[p]
@@ -166,40 +171,38 @@ def _azimuth_bins(rng, angle, block, n_bins):  # pragma: no cover - numba
 
 
 @numba.njit(cache=True)
-def _free_extent(b, rng, ground, obstacle, nearest, n_bins):  # pragma: no cover - numba
-    """How far each bin's ray clears: the farthest used point, clipped at the blocker."""
-    ext = np.zeros(n_bins)
-    for p in range(b.shape[0]):
-        if ground[p] or (obstacle[p] and rng[p] <= nearest[b[p]]):
-            ext[b[p]] = max(ext[b[p]], min(rng[p], nearest[b[p]]))
-    return ext
-
-
-@numba.njit(cache=True)
-def _mark_points(grid, x, y, b, rng, ground, obstacle, nearest, occluded_hits, max_range,
-                 cell, i0, j0):  # pragma: no cover - numba
-    """Own cells: ground returns before the blocker free, obstacle returns occupied."""
-    h, w = grid.shape
+def _extent_marks(x, y, b, rng, ground, obstacle, nearest, occluded_hits, max_range, cell, i0, j0,
+                  marks):  # pragma: no cover - numba
+    """One pass over the points: how far each bin's ray clears (the farthest used point,
+    clipped at the blocker; returned, ``(n_bins,)``) and the own cells in ``marks``:
+    ground returns before the blocker free, obstacle returns occupied."""
+    h, w = marks.shape
+    ext = np.zeros(nearest.shape[0])
     occ = np.uint8(SensorState.OCCUPIED)
     free = np.uint8(SensorState.FREE)
+    inv_cell = 1.0 / cell  # a product, not a division a point
     for p in range(x.shape[0]):
+        k = b[p]
+        first = rng[p] <= nearest[k]
+        if ground[p] or (obstacle[p] and first):
+            ext[k] = max(ext[k], min(rng[p], nearest[k]))
         if rng[p] > max_range:
             continue
-        first = rng[p] <= nearest[b[p]]
         if not ((ground[p] and first) or (obstacle[p] and (first or occluded_hits))):
             continue
-        i = int(math.floor(i0 - x[p] / cell + 0.5))
-        j = int(math.floor(j0 - y[p] / cell + 0.5))
+        i = int(math.floor(i0 - x[p] * inv_cell + 0.5))
+        j = int(math.floor(j0 - y[p] * inv_cell + 0.5))
         if 0 <= i < h and 0 <= j < w:
             if obstacle[p]:
-                grid[i, j] = occ
-            elif grid[i, j] != occ:
-                grid[i, j] = free
+                marks[i, j] = occ
+            elif marks[i, j] != occ:
+                marks[i, j] = free
+    return ext
 
 
 def cloud_sensor_grid(
     points: np.ndarray, spec: GridSpec, ground_cfg: dict[str, Any] | None = None,
-    ray_cfg: dict[str, Any] | None = None,
+    ray_cfg: dict[str, Any] | None = None, *, offset: tuple[float, float] = (0.0, 0.0),
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The whole road: ground fit, classification, rays.
 
@@ -208,6 +211,8 @@ def cloud_sensor_grid(
         spec: grid geometry.
         ground_cfg: overrides of :func:`default_ground_config`.
         ray_cfg: overrides of :func:`default_ray_config`.
+        offset: ``(dx, dy)`` [m] added to the points' x and y first (the simulated
+            sensor's mount, so that the grid stays ego-centred).
 
     Returns:
         ``(sensor, plane, ground, obstacle, height)``: ``(H, W) uint8`` sensor grid,
@@ -218,9 +223,9 @@ def cloud_sensor_grid(
     """
     gcfg = ground_config(ground_cfg)  # merged once, not again in every stage
     rcfg = merge_config(default_ray_config(), ray_cfg, "rays")
-    # one copy with contiguous columns: the stages read x, y, z column by column
-    xyz = np.asfortranarray(np.asarray(points, dtype=np.float64)[:, :3])
-    polar = polar_coordinates(xyz)  # shared by the three stages
+    # one copy with contiguous columns (the stages read x, y, z column by column) and
+    # the polar coordinates the three stages share, in one pass
+    xyz, polar = prepare_points(points, offset)
     plane = fit_ground_plane(xyz, gcfg, polar=polar)
     h, cell, flat = ground_walk(xyz, plane, gcfg, polar=polar)
     # heights, classification, azimuth bins and blockers in one pass (ground_heights'

@@ -1,14 +1,15 @@
-"""Counter-based Gaussian and uniform draws for the 3-D LIDAR's ~130,000 returns a sweep.
+"""Counter-based Gaussian draws and dropout for the 3-D LIDAR's ~130,000 returns a sweep.
 
-Beam ``k`` of stream ``key`` takes the 64-bit words ``w_0 = mix(key + (k + 1) G)``
-(SplitMix64's ``k``-th output, ``G`` its golden-ratio increment) and, for the 1 % of
-normal samples that need more, ``mix(w_0 + j G)``, j = 1, 2, ... A beam's draws
-depend on its index alone and the one-word samples of a sweep are a loop without a
-bit generator's state (faster than ``Generator.normal`` on bulk words, see
-``docs/realism-lidar.md``). The normal is NumPy's 256-layer ziggurat
-(``random_standard_normal``, with NumPy's tables as numba ships them) on those words:
-the same distribution as ``Generator.normal``, not the same numbers; the uniform is
-``Generator.random``'s 53-bit double. The keys come from the caller's ``Generator``
+Beam ``k`` of stream ``key`` takes the 64-bit word ``w_0 = mix(key + (k + 1) G)``
+(SplitMix64's ``k``-th output, ``G`` its golden-ratio increment); the 1 % of normal
+samples that need more take further words ``mix(w_0 + j G)``. A beam's draws depend on
+its index alone and the one-word samples of a sweep are a loop without a bit
+generator's state. :func:`beam_normal_pair` runs NumPy's float32 ziggurat
+(``random_standard_normal_f``, NumPy's tables as numba ships them) on the two halves
+of ``w_0``: two independent normals a word (the range and the reflectance noise), the
+same distribution as ``Generator.normal`` at float32 resolution, not the same
+numbers. :func:`beam_dropout` marks dropped beams by geometric gaps (one uniform per
+drop, not per beam). The keys come from the caller's ``Generator``
 (:func:`stream_keys`), so one seed gives one sweep (``tests/sensing/test_draws.py``).
 """
 
@@ -19,17 +20,18 @@ import math
 import numba
 import numpy as np
 from numba.np.random._constants import (
-    fi_double,
-    ki_double,
-    wi_double,
-    ziggurat_nor_inv_r,
-    ziggurat_nor_r,
+    fi_float,
+    ki_float,
+    wi_float,
+    ziggurat_nor_inv_r_f,
+    ziggurat_nor_r_f,
 )
 
-__all__ = ["stream_keys", "beam_normal", "beam_uniform"]
+__all__ = ["stream_keys", "beam_normal_pair", "beam_dropout"]
 
 _TO_DOUBLE = 1.0 / 9007199254740992.0  # 2**-53: NumPy's next_double
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)  # SplitMix64's increment
+_TO_FLOAT = 1.0 / 16777216.0  # 2**-24: NumPy's next_float
 
 
 def stream_keys(rng: np.random.Generator, n: int) -> np.ndarray:
@@ -46,64 +48,107 @@ def _mix(z):  # pragma: no cover - numba
 
 
 @numba.njit(cache=True)
-def beam_uniform(key, n):  # pragma: no cover - numba
-    """``(n,) float64`` uniforms on [0, 1) (53 bits, as ``Generator.random``): the first
-    word ``w_0`` of beams ``0 .. n-1`` of stream ``key``."""
-    out = np.empty(n)
+def beam_normal_pair(key, n, scale_a, scale_b):  # pragma: no cover - numba
+    """Two independent ``(n,) float64`` normal streams, of standard deviations
+    ``scale_a`` and ``scale_b``, for beams ``0 .. n-1`` of stream ``key``: NumPy's
+    float32 ziggurat (``random_standard_normal_f``: 8 bits of layer, a sign, 23 of
+    mantissa) on the low and the high half of each beam's first word, so one word
+    gives both (the 64-bit mix is the cost: without AVX-512 it does not vectorise).
+    The 1 % that need more take the low halves of the words
+    ``mix(w_0 + (2 i + h) G)``, i = 1, 2, ..., ``h`` the half (0 low, 1 high)."""
+    a = np.empty(n)
+    b = np.empty(n)
     for k in range(n):
-        out[k] = (_mix(key + np.uint64(k + 1) * _GOLDEN) >> np.uint64(11)) * _TO_DOUBLE
-    return out
+        w = _mix(key + np.uint64(k + 1) * _GOLDEN)
+        a[k] = _zig32_fast(w & np.uint64(0xFFFFFFFF))
+        b[k] = _zig32_fast(w >> np.uint64(32))
+    for k in range(n):
+        if not a[k] == a[k]:
+            a[k] = _zig32_slow(_mix(key + np.uint64(k + 1) * _GOLDEN), 0)
+        if not b[k] == b[k]:
+            b[k] = _zig32_slow(_mix(key + np.uint64(k + 1) * _GOLDEN), 1)
+    for k in range(n):
+        a[k] = 0.0 + scale_a * a[k]
+        b[k] = 0.0 + scale_b * b[k]
+    return a, b
+
+
+@numba.njit(cache=True, inline="always")
+def _zig32_fast(r):  # pragma: no cover - numba
+    """The one-word step of the float32 ziggurat on a 32-bit value ``r`` (held in a
+    uint64); NaN where it rejects."""
+    idx = r & np.uint64(0xFF)
+    rabs = (r >> np.uint64(9)) & np.uint64(0x007FFFFF)
+    x = float(np.int64(rabs)) * float(wi_float[idx])
+    x = -x if (r >> np.uint64(8)) & np.uint64(1) else x
+    return x if rabs < np.uint64(ki_float[idx]) else np.nan
 
 
 @numba.njit(cache=True)
-def beam_normal(key, n, scale):  # pragma: no cover - numba
-    """``(n,) float64`` normals of standard deviation ``scale`` for beams ``0 .. n-1`` of
-    stream ``key``: NumPy's ziggurat on each beam's words. The one-word samples (99 %)
-    in a loop that vectorises, the rest by :func:`_beam_normal_slow`."""
-    out = np.empty(n)
-    for k in range(n):
-        r = _mix(key + np.uint64(k + 1) * _GOLDEN)
-        idx = r & np.uint64(0xFF)
-        rabs = (r >> np.uint64(9)) & np.uint64(0x000FFFFFFFFFFFFF)
-        x = float(np.int64(rabs)) * wi_double[idx]
-        x = -x if (r >> np.uint64(8)) & np.uint64(1) else x
-        out[k] = x if rabs < ki_double[idx] else np.nan
-    for k in range(n):
-        if not out[k] == out[k]:
-            out[k] = _beam_normal_slow(_mix(key + np.uint64(k + 1) * _GOLDEN))
-    for k in range(n):
-        out[k] = 0.0 + scale * out[k]
-    return out
-
-
-@numba.njit(cache=True)
-def _beam_normal_slow(base):  # pragma: no cover - numba
-    """NumPy's random_standard_normal on a beam's words: ``base`` (its first word),
-    then ``mix(base + j G)``, j = 1, 2, ..."""
-    j = np.uint64(0)
+def _zig32_slow(base, half):  # pragma: no cover - numba
+    """NumPy's random_standard_normal_f on the 32-bit values: half ``half`` of
+    ``base``, then the low halves of ``mix(base + (2 i + half) G)``, i = 1, 2, ..."""
+    i = np.uint64(1)
+    r = (base >> np.uint64(32 * half)) & np.uint64(0xFFFFFFFF)
+    step = np.uint64(half)
     while True:
-        r = base if j == 0 else _mix(base + j * _GOLDEN)
-        j += np.uint64(1)
         idx = int(r & np.uint64(0xFF))
-        r >>= np.uint64(8)
-        rabs = (r >> np.uint64(1)) & np.uint64(0x000FFFFFFFFFFFFF)
-        x = float(np.int64(rabs)) * wi_double[idx]
-        if r & np.uint64(1):
+        rabs = (r >> np.uint64(9)) & np.uint64(0x007FFFFF)
+        x = float(np.int64(rabs)) * float(wi_float[idx])
+        if (r >> np.uint64(8)) & np.uint64(1):
             x = -x
-        if rabs < ki_double[idx]:
+        if rabs < np.uint64(ki_float[idx]):
             return x
         if idx == 0:  # the tail beyond r
             while True:
-                u1 = (_mix(base + j * _GOLDEN) >> np.uint64(11)) * _TO_DOUBLE
-                u2 = (_mix(base + (j + np.uint64(1)) * _GOLDEN) >> np.uint64(11)) * _TO_DOUBLE
-                j += np.uint64(2)
-                xx = -ziggurat_nor_inv_r * math.log1p(-u1)
+                u1 = _low_float(base, i, step)
+                u2 = _low_float(base, i + np.uint64(1), step)
+                i += np.uint64(2)
+                xx = -ziggurat_nor_inv_r_f * math.log1p(-u1)
                 yy = -math.log1p(-u2)
                 if yy + yy > xx * xx:
                     if (rabs >> np.uint64(8)) & np.uint64(1):
-                        return -(ziggurat_nor_r + xx)
-                    return ziggurat_nor_r + xx
-        u = (_mix(base + j * _GOLDEN) >> np.uint64(11)) * _TO_DOUBLE  # the wedge
-        j += np.uint64(1)
-        if (fi_double[idx - 1] - fi_double[idx]) * u + fi_double[idx] < math.exp(-0.5 * x * x):
+                        return -(ziggurat_nor_r_f + xx)
+                    return ziggurat_nor_r_f + xx
+        u = _low_float(base, i, step)  # the wedge
+        i += np.uint64(1)
+        if (float(fi_float[idx - 1]) - float(fi_float[idx])) * u + float(fi_float[idx]) < \
+                math.exp(-0.5 * x * x):
             return x
+        r = _mix(base + (np.uint64(2) * i + step) * _GOLDEN) & np.uint64(0xFFFFFFFF)
+        i += np.uint64(1)
+
+
+@numba.njit(cache=True, inline="always")
+def _low_float(base, i, step):  # pragma: no cover - numba
+    """NumPy's next_float (24 bits) from the low half of ``mix(base + (2 i + step) G)``."""
+    w = _mix(base + (np.uint64(2) * i + step) * _GOLDEN) & np.uint64(0xFFFFFFFF)
+    return float(np.int64(w >> np.uint64(8))) * _TO_FLOAT
+
+
+@numba.njit(cache=True)
+def beam_dropout(key, n, p):  # pragma: no cover - numba
+    """``(n,) bool``: True for the beams ``0 .. n-1`` that are kept, each dropped with
+    probability ``p`` independently. The gaps between dropped beams are geometric
+    (``floor(log(1 - u) / log(1 - p))`` failures before a drop, ``u`` from word ``i``
+    of stream ``key``), so a sweep draws about ``n p + 1`` uniforms, not ``n``; a
+    prefix of beams gets the same marks whatever ``n``."""
+    keep = np.ones(n, np.bool_)
+    if p <= 0.0:
+        return keep
+    if p >= 1.0:
+        keep[:] = False
+        return keep
+    scale = 1.0 / math.log1p(-p)
+    pos = -1
+    i = np.uint64(1)
+    while True:
+        u = (_mix(key + i * _GOLDEN) >> np.uint64(11)) * _TO_DOUBLE
+        i += np.uint64(1)
+        gap = math.floor(math.log1p(-u) * scale)
+        if gap >= n - pos:  # also an overflow guard for a huge gap
+            return keep
+        pos += int(gap) + 1
+        if pos >= n:
+            return keep
+        keep[pos] = False

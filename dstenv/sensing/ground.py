@@ -31,9 +31,11 @@ import numba
 import numpy as np
 
 from dstenv.config import Validated, merge_config
+from dstenv.sensing.ransac import best_plane, candidates, inlier_moments, sample_candidates
 
 __all__ = ["CloudError", "default_ground_config", "fit_ground_plane", "ground_heights",
-           "classify_points", "ground_config", "ground_walk", "polar_coordinates"]
+           "classify_points", "ground_config", "ground_walk", "polar_coordinates",
+           "prepare_points"]
 
 
 class CloudError(ValueError):
@@ -96,30 +98,18 @@ def fit_ground_plane(points: np.ndarray, config: dict[str, Any] | None = None, *
     cfg = ground_config(config)
     xyz = np.asarray(points, dtype=np.float64)[:, :3]
     r = (polar or polar_coordinates(xyz))[0]
-    pick = _candidates(xyz, r, float(cfg["fit_range"]), float(cfg["ego_radius"]),
+    pick = candidates(xyz, r, float(cfg["fit_range"]), float(cfg["ego_radius"]),
                        float(cfg["max_candidate_z"]))
     if len(pick) < 3:
         raise CloudError(f"ground fit: only {len(pick)} candidate points near the road")
-    rng = np.random.default_rng(cfg["seed"])
-    if len(pick) > cfg["sample"]:
-        pick = pick[rng.choice(len(pick), cfg["sample"], replace=False)]
-    cand = _rows(xyz, pick)
-    tri = cand[rng.integers(0, len(cand), size=(cfg["iterations"], 3))]  # (I, 3, 3)
-    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    norm = np.linalg.norm(normal, axis=1)
-    ok = norm > 1e-9
-    normal[ok] /= norm[ok, None]
-    normal *= np.where(normal[:, 2:3] < 0, -1.0, 1.0)  # point up
-    ok &= normal[:, 2] >= np.cos(np.deg2rad(cfg["max_tilt_deg"]))
-    if not ok.any():
+    pick, tri = sample_candidates(pick, int(cfg["sample"]), int(cfg["iterations"]), cfg["seed"])
+    cand, best, plane = best_plane(xyz, pick, tri, math.cos(math.radians(cfg["max_tilt_deg"])),
+                                float(cfg["inlier_distance"]))
+    if best < 0:
         raise CloudError("ground fit: no near-horizontal plane among the RANSAC hypotheses")
-    d = -np.einsum("ij,ij->i", normal, tri[:, 0])
-    columns = np.ascontiguousarray(cand.T)  # (3, K): the scoring loop vectorises
-    score = np.where(ok, _inlier_counts(normal, d, columns, cfg["inlier_distance"]), -1)
-    plane = np.append(normal[np.argmax(score)], d[np.argmax(score)])
     for _ in range(2):  # least-squares refit on the inliers: the normal is the
         # eigenvector of the smallest eigenvalue of their scatter matrix
-        count, centre, scatter = _inlier_moments(cand, plane, cfg["inlier_distance"])
+        count, centre, scatter = inlier_moments(cand, plane, cfg["inlier_distance"])
         if count < 3:
             break
         n = np.linalg.eigh(scatter)[1][:, 0]
@@ -228,45 +218,6 @@ def _split(r, height, ego_radius, ground_height, low, high):  # pragma: no cover
     return ground, obstacle
 
 
-@numba.njit(cache=True)
-def _candidates(xyz, r, fit_range, ego_radius, max_z):  # pragma: no cover - numba
-    """``(K,) int64`` indices of the points with ``ego_radius < r < fit_range`` and
-    ``z < max_z``, in order."""
-    out = np.empty(r.shape[0], np.int64)
-    k = 0
-    for p in range(r.shape[0]):
-        if ego_radius < r[p] < fit_range and xyz[p, 2] < max_z:
-            out[k] = p
-            k += 1
-    return out[:k]
-
-
-@numba.njit(cache=True)
-def _rows(xyz, pick):  # pragma: no cover - numba
-    """``(K, 3)`` C-ordered rows ``xyz[pick]`` (NumPy's fancy indexing of a column-major
-    array is several times slower)."""
-    out = np.empty((pick.shape[0], 3))
-    for k in range(pick.shape[0]):
-        for i in range(3):
-            out[k, i] = xyz[pick[k], i]
-    return out
-
-
-@numba.njit(cache=True)
-def _inlier_counts(normal, d, columns, dist):  # pragma: no cover - numba
-    """``(I,) int64`` candidates (``columns``: ``(3, K)`` x, y, z rows) within ``dist``
-    of each plane hypothesis."""
-    out = np.zeros(normal.shape[0], np.int64)
-    x, y, z = columns[0], columns[1], columns[2]
-    for k in range(normal.shape[0]):
-        a, b, c, e = normal[k, 0], normal[k, 1], normal[k, 2], d[k]
-        n = 0
-        for p in range(x.shape[0]):
-            n += abs(a * x[p] + b * y[p] + c * z[p] + e) < dist
-        out[k] = n
-    return out
-
-
 def polar_coordinates(xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``(r, angle)`` of ``(P, 2+)`` points: ``(P,) float64`` horizontal range [m] and
     azimuth [rad] in [-pi, pi] (computed once, shared by the stages of the road).
@@ -275,6 +226,46 @@ def polar_coordinates(xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     about five times faster than the C library's)."""
     xyz = np.asarray(xyz, dtype=np.float64)
     return _polar_kernel(np.ascontiguousarray(xyz[:, 0]), np.ascontiguousarray(xyz[:, 1]))
+
+
+def prepare_points(points: np.ndarray, offset: tuple[float, float] = (0.0, 0.0)
+                   ) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]:
+    """The copy of a scan the stages of the road read, and its polar coordinates.
+
+    Args:
+        points: ``(P, 3+) float32 or float64`` Velodyne points (KITTI ``.bin`` rows).
+        offset: ``(dx, dy)`` [m] added to x and y (a sensor's mount in the ego frame);
+            ``(0, 0)`` leaves the points as they are.
+
+    Returns:
+        ``(xyz, (r, angle))``: ``(P, 3) float64`` column-major (each coordinate
+        contiguous) and :func:`polar_coordinates` of it; one pass over ``points``.
+    """
+    pts = np.asarray(points)
+    if pts.ndim != 2 or pts.shape[1] < 3:
+        raise ValueError(f"prepare_points: points must be (P, 3+), got shape {pts.shape}")
+    if pts.dtype != np.float32 and pts.dtype != np.float64:
+        pts = pts.astype(np.float64)
+    dx, dy = float(offset[0]), float(offset[1])
+    rows, r, a = _prepare_kernel(pts, dx, dy, dx != 0.0 or dy != 0.0)
+    return rows.T, (r, a)
+
+
+@numba.njit(cache=True)
+def _prepare_kernel(pts, dx, dy, shift):  # pragma: no cover - numba
+    """``(3, P)`` rows x + dx, y + dy, z as float64 and their polar coordinates."""
+    n = pts.shape[0]
+    rows = np.empty((3, n))
+    for p in range(n):
+        rows[0, p] = pts[p, 0]
+        rows[1, p] = pts[p, 1]
+        rows[2, p] = pts[p, 2]
+    if shift:
+        for p in range(n):
+            rows[0, p] += dx
+            rows[1, p] += dy
+    r, a = _polar_kernel(rows[0], rows[1])
+    return rows, r, a
 
 
 # Cephes' atan on [0, 0.66] (rational approximation, relative error ~2e-16)
@@ -319,37 +310,6 @@ def _polar_kernel(x, y):  # pragma: no cover - numba
 
 
 @numba.njit(cache=True)
-def _inlier_moments(cand, plane, dist):  # pragma: no cover - numba
-    """Count, centre ``(3,)`` and scatter matrix ``(3, 3)`` of the plane's inliers."""
-    n = 0
-    s = np.zeros(3)
-    for p in range(cand.shape[0]):
-        d = plane[0] * cand[p, 0] + plane[1] * cand[p, 1] + plane[2] * cand[p, 2] + plane[3]
-        if abs(d) < dist:
-            n += 1
-            for i in range(3):  # scalar sums: no temporary array per point
-                s[i] += cand[p, i]
-    centre = s / max(n, 1)
-    m = np.zeros((3, 3))
-    for p in range(cand.shape[0]):
-        d = plane[0] * cand[p, 0] + plane[1] * cand[p, 1] + plane[2] * cand[p, 2] + plane[3]
-        if abs(d) < dist:
-            q0 = cand[p, 0] - centre[0]
-            q1 = cand[p, 1] - centre[1]
-            q2 = cand[p, 2] - centre[2]
-            m[0, 0] += q0 * q0
-            m[0, 1] += q0 * q1
-            m[0, 2] += q0 * q2
-            m[1, 0] += q1 * q0
-            m[1, 1] += q1 * q1
-            m[1, 2] += q1 * q2
-            m[2, 0] += q2 * q0
-            m[2, 1] += q2 * q1
-            m[2, 2] += q2 * q2
-    return n, centre, m
-
-
-@numba.njit(cache=True)
 def _local_ground(xyz, plane, r_all, angle, n_sec, bin_size, ego_radius, max_slope, step_tol,
                   flat_spread, max_drop_slope, drop_tol):  # pragma: no cover - numba
     """Heights above the local ground of the polar walk (see :func:`ground_heights`)."""
@@ -373,13 +333,17 @@ def _ground_walk(xyz, plane, r_all, angle, n_sec, bin_size, ego_radius, max_slop
     for p in range(n):  # its own loop: it vectorises
         h[p] = a * xyz[p, 0] + b * xyz[p, 1] + c * xyz[p, 2] + d
     n_bin = int(math.ceil(np.max(r_all) / bin_size)) + 1
+    # products by reciprocals, not divisions: this loop's cost (bins may differ from
+    # the quotients' only for a value within an ulp of a bin edge)
+    to_sec = n_sec / (2 * math.pi)
+    inv_bin = 1.0 / bin_size
     cell = np.empty(n, np.int64)  # sector * n_bin + range bin of every point
     lowest = np.full((n_sec, n_bin), np.inf)
     highest = np.full((n_sec, n_bin), -np.inf)
     for p in range(n):
         hp = h[p]
-        s = min(int((angle[p] + math.pi) / (2 * math.pi) * n_sec), n_sec - 1)
-        k = int(r_all[p] / bin_size)
+        s = min(int((angle[p] + math.pi) * to_sec), n_sec - 1)
+        k = int(r_all[p] * inv_bin)
         cell[p] = s * n_bin + k
         lowest[s, k] = min(lowest[s, k], hp)
         highest[s, k] = max(highest[s, k], hp)

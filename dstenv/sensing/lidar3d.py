@@ -49,7 +49,7 @@ from dstenv.grid import GridSpec
 from dstenv.sensing.cast3d import cast_boxes, cast_ground, cast_walls, column_index, raised_distance
 from dstenv.sensing.cloud import cloud_sensor_grid
 from dstenv.sensing.config import lidar_config
-from dstenv.sensing.draws import beam_normal, beam_uniform, stream_keys
+from dstenv.sensing.draws import beam_dropout, beam_normal_pair, stream_keys
 from dstenv.sim.types import Agents, MapClass, WorldMap
 
 __all__ = ["Hdl64", "Cloud", "SURFACES", "REFLECTANCE"]
@@ -100,13 +100,8 @@ class Cloud:
         """``(H, W) uint8`` sensor grid by :func:`dstenv.sensing.cloud.cloud_sensor_grid`
         (ground removal, one ray per point), the road KITTI scans take; the points are
         shifted by the mount so the grid stays ego-centred."""
-        pts = np.empty((len(self), 3), order="F")  # columns contiguous, as the road reads them
-        pts[:, 0] = self.points[:, 0]
-        pts[:, 0] += self.mount[0]
-        pts[:, 1] = self.points[:, 1]
-        pts[:, 1] += self.mount[1]
-        pts[:, 2] = self.points[:, 2]
-        return cloud_sensor_grid(pts, spec, self.config["ground"], self.config["rays"])[0]
+        return cloud_sensor_grid(self.points, spec, self.config["ground"], self.config["rays"],
+                                 offset=(float(self.mount[0]), float(self.mount[1])))[0]
 
 
 class Hdl64:
@@ -135,12 +130,14 @@ class Hdl64:
         self._cos_el, self._sin_el = np.cos(self.elevation), np.sin(self.elevation)
         gain_rng = np.random.default_rng(int(c["channel_seed"]))
         self.gain = gain_rng.uniform(0.75, 1.25, n)  # per-channel intensity calibration
+        self._sec_el = 1.0 / self._cos_el  # horizontal -> slant range, by a product
+        self._albedo = np.ascontiguousarray(np.outer(REFLECTANCE, self.gain))  # (surface, channel)
         self._map: WorldMap | None = None
         self._walls: tuple[np.ndarray, ...] = ()
         self._raster = np.zeros((0, 0), np.uint8)
         self._dist = np.zeros((0, 0), np.uint8)
         self._best = np.empty((self.columns, n))  # nearest hit per beam [m], horizontal
-        self._surf = np.empty((self.columns, n), np.int16)
+        self._surf = np.empty((self.columns, n), np.int16)  # read only where best < inf
         self._idx = np.empty((self.columns, n), np.int32)
 
     @property
@@ -189,9 +186,7 @@ class Hdl64:
             self._map = world_map
         edges, starts, circles, heights = self._walls
         best, surf, idx = self._best, self._surf, self._idx  # reused: no page faults
-        best.fill(np.inf)
-        surf.fill(-1)
-        idx.fill(-1)
+        best.fill(np.inf)  # surf and idx are written with every finite best
         h_max = c["max_range"]  # a slant range bounds the horizontal one
         mount = float(c["mount_height"])
         cols = column_index(ox, oy, world_az)
@@ -209,22 +204,24 @@ class Hdl64:
                  rng: np.random.Generator) -> Cloud:
         c = self.config
         n = _count_returns(best)  # returns before noise, column-major
-        # the sweep's whole use of ``rng``: three stream keys of counter-based draws
-        # (draws.beam_*: NumPy's distributions, one vectorised loop each)
-        k_noise, k_drop, k_int = stream_keys(rng, 3)
-        noise = (beam_normal(k_noise, n, float(c["range_noise"])) if c["range_noise"] > 0
-                 else np.zeros(n))
-        keep = (beam_uniform(k_drop, n) >= c["dropout"] if c["dropout"] > 0
-                else np.ones(n, bool))
-        inoise = (beam_normal(k_int, n, float(c["intensity_noise"]))
-                  if c["intensity_noise"] > 0 else np.zeros(n))
+        # the sweep's whole use of ``rng``: stream keys of counter-based draws (draws.py:
+        # NumPy's distributions; both noises from one word a beam, the dropout by its
+        # geometric gaps); three keys, the third unused, so that the caller's generator
+        # advances as it always did
+        k_noise, k_drop, _ = stream_keys(rng, 3)
+        if c["range_noise"] > 0 or c["intensity_noise"] > 0:
+            noise, inoise = beam_normal_pair(k_noise, n, float(c["range_noise"]),
+                                             float(c["intensity_noise"]))
+        else:
+            noise = inoise = np.zeros(n)
+        keep = beam_dropout(k_drop, n, float(c["dropout"]))
         pts = np.empty((n, 4), np.float32)
         out_ch = np.empty(n, np.int16)
         out_col = np.empty(n, np.int32)
         out_s = np.empty(n, np.uint8)
         out_i = np.empty(n, np.int32)
         m = _points(best, noise, keep, inoise, surf, idx, self._cos_az, self._sin_az,
-                    self._cos_el, self._sin_el, self.gain, REFLECTANCE,
+                    self._cos_el, self._sin_el, self._sec_el, self._albedo,
                     float(c["min_range"]), float(c["max_range"]), pts, out_ch, out_col, out_s,
                     out_i)
         return Cloud(pts[:m], out_ch[:m], out_col[:m], out_s[:m], out_i[:m], self.mount.copy(),
@@ -242,10 +239,11 @@ def _count_returns(best):  # pragma: no cover - numba
 
 
 @numba.njit(cache=True)
-def _points(best, noise, keep, inoise, surf, idx, cos_az, sin_az, cos_el, sin_el, gain, refl,
+def _points(best, noise, keep, inoise, surf, idx, cos_az, sin_az, cos_el, sin_el, sec_el, albedo,
             min_range, max_range, pts, out_ch, out_col, out_s, out_i):  # pragma: no cover
-    """Returns (finite ``best``, column-major) -> noisy Velodyne points and reflectance,
-    written compacted; returns how many are kept."""
+    """Returns (finite ``best``, column-major) -> noisy Velodyne points and reflectance
+    (``albedo[surface, channel]``, 25 % less at 100 m and beyond), written compacted;
+    returns how many are kept. Products, not divisions: the loop is the sweep's largest."""
     m = 0
     k = -1
     for j in range(best.shape[0]):
@@ -253,7 +251,7 @@ def _points(best, noise, keep, inoise, surf, idx, cos_az, sin_az, cos_el, sin_el
             if not best[j, c] < np.inf:
                 continue
             k += 1
-            r = best[j, c] / cos_el[c] + noise[k]
+            r = best[j, c] * sec_el[c] + noise[k]
             if not keep[k] or r > max_range or r < min_range:
                 continue
             ce = cos_el[c] * r
@@ -261,7 +259,7 @@ def _points(best, noise, keep, inoise, surf, idx, cos_az, sin_az, cos_el, sin_el
             pts[m, 1] = ce * sin_az[j]
             pts[m, 2] = r * sin_el[c]
             s = surf[j, c]
-            v = refl[s] * gain[c] * (1.0 - 0.25 * min(r / 100.0, 1.0)) + inoise[k]
+            v = albedo[s, c] * (1.0 - min(r * 0.0025, 0.25)) + inoise[k]
             pts[m, 3] = min(max(v, 0.0), 1.0)
             out_ch[m] = c
             out_col[m] = j

@@ -98,4 +98,3 @@ def test_real_ground_split(real_root):
     # the road ahead (5-15 m, within 2 m of the lane centre) is ground
     ahead = (pts[:, 0] > 5) & (pts[:, 0] < 15) & (np.abs(pts[:, 1]) < 2) & (pts[:, 2] < -1.3)
     assert ground[ahead].mean() > 0.98
-

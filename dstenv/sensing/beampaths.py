@@ -146,6 +146,18 @@ def _margin_needed(spec: GridSpec, far: float, ox: float, oy: float) -> float:
     return 64 * ((spec.height + spec.width + 8) * _EPS + err / gu + err / gv)
 
 
+@numba.njit(cache=True, inline="always")
+def axis_start(d: float, p0: float, cell: int) -> tuple[float, float]:  # pragma: no cover
+    """Amanatides-Woo set-up along one grid axis for a ray that moves ``d`` cells per
+    unit of its parameter t from coordinate ``p0`` inside cell ``cell``: ``(t per
+    cell, t to the first cell border)``, both ``inf`` when the ray does not move
+    along this axis."""
+    if d != 0.0:
+        td = 1.0 / abs(d)
+        return td, ((cell + 1 - p0) if d > 0 else (p0 - cell)) * td
+    return np.inf, np.inf
+
+
 @numba.njit(cache=True)
 def _shared_prefix(start, cells, shared):  # pragma: no cover - numba
     for k in range(1, start.shape[0] - 1):
@@ -177,18 +189,8 @@ def _trace(angles, c, far, ox, oy, h, w, cos_a, sin_a, margin, start, cells, ist
         dv = (j0 - (oy + far * sa) / c + 0.5) - v0
         si = 1 if du > 0 else -1
         sj = 1 if dv > 0 else -1
-        if du != 0.0:
-            tdu = 1.0 / abs(du)
-            tmu = ((ist + 1 - u0) if du > 0 else (u0 - ist)) * tdu
-        else:
-            tdu = np.inf
-            tmu = np.inf
-        if dv != 0.0:
-            tdv = 1.0 / abs(dv)
-            tmv = ((jst + 1 - v0) if dv > 0 else (v0 - jst)) * tdv
-        else:
-            tdv = np.inf
-            tmv = np.inf
+        tdu, tmu = axis_start(du, u0, ist)
+        tdv, tmv = axis_start(dv, v0, jst)
         i = ist
         j = jst
         m = 0

@@ -27,7 +27,7 @@ import numpy as np
 
 from dstenv.dst import SensorState
 from dstenv.grid import GridSpec
-from dstenv.sensing.beampaths import paths_for
+from dstenv.sensing.beampaths import axis_start, paths_for
 
 __all__ = ["sensor_grid"]
 
@@ -195,18 +195,8 @@ def _walk(flat, h, w, ist, jst, u0, v0, ue, ve, ie, je, occ):  # pragma: no cove
         dj, ej = 1, w - jst
     else:
         dj, ej = -1, jst + 1
-    if du != 0.0:
-        tdu = 1.0 / abs(du)
-        tmu = ((ist + 1 - u0) if du > 0 else (u0 - ist)) * tdu
-    else:
-        tdu = np.inf
-        tmu = np.inf
-    if dv != 0.0:
-        tdv = 1.0 / abs(dv)
-        tmv = ((jst + 1 - v0) if dv > 0 else (v0 - jst)) * tdv
-    else:
-        tdv = np.inf
-        tmv = np.inf
+    tdu, tmu = axis_start(du, u0, ist)
+    tdv, tmv = axis_start(dv, v0, jst)
     ai = min(ni, ei)  # row steps left before the end row or the grid border
     aj = min(nj, ej)
     idx = ist * w + jst

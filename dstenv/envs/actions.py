@@ -61,6 +61,11 @@ def default_action_config() -> dict[str, Any]:
         # SLOWER meta-action brakes comfortably; continuous control can brake harder
         "brake_decel": 2.4,
         "max_steer": 0.5,  # [rad] continuous-action steering scale
+        # [steps] world steps (0.1 s each) per env step: the policy acts at 10 / repeat
+        # Hz; a meta-action is applied once, then held (IDLE), a continuous action or the
+        # autopilot repeats; rewards are summed over the steps (highway-env's
+        # policy_frequency)
+        "repeat": 1,
     }
 
 
@@ -160,6 +165,12 @@ class ActionMode:
             return spaces.Discrete(len(self.names))
         return spaces.Box(-1.0, 1.0, (2,), dtype=np.float32)
 
+    def held(self, action: Any) -> Any:
+        """The action for the world steps after the first of one env step
+        (``action.repeat``): IDLE for meta-actions (a target speed, a turn or a lane
+        change is chosen once), the action itself otherwise."""
+        return self.names.index("IDLE") if "IDLE" in self.names else action
+
     def controller(self, cfg: dict[str, Any], world: Any, source: str) -> Controller:
         """A fresh controller for one episode on ``world`` (a ``source`` world)."""
         if source not in self.controllers:
@@ -191,6 +202,7 @@ SECTION = Section(default_action_config, {
     "max_accel": between(0.0, 20.0, "m/s^2", lo_open=True),
     "brake_decel": between(0.0, 20.0, "m/s^2", lo_open=True),
     "max_steer": between(0.0, 1.2, "rad", lo_open=True),
+    "repeat": between(1, 100, "steps"),
 }, (
     ("type", lambda c: action_mode(c["type"]) is not None, "unknown mode"),
     ("target_speeds", lambda c: len(c["target_speeds"]) >= 1, "needs at least one speed"),

@@ -112,7 +112,8 @@ class DSTGridEnv(gym.Env):
 
     Terminated on a collision, on leaving the road, or on arrival at the route's end
     (highway-env scenes with a destination). Truncated by the ``TimeLimit`` of the
-    registration (``max_episode_steps``).
+    registration (``max_episode_steps``, counted in env steps: with ``action.repeat =
+    r`` an env step is r world steps of 0.1 s, rewards summed over them).
 
     ## Info
 
@@ -306,22 +307,30 @@ class DSTGridEnv(gym.Env):
         if self._frame is None:
             raise RuntimeError("DSTGridEnv.step: call reset() first")
         w = self._world
-        prev_pose, prev_speed, prev_time = self._frame.ego_pose, w.ego_speed, w.time
-        prev_route = getattr(w, "route_progress", None)
-        world_action = self._controller.world_action(action)
-        self._frame = self.pipeline.step(world_action)
-        dt = max(w.time - prev_time, 1e-9)
-        if prev_route is not None:
-            progress = w.route_progress - prev_route
-        else:  # forward displacement when the world has no route
-            progress = relative_pose(prev_pose, self._frame.ego_pose)[0]
-        arrived = bool(getattr(w, "route_done", False))
-        out = StepOutcome(float(progress), float(w.ego_speed), (prev_speed - w.ego_speed) / dt,
-                          bool(w.collision), bool(w.off_road), arrived)
-        terms = reward_terms(out, self.config["reward"])
-        terminated = out.collision or out.off_road or arrived
-        self._accel = (w.ego_speed - prev_speed) / dt
-        self._progress += float(progress)
+        repeat, held = self.config["action"]["repeat"], self._action.held(action)
+        terms: dict[str, float] = {}
+        terminated = False
+        for k in range(repeat):  # the action once, then held (meta-actions: IDLE)
+            prev_pose, prev_speed, prev_time = self._frame.ego_pose, w.ego_speed, w.time
+            prev_route = getattr(w, "route_progress", None)
+            world_action = self._controller.world_action(action if k == 0 else held)
+            self._frame = self.pipeline.step(world_action)
+            dt = max(w.time - prev_time, 1e-9)
+            if prev_route is not None:
+                progress = w.route_progress - prev_route
+            else:  # forward displacement when the world has no route
+                progress = relative_pose(prev_pose, self._frame.ego_pose)[0]
+            arrived = bool(getattr(w, "route_done", False))
+            out = StepOutcome(float(progress), float(w.ego_speed),
+                              (prev_speed - w.ego_speed) / dt, bool(w.collision),
+                              bool(w.off_road), arrived)
+            for name, value in reward_terms(out, self.config["reward"]).items():
+                terms[name] = terms.get(name, 0.0) + value
+            terminated = out.collision or out.off_road or arrived
+            self._accel = (w.ego_speed - prev_speed) / dt
+            self._progress += float(progress)
+            if terminated:
+                break
         info = self._info(terms, terminated)
         if self.render_mode == "human":
             self.render()

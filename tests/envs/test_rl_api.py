@@ -127,6 +127,46 @@ def test_meta_actions_steer_with_the_world_rule():
     env.close()
 
 
+@pytest.mark.parametrize("env_id,actions", [
+    ("DSTGrid-Occluded-v0", [0, 2, 1, 0]),  # meta-actions: once, then IDLE
+    ("DSTGrid-Continuous-v0", [np.array([0.5, 0.1], np.float32),
+                               np.array([-0.3, -0.2], np.float32)]),  # repeated
+])
+def test_action_repeat_equals_single_steps_with_the_action_held(env_id, actions):
+    repeated = gym.make(env_id, config={**SMALL_CITY, "action": {"repeat": 3}})
+    single = gym.make(env_id, config=SMALL_CITY)
+    obs_r, info_r = repeated.reset(seed=4)
+    start, steps = info_r["time"], 0
+    single.reset(seed=4)
+    held = repeated.unwrapped._action.held
+    for a in actions:
+        obs_r, reward_r, term_r, _, info_r = repeated.step(a)
+        steps += 1
+        total, rewards = 0.0, dict.fromkeys(info_r["rewards"], 0.0)
+        for k in range(3):
+            obs_s, reward_s, term_s, _, info_s = single.step(a if k == 0 else held(a))
+            total += reward_s
+            rewards = {n: rewards[n] + v for n, v in info_s["rewards"].items()}
+            if term_s:
+                break
+        assert info_r["time"] == pytest.approx(info_s["time"])
+        np.testing.assert_array_equal(info_r["ego_pose"], info_s["ego_pose"])
+        assert reward_r == pytest.approx(total, abs=1e-12)
+        assert rewards == pytest.approx(info_r["rewards"], abs=1e-12)
+        assert info_r["route_progress"] == pytest.approx(info_s["route_progress"])
+        for key in obs_r:
+            np.testing.assert_array_equal(obs_r[key], obs_s[key])
+        assert term_r == term_s
+        if term_r:
+            break
+    if not term_r:  # each env step ran three world steps of 0.1 s
+        assert info_r["time"] - start == pytest.approx(0.3 * steps)
+    with pytest.raises(ConfigError, match="action.repeat: must be in"):
+        gym.make(env_id, config={"action": {"repeat": 0}})
+    repeated.close()
+    single.close()
+
+
 def test_wrapper_records_its_arguments_and_rejects_other_envs():
     from gymnasium.utils.env_checker import check_env
 

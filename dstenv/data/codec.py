@@ -55,7 +55,13 @@ def _deflate(engine: str) -> Callable[[bytes, int], bytes]:
 
 @nb.njit(cache=True, nogil=True)
 def _fletcher32(data: np.ndarray) -> np.uint32:
-    """``H5_checksum_fletcher32`` of HDF5, bit for bit (big-endian 16-bit words)."""
+    """``H5_checksum_fletcher32`` of HDF5, bit for bit (big-endian 16-bit words).
+
+    HDF5 adds word by word (``s1 += w; s2 += s1``) and folds every 360 words. Over a
+    block of ``t`` words that is ``s2 += t * s1 + sum((t - k) * w_k)`` and
+    ``s1 += sum(w_k)``: the same sums modulo 2**32 (so the same folds and result),
+    but without the chain of dependent additions, so LLVM vectorises the block.
+    """
     mask, sh = np.uint32(0xFFFF), np.uint32(16)
     s1 = np.uint32(0)
     s2 = np.uint32(0)
@@ -64,10 +70,15 @@ def _fletcher32(data: np.ndarray) -> np.uint32:
     while n > 0:
         t = n if n <= 360 else 360  # 360 words: the sums cannot overflow 32 bits
         n -= t
-        for _ in range(t):
-            s1 += (np.uint32(data[i]) << np.uint32(8)) | np.uint32(data[i + 1])
-            s2 += s1
-            i += 2
+        a = np.uint32(0)
+        b = np.uint32(0)
+        for k in range(t):
+            w = (np.uint32(data[i + 2 * k]) << np.uint32(8)) | np.uint32(data[i + 2 * k + 1])
+            a += w
+            b += np.uint32(t - k) * w
+        i += 2 * t
+        s2 += np.uint32(t) * s1 + b
+        s1 += a
         s1 = (s1 & mask) + (s1 >> sh)
         s2 = (s2 & mask) + (s2 >> sh)
     if data.shape[0] % 2:
@@ -144,28 +155,40 @@ def quantize(p: np.ndarray, scale: int) -> np.ndarray:
 
 
 @nb.njit(cache=True, nogil=True)
-def _class_counts(labels: np.ndarray, n: int, ignore: int, counts: np.ndarray) -> int:
-    for i in range(labels.shape[0]):
-        v = labels[i]
-        if v < n:
-            counts[v] += 1
-        elif v != ignore:
-            return int(v)
-    return -1
+def _histogram(labels: np.ndarray, counts: np.ndarray) -> None:
+    """``counts[v]`` = cells equal to ``v`` (``counts``: ``(256,) int64``, zeroed).
+
+    Four interleaved histograms: with one, a run of equal labels chains every
+    increment on the store of the previous one (~3x slower on long runs).
+    """
+    n = labels.shape[0]
+    c = np.zeros((4, 256), np.int64)
+    m = n - n % 4
+    for i in range(0, m, 4):
+        c[0, labels[i]] += 1
+        c[1, labels[i + 1]] += 1
+        c[2, labels[i + 2]] += 1
+        c[3, labels[i + 3]] += 1
+    for i in range(m, n):
+        c[0, labels[i]] += 1
+    for v in range(256):
+        counts[v] = c[0, v] + c[1, v] + c[2, v] + c[3, v]
 
 
 def class_counts(labels: np.ndarray, n_classes: int, ignore: int) -> np.ndarray:
     """Cells per class of a uint8 label grid: ``(n_classes,) int64``.
 
     Raises:
-        ValueError: naming the first value that is neither a class nor ``ignore``.
+        ValueError: naming the smallest value that is neither a class nor ``ignore``.
     """
-    counts = np.zeros(n_classes, np.int64)
-    bad = _class_counts(np.ascontiguousarray(labels, dtype=np.uint8).reshape(-1), n_classes,
-                        ignore, counts)
-    if bad >= 0:
-        raise ValueError(f"labels hold value {bad}; allowed 0..{n_classes - 1} and {ignore}")
-    return counts
+    counts = np.zeros(256, np.int64)
+    _histogram(np.ascontiguousarray(labels, dtype=np.uint8).reshape(-1), counts)
+    bad = np.flatnonzero(counts[n_classes:])
+    bad = bad[bad + n_classes != ignore]
+    if bad.size:
+        raise ValueError(f"labels hold value {int(bad[0]) + n_classes}; allowed "
+                         f"0..{n_classes - 1} and {ignore}")
+    return counts[:n_classes].copy()
 
 
 @nb.njit(cache=True, nogil=True)

@@ -33,6 +33,8 @@ N_MASSES = NUM_SETS  # 32
 GRID_FIELDS = {"labels": np.uint8, "visible": np.bool_, "sensor": np.uint8, "gis": np.uint8}
 PROB_FIELDS = ("pignistic", "pignistic_prev")
 SCALAR_FIELDS = {"time": np.float64, "seed": np.int64, "step": np.int64}
+#: the small per-frame records (64 frames per chunk, written once per shard)
+RECORD_FIELDS: tuple[str, ...] = ("ego_pose", *SCALAR_FIELDS, "class_counts")
 #: Every dataset a valid shard holds (``masses`` is optional).
 FRAME_FIELDS: tuple[str, ...] = (
     *PROB_FIELDS, *GRID_FIELDS, "ego_pose", *SCALAR_FIELDS, "class_counts",

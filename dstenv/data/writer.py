@@ -252,8 +252,9 @@ class ShardWriter:
         for name, dtype in GRID_FIELDS.items():
             a = np.asarray(getattr(frame, name))
             _expect(self.path, name, a, (h, w))
-            # the direct path encodes in add(), so no copy; h5py's path buffers them
-            out[name] = a.astype(dtype, copy=not self._direct)
+            # encoded in add() on this thread: no copy; h5py's path and the codec
+            # threads read them later, so they get a copy
+            out[name] = a.astype(dtype, copy=not self._direct or self._threads > 0)
         try:
             out["class_counts"] = class_counts(out["labels"], N_CLASSES, IGNORE_INDEX)
         except ValueError as exc:

@@ -157,3 +157,45 @@ def test_hdf5_write_failure_becomes_one_line_oserror(tmp_path, frames, shard_att
     with pytest.raises(OSError, match=r"full\.h5: cannot write shard: No space left on device$"):
         _write(path, frames, shard_attrs)
     assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("compression", ["gzip", "lzf"])
+def test_many_flushes_store_exactly_the_frames(tmp_path, make_frame, shard_attrs, compression):
+    # 37 frames: grids grow 16 -> 32 -> 64 frames and are cut to 37 at close; the small
+    # records are written once, at close; h5py alone sees exactly 37 frames
+    rng = np.random.default_rng(4)
+    frames = [make_frame(rng, step=i) for i in range(37)]
+    path = _write(tmp_path / "m.h5", frames, shard_attrs, compression=compression)
+    with h5py.File(path) as f:
+        for name in ("pignistic", "labels", "visible", "ego_pose", "step", "class_counts"):
+            assert f[name].shape[0] == 37, name
+        assert f["labels"].id.get_num_chunks() == 37  # nothing stored past the end
+        np.testing.assert_array_equal(f["step"][:], np.arange(37))
+        np.testing.assert_array_equal(f["ego_pose"][:], np.stack([x.ego_pose for x in frames]))
+        np.testing.assert_array_equal(f["labels"][:], np.stack([x.labels for x in frames]))
+        np.testing.assert_array_equal(f["visible"][:], np.stack([x.visible for x in frames]))
+        counts = np.stack([np.bincount(x.labels.ravel(), minlength=256)[:5] for x in frames])
+        np.testing.assert_array_equal(f["class_counts"][:], counts)
+    with ShardReader(path) as r:
+        assert len(r) == 37 and r[36].step == 36
+        assert np.abs(r[20].pignistic - frames[20].pignistic).max() <= QUANT_MAX_ERROR + 1e-7
+
+
+def test_writer_does_not_keep_views_of_the_callers_arrays(tmp_path, make_frame, shard_attrs):
+    # the direct path encodes grids in add(); h5py's (lzf) path and the codec threads
+    # work on copies: a producer that reuses its buffers after add() must not change
+    # what is stored
+    rng = np.random.default_rng(5)
+    for compression, threads in (("gzip", 0), ("gzip", 1), ("lzf", 0)):
+        frames = [make_frame(rng, step=i) for i in range(3)]
+        stored = [x.labels.copy() for x in frames]
+        path = tmp_path / f"v-{compression}-{threads}.h5"
+        with ShardWriter(path, shard_attrs, compression=compression, threads=threads) as w:
+            for x in frames:
+                w.add(x)
+                x.labels[:] = 0
+                x.ego_pose[:] = -1.0
+        with ShardReader(path) as r:
+            for i in range(3):
+                np.testing.assert_array_equal(r[i].labels, stored[i])
+                assert not np.all(r[i].ego_pose == -1.0)

@@ -68,7 +68,7 @@ def _write_path_ms(config: dict[str, Any], n: int, tmp: Path) -> dict[str, float
     chunks (:func:`~dstenv.data.codec.encode_chunk`, the writer's settings), and the
     rest (HDF5 calls, label histogram, checks, file open and commit).
     """
-    from dstenv.data.codec import encode_chunk, quantize
+    from dstenv.data.codec import encode_chunk, quantize_cells
     from dstenv.data.format import GRID_FIELDS, PROB_FIELDS, QUANT_SCALE
     from dstenv.data.generate import GenerateSpec
     from dstenv.data.shards import ShardWriter
@@ -82,8 +82,9 @@ def _write_path_ms(config: dict[str, Any], n: int, tmp: Path) -> dict[str, float
         f = p.step()
         if k >= 10 and k % 10 == 0:  # stride 10, after the warm-up
             w = p.world
+            agents = w.agents  # the pipeline builds them once a step, for the sweep too
             c0, t0 = time.thread_time(), time.perf_counter()
-            label_grid(w.map, w.agents, f.ego_pose, p.spec,
+            label_grid(w.map, agents, f.ego_pose, p.spec,
                        config["labels"]["moving_threshold"])
             visible_mask(f.sensor)
             label_cpu += time.thread_time() - c0
@@ -114,7 +115,7 @@ def _write_path_ms(config: dict[str, Any], n: int, tmp: Path) -> dict[str, float
     quant_cpu = deflate_cpu = 0.0
     for f in frames:
         c0 = time.thread_time()
-        probs = [quantize(getattr(f, name), QUANT_SCALE) for name in PROB_FIELDS]
+        probs = [quantize_cells(getattr(f, name), QUANT_SCALE) for name in PROB_FIELDS]
         c1 = time.thread_time()
         for a in (*probs, *(np.asarray(getattr(f, g), dt) for g, dt in GRID_FIELDS.items())):
             encode_chunk(a, *codec)

@@ -16,13 +16,14 @@ import numpy as np
 
 from dstenv import __version__
 from dstenv.data.codec import (
-    DEFLATE_ENGINES, DIRECT_COMPRESSIONS, class_counts, encode_chunk, quantize, same_bytes,
+    DEFLATE_ENGINES, DIRECT_COMPRESSIONS, class_counts, encode_chunk, quantize_cells,
+    same_bytes,
 )
 from dstenv.io import fsync_dir
 from dstenv.data.format import (
     BUFFER_BYTES, BUFFER_FRAMES, FORMAT, FORMAT_VERSION, GRID_FIELDS, N_CLASSES, N_MASSES,
     PROB_FIELDS, QUANT_SCALE, RECORD_FIELDS, SCALAR_FIELDS, class_names, encode_attr,
-    partial_path, short_error,
+    partial_path, prob_shape, short_error,
 )
 from dstenv.frame import IGNORE_INDEX, Frame
 
@@ -134,7 +135,7 @@ class ShardWriter:
         assert f is not None
         prob_dtype = np.uint8 if self.quantize else np.float32
         specs: dict[str, tuple[tuple[int, ...], Any]] = {
-            **{k: ((N_CLASSES, h, w), prob_dtype) for k in PROB_FIELDS},
+            **{k: (prob_shape(FORMAT_VERSION, h, w), prob_dtype) for k in PROB_FIELDS},
             **{k: ((h, w), dt) for k, dt in GRID_FIELDS.items()},
             "ego_pose": ((3,), np.float64),
             **{k: ((), dt) for k, dt in SCALAR_FIELDS.items()},
@@ -243,8 +244,8 @@ class ShardWriter:
             p = np.asarray(getattr(frame, name))
             _expect(self.path, name, p, (N_CLASSES, h, w))
             try:
-                # one pass: clip, scale, round and the NaN/inf check
-                out[name] = (quantize(p, QUANT_SCALE) if self.quantize
+                # one pass: clip, scale, round, the NaN/inf check and the cell-major order
+                out[name] = (quantize_cells(p, QUANT_SCALE) if self.quantize
                              else quantize_check(p))
             except ValueError:
                 raise ValueError(f"{self.path}: frame {self.n_frames}: {name} has NaN/inf"
@@ -342,8 +343,9 @@ class ShardWriter:
 
 
 def quantize_check(p: np.ndarray) -> np.ndarray:
-    """``p`` as float32 (unquantised shards); ValueError if it holds NaN/inf."""
-    p = p.astype(np.float32)
+    """``(5, H, W)`` ``p`` as cell-major ``(H, W, 5)`` float32 (unquantised shards);
+    ValueError if it holds NaN/inf."""
+    p = np.ascontiguousarray(np.moveaxis(np.asarray(p, dtype=np.float32), 0, -1))
     if not np.all(np.isfinite(p)):
         raise ValueError("NaN/inf")
     return p

@@ -53,7 +53,9 @@ def test_quantised_error_bound(tmp_path, frames, shard_attrs):
     one.pignistic[:, 0, 0] = [0.5, 0.25, 0.125, 0.125, 0.0]
     _write(tmp_path / "h.h5", [one], shard_attrs, quantize=True)
     with h5py.File(tmp_path / "h.h5") as f:  # h5py alone reads the shard
-        assert f["pignistic"][0, :, 0, 0].tolist() == [128, 64, 32, 32, 0]
+        assert f.attrs["format_version"] == 2  # probabilities cell-major: (N, H, W, 5)
+        assert f["pignistic"].shape == (1, 12, 10, 5)
+        assert f["pignistic"][0, 0, 0].tolist() == [128, 64, 32, 32, 0]
         assert f.attrs["prob_scale"] == 255
         assert json.loads(f.attrs["config"])["grid"]["cell_size"] == 0.5
 
@@ -137,8 +139,8 @@ def test_missing_dataset_and_wrong_shape(tmp_path, frames, shard_attrs):
     path = _write(tmp_path / "n.h5", frames, shard_attrs)
     with h5py.File(path, "a") as f:
         f.attrs["n_frames"] = 5
-    with pytest.raises(ShardError, match=r"dataset 'pignistic' has shape \(4, 5, 12, 10\), "
-                                         r"expected \(5, 5, 12, 10\)"):
+    with pytest.raises(ShardError, match=r"dataset 'pignistic' has shape \(4, 12, 10, 5\), "
+                                         r"expected \(5, 12, 10, 5\)"):
         ShardReader(path)
     (tmp_path / "plain.h5").write_bytes(b"")
     with h5py.File(tmp_path / "plain.h5", "w") as f:
@@ -199,3 +201,35 @@ def test_writer_does_not_keep_views_of_the_callers_arrays(tmp_path, make_frame, 
             for i in range(3):
                 np.testing.assert_array_equal(r[i].labels, stored[i])
                 assert not np.all(r[i].ego_pose == -1.0)
+
+
+def test_reads_format_version_1(tmp_path, frames, shard_attrs):
+    # version 1 stored the probabilities as planes (N, 5, H, W): rewrite a shard that way
+    # with h5py alone; the reader must give the same frames
+    for quantize in (True, False):
+        path = _write(tmp_path / f"v2-{quantize}.h5", frames, shard_attrs, quantize=quantize)
+        old = tmp_path / f"v1-{quantize}.h5"
+        with h5py.File(path) as src, h5py.File(old, "w") as dst:
+            for key, value in src.attrs.items():
+                dst.attrs[key] = value
+            dst.attrs["format_version"] = 1
+            for name in src:
+                data = src[name][()]
+                if name in ("pignistic", "pignistic_prev"):
+                    data = np.ascontiguousarray(data.transpose(0, 3, 1, 2))
+                dst.create_dataset(name, data=data, fletcher32=True)
+        with ShardReader(path) as new, ShardReader(old) as r:
+            assert r.format_version == 1 and new.format_version == 2
+            for i in range(len(frames)):
+                a, b = new[i], r[i]
+                for name in ("pignistic", "pignistic_prev", "labels", "ego_pose"):
+                    np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+                assert a.pignistic.shape == (5, 12, 10) and a.pignistic.flags.c_contiguous
+                stored = r.get(i, ["pignistic"], stored=True)["pignistic"]
+                np.testing.assert_array_equal(
+                    stored, new.get(i, ["pignistic"], stored=True)["pignistic"])
+        with h5py.File(old, "r+") as f:
+            f.attrs["format_version"] = 3
+        with pytest.raises(ShardError, match="format_version 3 is not supported "
+                                             r"\(this dstenv reads 1, 2\)"):
+            ShardReader(old)

@@ -212,8 +212,9 @@ def quantize_cells(p: np.ndarray, scale: int) -> np.ndarray:
 
     ``out[i, j, k] == quantize(p, scale)[k, i, j]``. The five bytes of a cell side by
     side deflate ~35 % smaller and ~25 % faster than five planes (the classes of a
-    cell are correlated, and repeated cells make long matches), which pays for the
-    interleaving (format version 2, :mod:`dstenv.data.shards`).
+    cell are correlated, and repeated cells make long matches); the interleaving
+    costs ~0.1 ms more per 256 x 256 grid than :func:`quantize` (format version 2,
+    :mod:`dstenv.data.shards`).
 
     Raises:
         ValueError: if ``p`` is not ``(5, H, W)`` or holds NaN or inf.

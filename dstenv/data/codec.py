@@ -34,7 +34,7 @@ from collections.abc import Callable
 import numba as nb
 import numpy as np
 
-__all__ = ["fletcher32", "encode_chunk", "quantize", "class_counts", "same_bytes",
+__all__ = ["fletcher32", "encode_chunk", "quantize", "quantize_cells", "class_counts", "same_bytes",
            "DIRECT_COMPRESSIONS", "DEFLATE_ENGINES"]
 
 #: compressions whose chunks :func:`encode_chunk` can produce (lzf lives inside h5py only)
@@ -55,7 +55,13 @@ def _deflate(engine: str) -> Callable[[bytes, int], bytes]:
 
 @nb.njit(cache=True, nogil=True)
 def _fletcher32(data: np.ndarray) -> np.uint32:
-    """``H5_checksum_fletcher32`` of HDF5, bit for bit (big-endian 16-bit words)."""
+    """``H5_checksum_fletcher32`` of HDF5, bit for bit (big-endian 16-bit words).
+
+    HDF5 adds word by word (``s1 += w; s2 += s1``) and folds every 360 words. Over a
+    block of ``t`` words that is ``s2 += t * s1 + sum((t - k) * w_k)`` and
+    ``s1 += sum(w_k)``: the same sums modulo 2**32 (so the same folds and result),
+    but without the chain of dependent additions, so LLVM vectorises the block.
+    """
     mask, sh = np.uint32(0xFFFF), np.uint32(16)
     s1 = np.uint32(0)
     s2 = np.uint32(0)
@@ -64,10 +70,15 @@ def _fletcher32(data: np.ndarray) -> np.uint32:
     while n > 0:
         t = n if n <= 360 else 360  # 360 words: the sums cannot overflow 32 bits
         n -= t
-        for _ in range(t):
-            s1 += (np.uint32(data[i]) << np.uint32(8)) | np.uint32(data[i + 1])
-            s2 += s1
-            i += 2
+        a = np.uint32(0)
+        b = np.uint32(0)
+        for k in range(t):
+            w = (np.uint32(data[i + 2 * k]) << np.uint32(8)) | np.uint32(data[i + 2 * k + 1])
+            a += w
+            b += np.uint32(t - k) * w
+        i += 2 * t
+        s2 += np.uint32(t) * s1 + b
+        s1 += a
         s1 = (s1 & mask) + (s1 >> sh)
         s2 = (s2 & mask) + (s2 >> sh)
     if data.shape[0] % 2:
@@ -143,29 +154,119 @@ def quantize(p: np.ndarray, scale: int) -> np.ndarray:
     return out.reshape(np.shape(p))
 
 
+#: cells per block of :func:`quantize_cells` (five rows of this many bytes stay in L1)
+_BLOCK = 512
+
+
+@nb.njit(cache=True, nogil=True, inline="always")
+def _cell(t0, t1, t2, t3, t4, j):  # pragma: no cover - numba
+    """Cell ``j``'s five bytes as the low 40 bits of a uint64 (byte k: channel k)."""
+    u = np.uint64(j)
+    return (np.uint64(t0[u]) | (np.uint64(t1[u]) << np.uint64(8))
+            | (np.uint64(t2[u]) << np.uint64(16)) | (np.uint64(t3[u]) << np.uint64(24))
+            | (np.uint64(t4[u]) << np.uint64(32)))
+
+
 @nb.njit(cache=True, nogil=True)
-def _class_counts(labels: np.ndarray, n: int, ignore: int, counts: np.ndarray) -> int:
-    for i in range(labels.shape[0]):
-        v = labels[i]
-        if v < n:
-            counts[v] += 1
-        elif v != ignore:
-            return int(v)
-    return -1
+def _quantize_cells(p, scale, t, words, out):  # pragma: no cover - numba
+    """Quantise ``p`` ``(5, n)`` into ``out`` (``(5 n,) uint8``, cell-major), the bytes
+    of ``words`` (``(ceil(5 n / 8),) uint64``), block by block: each channel with the
+    vectorised :func:`_quantize` into a row of ``t`` ``(5, _BLOCK)``, then eight cells
+    at a time into five little-endian words (shifts and ors; byte stores at stride 5
+    would not vectorise). Returns False if ``p`` holds NaN/inf."""
+    n = p.shape[1]
+    b = t.shape[1]
+    t0, t1, t2, t3, t4 = t[0], t[1], t[2], t[3], t[4]
+    ok = True
+    for s in range(0, n, b):
+        e = min(s + b, n)
+        for k in range(5):
+            ok &= _quantize(p[k, s:e], scale, t[k, : e - s])
+        m = (e - s) // 8 * 8
+        base = s * 5 // 8  # s is a multiple of b, so of 8
+        for g in range(0, m, 8):
+            v0 = _cell(t0, t1, t2, t3, t4, g)
+            v1 = _cell(t0, t1, t2, t3, t4, g + 1)
+            v2 = _cell(t0, t1, t2, t3, t4, g + 2)
+            v3 = _cell(t0, t1, t2, t3, t4, g + 3)
+            v4 = _cell(t0, t1, t2, t3, t4, g + 4)
+            v5 = _cell(t0, t1, t2, t3, t4, g + 5)
+            v6 = _cell(t0, t1, t2, t3, t4, g + 6)
+            v7 = _cell(t0, t1, t2, t3, t4, g + 7)
+            w = np.uint64(base + g * 5 // 8)
+            words[w] = v0 | (v1 << np.uint64(40))
+            words[w + np.uint64(1)] = ((v1 >> np.uint64(24)) | (v2 << np.uint64(16))
+                                       | (v3 << np.uint64(56)))
+            words[w + np.uint64(2)] = (v3 >> np.uint64(8)) | (v4 << np.uint64(32))
+            words[w + np.uint64(3)] = ((v4 >> np.uint64(32)) | (v5 << np.uint64(8))
+                                       | (v6 << np.uint64(48)))
+            words[w + np.uint64(4)] = (v6 >> np.uint64(16)) | (v7 << np.uint64(24))
+        for j in range(m, e - s):  # the last n % 8 cells
+            for k in range(5):
+                out[(s + j) * 5 + k] = t[k, j]
+    return ok
+
+
+def quantize_cells(p: np.ndarray, scale: int) -> np.ndarray:
+    """:func:`quantize` of a ``(5, H, W)`` grid, stored cell-major: ``(H, W, 5) uint8``.
+
+    ``out[i, j, k] == quantize(p, scale)[k, i, j]``. The five bytes of a cell side by
+    side deflate ~35 % smaller and ~25 % faster than five planes (the classes of a
+    cell are correlated, and repeated cells make long matches); the interleaving
+    costs ~0.1 ms more per 256 x 256 grid than :func:`quantize` (format version 2,
+    :mod:`dstenv.data.shards`).
+
+    Raises:
+        ValueError: if ``p`` is not ``(5, H, W)`` or holds NaN or inf.
+    """
+    p = np.ascontiguousarray(p, dtype=np.float32)
+    if p.ndim != 3 or p.shape[0] != 5:
+        raise ValueError(f"quantize_cells needs a (5, H, W) grid, got shape {p.shape}")
+    _, h, w = p.shape
+    n = h * w
+    words = np.empty(-(-5 * n // 8), np.uint64)
+    out = words.view(np.uint8)
+    scratch = np.empty((5, _BLOCK), np.uint8)
+    if not _quantize_cells(p.reshape(5, n), np.float32(scale), scratch, words, out):
+        raise ValueError("probabilities hold NaN/inf")
+    return out[: 5 * n].reshape(h, w, 5)
+
+
+@nb.njit(cache=True, nogil=True)
+def _histogram(labels: np.ndarray, counts: np.ndarray) -> None:
+    """``counts[v]`` = cells equal to ``v`` (``counts``: ``(256,) int64``, zeroed).
+
+    Four interleaved histograms: with one, a run of equal labels chains every
+    increment on the store of the previous one (~3x slower on long runs).
+    """
+    n = labels.shape[0]
+    c = np.zeros((4, 256), np.int64)
+    m = n - n % 4
+    for i in range(0, m, 4):
+        c[0, labels[i]] += 1
+        c[1, labels[i + 1]] += 1
+        c[2, labels[i + 2]] += 1
+        c[3, labels[i + 3]] += 1
+    for i in range(m, n):
+        c[0, labels[i]] += 1
+    for v in range(256):
+        counts[v] = c[0, v] + c[1, v] + c[2, v] + c[3, v]
 
 
 def class_counts(labels: np.ndarray, n_classes: int, ignore: int) -> np.ndarray:
     """Cells per class of a uint8 label grid: ``(n_classes,) int64``.
 
     Raises:
-        ValueError: naming the first value that is neither a class nor ``ignore``.
+        ValueError: naming the smallest value that is neither a class nor ``ignore``.
     """
-    counts = np.zeros(n_classes, np.int64)
-    bad = _class_counts(np.ascontiguousarray(labels, dtype=np.uint8).reshape(-1), n_classes,
-                        ignore, counts)
-    if bad >= 0:
-        raise ValueError(f"labels hold value {bad}; allowed 0..{n_classes - 1} and {ignore}")
-    return counts
+    counts = np.zeros(256, np.int64)
+    _histogram(np.ascontiguousarray(labels, dtype=np.uint8).reshape(-1), counts)
+    bad = np.flatnonzero(counts[n_classes:])
+    bad = bad[bad + n_classes != ignore]
+    if bad.size:
+        raise ValueError(f"labels hold value {int(bad[0]) + n_classes}; allowed "
+                         f"0..{n_classes - 1} and {ignore}")
+    return counts[:n_classes].copy()
 
 
 @nb.njit(cache=True, nogil=True)

@@ -13,12 +13,15 @@ import numpy as np
 from dstenv.dst.frame import CLASSES, NUM_CLASSES, NUM_SETS
 
 __all__ = [
-    "FORMAT", "FORMAT_VERSION", "QUANT_SCALE", "QUANT_MAX_ERROR", "N_CLASSES", "N_MASSES",
-    "FRAME_FIELDS", "ShardError", "class_names", "partial_path",
+    "FORMAT", "FORMAT_VERSION", "READ_VERSIONS", "QUANT_SCALE", "QUANT_MAX_ERROR", "N_CLASSES",
+    "N_MASSES", "FRAME_FIELDS", "ShardError", "class_names", "partial_path", "prob_shape",
 ]
 
 FORMAT = "dstenv-shard"
-FORMAT_VERSION = 1
+#: written by this dstenv: 2 stores probabilities cell-major ``(N, H, W, 5)``
+FORMAT_VERSION = 2
+#: read by this dstenv: 1 stored them as planes ``(N, 5, H, W)`` (otherwise the same)
+READ_VERSIONS = (1, 2)
 #: uint8 quantisation: ``q = rint(QUANT_SCALE * p)``.
 QUANT_SCALE = 255
 #: Largest absolute error of a dequantised probability.
@@ -33,10 +36,18 @@ N_MASSES = NUM_SETS  # 32
 GRID_FIELDS = {"labels": np.uint8, "visible": np.bool_, "sensor": np.uint8, "gis": np.uint8}
 PROB_FIELDS = ("pignistic", "pignistic_prev")
 SCALAR_FIELDS = {"time": np.float64, "seed": np.int64, "step": np.int64}
+#: the small per-frame records (64 frames per chunk, written once per shard)
+RECORD_FIELDS: tuple[str, ...] = ("ego_pose", *SCALAR_FIELDS, "class_counts")
 #: Every dataset a valid shard holds (``masses`` is optional).
 FRAME_FIELDS: tuple[str, ...] = (
     *PROB_FIELDS, *GRID_FIELDS, "ego_pose", *SCALAR_FIELDS, "class_counts",
 )
+
+
+def prob_shape(version: int, h: int, w: int) -> tuple[int, int, int]:
+    """Stored shape of one frame of ``pignistic`` / ``pignistic_prev`` in a shard of
+    format ``version``: ``(H, W, 5)`` from version 2, ``(5, H, W)`` before."""
+    return (h, w, N_CLASSES) if version >= 2 else (N_CLASSES, h, w)
 
 
 class ShardError(ValueError):

@@ -11,8 +11,8 @@ import h5py
 import numpy as np
 
 from dstenv.data.format import (
-    FORMAT, FORMAT_VERSION, FRAME_FIELDS, GRID_FIELDS, N_CLASSES, N_MASSES, PROB_FIELDS,
-    SCALAR_FIELDS, ShardError, short_error,
+    FORMAT, FRAME_FIELDS, GRID_FIELDS, N_CLASSES, N_MASSES, PROB_FIELDS, READ_VERSIONS,
+    SCALAR_FIELDS, ShardError, prob_shape, short_error,
 )
 from dstenv.frame import Frame
 
@@ -60,9 +60,10 @@ class ShardReader:
         if raw.get("format") != FORMAT:
             raise ShardError(f"{self.path}: not a dstenv shard "
                              f"(attribute format={raw.get('format')!r})")
-        if int(raw.get("format_version", -1)) != FORMAT_VERSION:
+        if int(raw.get("format_version", -1)) not in READ_VERSIONS:
             raise ShardError(f"{self.path}: shard format_version {raw.get('format_version')} is "
-                             f"not supported (this dstenv reads {FORMAT_VERSION})")
+                             f"not supported (this dstenv reads "
+                             f"{', '.join(map(str, READ_VERSIONS))})")
         out: dict[str, Any] = {}
         json_keys = set(json.loads(raw.pop("json_attrs", "[]")))
         for key, value in raw.items():
@@ -85,8 +86,9 @@ class ShardReader:
             raise ShardError(f"{self.path}: shard marked incomplete")
         n = int(a["n_frames"])
         h, w = (int(v) for v in a["grid_shape"])
+        self.format_version = int(a["format_version"])
         expected = {
-            **{k: (n, N_CLASSES, h, w) for k in PROB_FIELDS},
+            **{k: (n, *prob_shape(self.format_version, h, w)) for k in PROB_FIELDS},
             **{k: (n, h, w) for k in GRID_FIELDS},
             "ego_pose": (n, 3), **{k: (n,) for k in SCALAR_FIELDS},
             "class_counts": (n, N_CLASSES),
@@ -119,6 +121,8 @@ class ShardReader:
                 ``float32`` in [0, 1] whatever the stored dtype.
             stored: return probabilities as stored (``uint8`` scaled by
                 :attr:`prob_scale`, or ``float32``) instead; see :meth:`dequantise`.
+                Either way they are ``(5, H, W)`` (of format version 2, which stores
+                them cell-major, a transposed view).
 
         Raises:
             IndexError: index out of range.
@@ -138,6 +142,8 @@ class ShardReader:
             except (OSError, ValueError) as exc:
                 raise ShardError(f"{self.path}: frame {index}: cannot read {name!r} "
                                  f"(corrupt chunk?): {short_error(exc)}") from None
+            if name in PROB_FIELDS and self.format_version >= 2:
+                value = np.moveaxis(value, -1, 0)  # cell-major on disk: a (5, H, W) view
             out[name] = value if stored else self.dequantise(name, value)
         return out
 
@@ -146,7 +152,7 @@ class ShardReader:
         a new ``float32`` array in [0, 1]; other datasets: ``value`` itself)."""
         if name not in PROB_FIELDS:
             return value
-        value = value.astype(np.float32)
+        value = np.array(value, dtype=np.float32, order="C")  # a view of v2 data: C order
         if self.prob_scale != 1:
             value /= np.float32(self.prob_scale)
         return value

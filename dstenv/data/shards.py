@@ -1,24 +1,25 @@
 """Shard files: HDF5 containers of labelled frames, readable with ``h5py`` alone.
 
-Format (``format = "dstenv-shard"``, ``format_version = 1``)
+Format (``format = "dstenv-shard"``, ``format_version = 2``)
 ------------------------------------------------------------
 One shard holds ``N`` :class:`dstenv.frame.Frame` records of one grid shape
 ``(H, W)``. Every per-frame dataset has ``N`` as its first axis; grids are chunked
 one frame per chunk (random access reads exactly one chunk per array; the small
 records ``ego_pose``, ``time``, ``seed``, ``step``, ``class_counts`` 64 frames per
-chunk), compressed
-(``gzip`` level 3 by default, or ``lzf``) and checksummed (``fletcher32``: a
-corrupted chunk raises on read instead of returning wrong numbers). With gzip the
-writer deflates the grid chunks itself (:mod:`dstenv.data.codec`, the same bytes
-HDF5's filters produce) so that a ``pignistic_prev`` equal to the previous frame's
-``pignistic`` (every step kept) is compressed once; readers see no difference.
+chunk), compressed (``gzip``, level 1 by default, or ``lzf``) and checksummed
+(``fletcher32``: a corrupted chunk raises on read instead of returning wrong
+numbers). With gzip the writer deflates the grid chunks itself
+(:mod:`dstenv.data.codec`, streams HDF5's built-in filter reads) so that a
+``pignistic_prev`` equal to the previous frame's ``pignistic`` (every step kept) is
+compressed once; readers see no difference.
 
 ===================  ======================  =========================================
 dataset              shape, dtype            meaning (axes: :mod:`dstenv.grid`)
 ===================  ======================  =========================================
-``pignistic``        (N, 5, H, W) uint8 or   BetP at t over ``attrs["classes"]``
-                     float32
-``pignistic_prev``   (N, 5, H, W) as above   BetP at t-1 (the paper's FCN input is both)
+``pignistic``        (N, H, W, 5) uint8 or   BetP at t over ``attrs["classes"]``,
+                     float32                 cell-major (the 5 classes of a cell
+                                             side by side)
+``pignistic_prev``   (N, H, W, 5) as above   BetP at t-1 (the paper's FCN input is both)
 ``labels``           (N, H, W) uint8         class index, or 255 (``IGNORE_INDEX``)
 ``visible``          (N, H, W) bool          cell observed by this sweep
 ``sensor``           (N, H, W) uint8         0 unknown, 1 free, 2 occupied
@@ -32,10 +33,16 @@ dataset              shape, dtype            meaning (axes: :mod:`dstenv.grid`)
                                              :mod:`dstenv.dst`), never quantised
 ===================  ======================  =========================================
 
-Measured at 256 x 256 (default city; ``dstenv bench data``): uint8 + gzip 3 (the
-default) stores about 30-35 KB per frame with every step kept and 40-45 KB at
-stride 10, against 919 KB uncompressed uint8 and 2.9 MB as float32; gzip 6 gives
-about 25 / 33 KB at 2-3x the compression time, gzip 1 40 / 53 KB, lzf 85 KB.
+Version 1 (dstenv before this layout) stored ``pignistic`` and ``pignistic_prev`` as
+planes, ``(N, 5, H, W)``; everything else is the same. :class:`ShardReader` reads both
+and returns ``(5, H, W)`` either way. Cell-major bytes deflate ~35 % smaller and
+~25 % faster (the classes of a cell are correlated); interleaving them costs a little
+more than the deflate saves (about +10 % writer CPU per frame against version 1,
+measured in one process; see ``docs/throughput.md``).
+
+Measured at 256 x 256 at stride 10 (default city, uint8 + ISA-L gzip 1, the
+default): 40 and 47 KB per frame on two episodes where version 1 stored 57 and
+67 KB; ``dstenv bench data`` prints bytes per frame.
 
 Quantisation: when ``attrs["prob_dtype"] == "uint8"`` the probabilities are stored
 as ``q = rint(255 * p)`` and read as ``p' = q / 255``, so ``|p' - p| <= 1/510``
@@ -55,7 +62,7 @@ the attribute ``json_attrs``.
 Reading with h5py alone::
 
     with h5py.File("shard-00000.h5") as f:
-        p = f["pignistic"][7] / f.attrs["prob_scale"]     # (5, H, W)
+        p = f["pignistic"][7] / f.attrs["prob_scale"]     # (H, W, 5); version 1: (5, H, W)
         config = json.loads(f.attrs["config"])
 
 Atomicity and determinism: :class:`ShardWriter` writes ``NAME.partial`` and renames

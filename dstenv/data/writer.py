@@ -16,12 +16,14 @@ import numpy as np
 
 from dstenv import __version__
 from dstenv.data.codec import (
-    DEFLATE_ENGINES, DIRECT_COMPRESSIONS, class_counts, encode_chunk, quantize, same_bytes,
+    DEFLATE_ENGINES, DIRECT_COMPRESSIONS, class_counts, encode_chunk, quantize_cells,
+    same_bytes,
 )
 from dstenv.io import fsync_dir
 from dstenv.data.format import (
     BUFFER_BYTES, BUFFER_FRAMES, FORMAT, FORMAT_VERSION, GRID_FIELDS, N_CLASSES, N_MASSES,
-    PROB_FIELDS, QUANT_SCALE, SCALAR_FIELDS, class_names, encode_attr, partial_path, short_error,
+    PROB_FIELDS, QUANT_SCALE, RECORD_FIELDS, SCALAR_FIELDS, class_names, encode_attr,
+    partial_path, prob_shape, short_error,
 )
 from dstenv.frame import IGNORE_INDEX, Frame
 
@@ -117,6 +119,8 @@ class ShardWriter:
         self._datasets: dict[str, h5py.Dataset] = {}
         self._pending: list[dict[str, Any]] = []
         self._pending_bytes = 0
+        self._capacity = 0  # frames the grid datasets hold room for (see _flush)
+        self._records: dict[str, list[Any]] = {}  # small per-frame records until close
         self.n_frames = 0
 
     def __enter__(self) -> ShardWriter:
@@ -131,7 +135,7 @@ class ShardWriter:
         assert f is not None
         prob_dtype = np.uint8 if self.quantize else np.float32
         specs: dict[str, tuple[tuple[int, ...], Any]] = {
-            **{k: ((N_CLASSES, h, w), prob_dtype) for k in PROB_FIELDS},
+            **{k: (prob_shape(FORMAT_VERSION, h, w), prob_dtype) for k in PROB_FIELDS},
             **{k: ((h, w), dt) for k, dt in GRID_FIELDS.items()},
             "ego_pose": ((3,), np.float64),
             **{k: ((), dt) for k, dt in SCALAR_FIELDS.items()},
@@ -196,23 +200,42 @@ class ShardWriter:
         return err
 
     def _flush(self, f: h5py.File) -> None:
-        """Write buffered frames: one resize and one write per dataset (still 1 chunk/frame)."""
+        """Write buffered frames' grids (one chunk per frame); keep their small records.
+
+        Grid datasets grow by doubling (at least :data:`BUFFER_FRAMES` frames), not
+        per flush, and are cut to ``n_frames`` at close (chunks never written take no
+        space); the small records are written once per shard, at close.
+        """
         if not self._pending:
             return
         start, k = self.n_frames - len(self._pending), len(self._pending)
+        if start + k > self._capacity:
+            self._capacity = max(2 * self._capacity, start + k, BUFFER_FRAMES)
+            for name in self._pending[0]:
+                if name not in RECORD_FIELDS:
+                    self._datasets[name].resize(self._capacity, axis=0)
         for name in self._pending[0]:
+            values = [v[name] for v in self._pending]
+            if name in RECORD_FIELDS:
+                self._records.setdefault(name, []).extend(values)
+                continue
             ds = self._datasets[name]
-            ds.resize(start + k, axis=0)
-            first = self._pending[0][name]
-            if isinstance(first, (bytes, cf.Future)):
+            if isinstance(values[0], (bytes, cf.Future)):
                 tail = (0,) * (ds.ndim - 1)
-                for i, v in enumerate(self._pending):
-                    chunk = v[name]
+                for i, chunk in enumerate(values):
                     ds.id.write_direct_chunk((start + i, *tail),
                                              chunk if isinstance(chunk, bytes) else chunk.result())
             else:
-                ds[start:start + k] = np.stack([np.asarray(v[name]) for v in self._pending])
+                ds[start:start + k] = np.stack(values)
         self._pending, self._pending_bytes = [], 0
+
+    def _finish(self) -> None:
+        """Cut the grids to ``n_frames`` and write the small records (at close)."""
+        n = self.n_frames
+        for name, ds in self._datasets.items():
+            ds.resize(n, axis=0)
+            if name in RECORD_FIELDS:
+                ds[:] = np.asarray(self._records[name], dtype=ds.dtype).reshape(ds.shape)
 
     def _check(self, frame: Frame) -> dict[str, Any]:
         h, w = self._shape  # type: ignore[misc]
@@ -221,8 +244,8 @@ class ShardWriter:
             p = np.asarray(getattr(frame, name))
             _expect(self.path, name, p, (N_CLASSES, h, w))
             try:
-                # one pass: clip, scale, round and the NaN/inf check
-                out[name] = (quantize(p, QUANT_SCALE) if self.quantize
+                # one pass: clip, scale, round, the NaN/inf check and the cell-major order
+                out[name] = (quantize_cells(p, QUANT_SCALE) if self.quantize
                              else quantize_check(p))
             except ValueError:
                 raise ValueError(f"{self.path}: frame {self.n_frames}: {name} has NaN/inf"
@@ -230,12 +253,14 @@ class ShardWriter:
         for name, dtype in GRID_FIELDS.items():
             a = np.asarray(getattr(frame, name))
             _expect(self.path, name, a, (h, w))
-            out[name] = a.astype(dtype)
+            # encoded in add() on this thread: no copy; h5py's path and the codec
+            # threads read them later, so they get a copy
+            out[name] = a.astype(dtype, copy=not self._direct or self._threads > 0)
         try:
             out["class_counts"] = class_counts(out["labels"], N_CLASSES, IGNORE_INDEX)
         except ValueError as exc:
             raise ValueError(f"{self.path}: {exc}") from None
-        out["ego_pose"] = np.asarray(frame.ego_pose, dtype=np.float64)
+        out["ego_pose"] = np.array(frame.ego_pose, dtype=np.float64)
         _expect(self.path, "ego_pose", out["ego_pose"], (3,))
         out["time"], out["seed"], out["step"] = float(frame.time), int(frame.seed), int(frame.step)
         if self.masses:
@@ -283,6 +308,7 @@ class ShardWriter:
                 self._pool.shutdown(wait=True, cancel_futures=True)
                 self._pool = None
             self._last_prob = self._last_chunk = None
+            self._records = {}
 
     def _close(self, f: h5py.File, exc_type: type[BaseException] | None) -> None:
         if exc_type is not None:
@@ -293,6 +319,7 @@ class ShardWriter:
             raise ValueError(f"{self.path}: no frames added; refusing to write an empty shard")
         try:
             self._flush(f)
+            self._finish()
             self._write_attrs(f)
             f.flush()
             os.fsync(f.id.get_vfd_handle())
@@ -316,8 +343,9 @@ class ShardWriter:
 
 
 def quantize_check(p: np.ndarray) -> np.ndarray:
-    """``p`` as float32 (unquantised shards); ValueError if it holds NaN/inf."""
-    p = p.astype(np.float32)
+    """``(5, H, W)`` ``p`` as cell-major ``(H, W, 5)`` float32 (unquantised shards);
+    ValueError if it holds NaN/inf."""
+    p = np.ascontiguousarray(np.moveaxis(np.asarray(p, dtype=np.float32), 0, -1))
     if not np.all(np.isfinite(p)):
         raise ValueError("NaN/inf")
     return p

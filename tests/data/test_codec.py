@@ -6,7 +6,9 @@ import h5py
 import numpy as np
 import pytest
 
-from dstenv.data.codec import class_counts, encode_chunk, fletcher32, quantize
+from dstenv.data.codec import (
+    class_counts, encode_chunk, fletcher32, quantize, quantize_cells,
+)
 from dstenv.data.shards import ShardReader, ShardWriter
 
 
@@ -106,3 +108,19 @@ def test_stride1_prev_chunk_is_shared_and_reads_back(tmp_path, frames, shard_att
             for i, f in enumerate(frames):
                 np.testing.assert_allclose(r[i].pignistic_prev, f.pignistic_prev, atol=1 / 510)
     assert (tmp_path / "s0.h5").read_bytes() == (tmp_path / "s1.h5").read_bytes()
+
+
+@pytest.mark.parametrize("shape", [(256, 256), (12, 10), (13, 7), (1, 1), (37, 29)])
+def test_quantize_cells_is_the_cell_major_quantisation(shape):
+    # eight cells are packed into five words; grids whose cell count is no multiple of
+    # 8 (or of the 512-cell block) end in single bytes
+    rng = np.random.default_rng(3)
+    p = (rng.random((5, *shape)) * 1.2 - 0.1).astype(np.float32)
+    q = quantize_cells(p, 255)
+    assert q.shape == (*shape, 5) and q.dtype == np.uint8 and q.flags.c_contiguous
+    np.testing.assert_array_equal(q, quantize(p, 255).transpose(1, 2, 0))
+    p[4, -1, -1] = np.inf
+    with pytest.raises(ValueError, match="NaN/inf"):
+        quantize_cells(p, 255)
+    with pytest.raises(ValueError, match=r"needs a \(5, H, W\) grid"):
+        quantize_cells(p[:4], 255)

@@ -53,7 +53,9 @@ def test_quantised_error_bound(tmp_path, frames, shard_attrs):
     one.pignistic[:, 0, 0] = [0.5, 0.25, 0.125, 0.125, 0.0]
     _write(tmp_path / "h.h5", [one], shard_attrs, quantize=True)
     with h5py.File(tmp_path / "h.h5") as f:  # h5py alone reads the shard
-        assert f["pignistic"][0, :, 0, 0].tolist() == [128, 64, 32, 32, 0]
+        assert f.attrs["format_version"] == 2  # probabilities cell-major: (N, H, W, 5)
+        assert f["pignistic"].shape == (1, 12, 10, 5)
+        assert f["pignistic"][0, 0, 0].tolist() == [128, 64, 32, 32, 0]
         assert f.attrs["prob_scale"] == 255
         assert json.loads(f.attrs["config"])["grid"]["cell_size"] == 0.5
 
@@ -137,8 +139,8 @@ def test_missing_dataset_and_wrong_shape(tmp_path, frames, shard_attrs):
     path = _write(tmp_path / "n.h5", frames, shard_attrs)
     with h5py.File(path, "a") as f:
         f.attrs["n_frames"] = 5
-    with pytest.raises(ShardError, match=r"dataset 'pignistic' has shape \(4, 5, 12, 10\), "
-                                         r"expected \(5, 5, 12, 10\)"):
+    with pytest.raises(ShardError, match=r"dataset 'pignistic' has shape \(4, 12, 10, 5\), "
+                                         r"expected \(5, 12, 10, 5\)"):
         ShardReader(path)
     (tmp_path / "plain.h5").write_bytes(b"")
     with h5py.File(tmp_path / "plain.h5", "w") as f:
@@ -157,3 +159,77 @@ def test_hdf5_write_failure_becomes_one_line_oserror(tmp_path, frames, shard_att
     with pytest.raises(OSError, match=r"full\.h5: cannot write shard: No space left on device$"):
         _write(path, frames, shard_attrs)
     assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("compression", ["gzip", "lzf"])
+def test_many_flushes_store_exactly_the_frames(tmp_path, make_frame, shard_attrs, compression):
+    # 37 frames: grids grow 16 -> 32 -> 64 frames and are cut to 37 at close; the small
+    # records are written once, at close; h5py alone sees exactly 37 frames
+    rng = np.random.default_rng(4)
+    frames = [make_frame(rng, step=i) for i in range(37)]
+    path = _write(tmp_path / "m.h5", frames, shard_attrs, compression=compression)
+    with h5py.File(path) as f:
+        for name in ("pignistic", "labels", "visible", "ego_pose", "step", "class_counts"):
+            assert f[name].shape[0] == 37, name
+        assert f["labels"].id.get_num_chunks() == 37  # nothing stored past the end
+        np.testing.assert_array_equal(f["step"][:], np.arange(37))
+        np.testing.assert_array_equal(f["ego_pose"][:], np.stack([x.ego_pose for x in frames]))
+        np.testing.assert_array_equal(f["labels"][:], np.stack([x.labels for x in frames]))
+        np.testing.assert_array_equal(f["visible"][:], np.stack([x.visible for x in frames]))
+        counts = np.stack([np.bincount(x.labels.ravel(), minlength=256)[:5] for x in frames])
+        np.testing.assert_array_equal(f["class_counts"][:], counts)
+    with ShardReader(path) as r:
+        assert len(r) == 37 and r[36].step == 36
+        assert np.abs(r[20].pignistic - frames[20].pignistic).max() <= QUANT_MAX_ERROR + 1e-7
+
+
+def test_writer_does_not_keep_views_of_the_callers_arrays(tmp_path, make_frame, shard_attrs):
+    # the direct path encodes grids in add(); h5py's (lzf) path and the codec threads
+    # work on copies: a producer that reuses its buffers after add() must not change
+    # what is stored
+    rng = np.random.default_rng(5)
+    for compression, threads in (("gzip", 0), ("gzip", 1), ("lzf", 0)):
+        frames = [make_frame(rng, step=i) for i in range(3)]
+        stored = [x.labels.copy() for x in frames]
+        path = tmp_path / f"v-{compression}-{threads}.h5"
+        with ShardWriter(path, shard_attrs, compression=compression, threads=threads) as w:
+            for x in frames:
+                w.add(x)
+                x.labels[:] = 0
+                x.ego_pose[:] = -1.0
+        with ShardReader(path) as r:
+            for i in range(3):
+                np.testing.assert_array_equal(r[i].labels, stored[i])
+                assert not np.all(r[i].ego_pose == -1.0)
+
+
+def test_reads_format_version_1(tmp_path, frames, shard_attrs):
+    # version 1 stored the probabilities as planes (N, 5, H, W): rewrite a shard that way
+    # with h5py alone; the reader must give the same frames
+    for quantize in (True, False):
+        path = _write(tmp_path / f"v2-{quantize}.h5", frames, shard_attrs, quantize=quantize)
+        old = tmp_path / f"v1-{quantize}.h5"
+        with h5py.File(path) as src, h5py.File(old, "w") as dst:
+            for key, value in src.attrs.items():
+                dst.attrs[key] = value
+            dst.attrs["format_version"] = 1
+            for name in src:
+                data = src[name][()]
+                if name in ("pignistic", "pignistic_prev"):
+                    data = np.ascontiguousarray(data.transpose(0, 3, 1, 2))
+                dst.create_dataset(name, data=data, fletcher32=True)
+        with ShardReader(path) as new, ShardReader(old) as r:
+            assert r.format_version == 1 and new.format_version == 2
+            for i in range(len(frames)):
+                a, b = new[i], r[i]
+                for name in ("pignistic", "pignistic_prev", "labels", "ego_pose"):
+                    np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+                assert a.pignistic.shape == (5, 12, 10) and a.pignistic.flags.c_contiguous
+                stored = r.get(i, ["pignistic"], stored=True)["pignistic"]
+                np.testing.assert_array_equal(
+                    stored, new.get(i, ["pignistic"], stored=True)["pignistic"])
+        with h5py.File(old, "r+") as f:
+            f.attrs["format_version"] = 3
+        with pytest.raises(ShardError, match="format_version 3 is not supported "
+                                             r"\(this dstenv reads 1, 2\)"):
+            ShardReader(old)

@@ -28,7 +28,7 @@ import numba
 import numpy as np
 from scipy.ndimage import minimum_filter1d
 
-from dstenv.config import merge_config
+from dstenv.config import Validated, merge_config
 from dstenv.dst import SensorState
 from dstenv.grid import GridSpec
 from dstenv.sensing.ground import (
@@ -40,7 +40,7 @@ from dstenv.sensing.ground import (
 )
 from dstenv.sensing.raycast import sensor_grid
 
-__all__ = ["default_ray_config", "scan_sensor_grid", "cloud_sensor_grid"]
+__all__ = ["default_ray_config", "ray_config", "scan_sensor_grid", "cloud_sensor_grid"]
 
 
 def default_ray_config() -> dict[str, Any]:
@@ -56,6 +56,14 @@ def default_ray_config() -> dict[str, Any]:
         # guard rails free but lets rays clear the cells under cars)
         "block_height": 0.0,
     }
+
+
+def ray_config(config: dict[str, Any] | None) -> Validated:
+    """Ray settings merged over :func:`default_ray_config` and marked validated (a
+    validated one is passed through, as :func:`~dstenv.sensing.ground.ground_config`)."""
+    if isinstance(config, Validated):
+        return config
+    return Validated(merge_config(default_ray_config(), config, "rays"))
 
 
 def scan_sensor_grid(
@@ -222,7 +230,7 @@ def cloud_sensor_grid(
         CloudError: the scan has no usable ground (see :func:`fit_ground_plane`).
     """
     gcfg = ground_config(ground_cfg)  # merged once, not again in every stage
-    rcfg = merge_config(default_ray_config(), ray_cfg, "rays")
+    rcfg = ray_config(ray_cfg)
     # one copy with contiguous columns (the stages read x, y, z column by column) and
     # the polar coordinates the three stages share, in one pass
     xyz, polar = prepare_points(points, offset)

@@ -26,7 +26,6 @@ from typing import Any
 
 import numba
 import numpy as np
-from scipy.ndimage import minimum_filter1d
 
 from dstenv.config import Validated, merge_config
 from dstenv.dst import SensorState
@@ -122,7 +121,7 @@ def _rays(xyz: np.ndarray, rng: np.ndarray, b: np.ndarray, nearest: np.ndarray,
     x, y = np.ascontiguousarray(xyz[:, 0]), np.ascontiguousarray(xyz[:, 1])
     half = round(0.5 * block_window_deg / azimuth_bin_deg)
     if half > 0:
-        nearest = minimum_filter1d(nearest, 2 * half + 1, mode="wrap")
+        nearest = _wrap_min(nearest, half)
     i0, j0 = spec.ego_cell
     marks = np.zeros(spec.shape, np.uint8)  # the points' own cells
     extent = _extent_marks(x, y, b, rng, ground, obstacle, nearest, occluded_hits, max_range,
@@ -132,6 +131,21 @@ def _rays(xyz: np.ndarray, rng: np.ndarray, b: np.ndarray, nearest: np.ndarray,
     # the rays only clear (no hits): own cells after them, occupied > free > unknown,
     # is the larger code of the two
     return np.maximum(grid, marks, out=grid)
+
+
+@numba.njit(cache=True)
+def _wrap_min(v, half):  # pragma: no cover - numba
+    """``(n,)`` minimum of ``v`` over ``[k - half, k + half]`` around the circle
+    (``scipy.ndimage.minimum_filter1d(v, 2 half + 1, mode="wrap")``, without its call
+    overhead)."""
+    n = v.shape[0]
+    out = np.empty(n)
+    for k in range(n):
+        m = v[k]
+        for d in range(-half, half + 1):
+            m = min(m, v[(k + d) % n])
+        out[k] = m
+    return out
 
 
 @numba.njit(cache=True)
@@ -189,22 +203,35 @@ def _extent_marks(x, y, b, rng, ground, obstacle, nearest, occluded_hits, max_ra
     occ = np.uint8(SensorState.OCCUPIED)
     free = np.uint8(SensorState.FREE)
     inv_cell = 1.0 / cell  # a product, not a division a point
+    # consecutive points mostly share a bin (a scan comes column by column): the bin's
+    # extent is kept in a register until the bin changes, not stored and reloaded a point
+    kk = 0
+    acc = ext[0]
     for p in range(x.shape[0]):
         k = b[p]
-        first = rng[p] <= nearest[k]
-        if ground[p] or (obstacle[p] and first):
-            ext[k] = max(ext[k], min(rng[p], nearest[k]))
-        if rng[p] > max_range:
+        nk = nearest[k]
+        rp = rng[p]
+        first = rp <= nk
+        g = ground[p]
+        o = obstacle[p]
+        if g or (o and first):
+            if k != kk:
+                ext[kk] = acc
+                kk = k
+                acc = ext[k]
+            acc = max(acc, min(rp, nk))
+        if rp > max_range:
             continue
-        if not ((ground[p] and first) or (obstacle[p] and (first or occluded_hits))):
+        if not ((g and first) or (o and (first or occluded_hits))):
             continue
         i = int(math.floor(i0 - x[p] * inv_cell + 0.5))
         j = int(math.floor(j0 - y[p] * inv_cell + 0.5))
         if 0 <= i < h and 0 <= j < w:
-            if obstacle[p]:
+            if o:
                 marks[i, j] = occ
             elif marks[i, j] != occ:
                 marks[i, j] = free
+    ext[kk] = acc
     return ext
 
 

@@ -49,7 +49,12 @@ from dstenv.grid import GridSpec
 from dstenv.sensing.cast3d import cast_boxes, cast_ground, cast_walls, column_index, raised_distance
 from dstenv.sensing.cloud import cloud_sensor_grid, ray_config
 from dstenv.sensing.config import lidar_config
-from dstenv.sensing.draws import beam_dropout, beam_normal_pair, stream_keys
+from dstenv.sensing.draws import (
+    beam_dropout,
+    beam_normal_rest,
+    beam_normal_words,
+    stream_keys,
+)
 from dstenv.sensing.ground import ground_config
 from dstenv.sim.types import Agents, MapClass, WorldMap
 
@@ -207,21 +212,20 @@ class Hdl64:
         # geometric gaps); three keys, the third unused, so that the caller's generator
         # advances as it always did
         k_noise, k_drop, _ = stream_keys(rng, 3)
-        if c["range_noise"] > 0 or c["intensity_noise"] > 0:
-            noise, inoise = beam_normal_pair(k_noise, n, float(c["range_noise"]),
-                                             float(c["intensity_noise"]))
-        else:
-            noise = inoise = np.zeros(n)
+        # the draws' one-word step alone (a loop that pipelines); the point pass scales
+        # them and draws the ~1 % rejected ones (beam_normal_pair's values, two passes fewer)
+        noisy = c["range_noise"] > 0 or c["intensity_noise"] > 0
+        noise, inoise = beam_normal_words(k_noise, n if noisy else 0)
         keep = beam_dropout(k_drop, n, float(c["dropout"]))
         pts = np.empty((n, 4), np.float32)
         out_ch = np.empty(n, np.int16)
         out_col = np.empty(n, np.int32)
         out_s = np.empty(n, np.uint8)
         out_i = np.empty(n, np.int32)
-        m = _points(best, noise, keep, inoise, surf, idx, self._cos_az, self._sin_az,
-                    self._cos_el, self._sin_el, self._sec_el, self._albedo,
-                    float(c["min_range"]), float(c["max_range"]), pts, out_ch, out_col, out_s,
-                    out_i)
+        m = _points(best, noisy, k_noise, float(c["range_noise"]), float(c["intensity_noise"]),
+                    noise, inoise, keep, surf, idx, self._cos_az, self._sin_az, self._cos_el,
+                    self._sin_el, self._sec_el, self._albedo, float(c["min_range"]),
+                    float(c["max_range"]), pts, out_ch, out_col, out_s, out_i)
         return Cloud(pts[:m], out_ch[:m], out_col[:m], out_s[:m], out_i[:m], self.mount.copy(),
                      c, best.shape)
 
@@ -237,11 +241,16 @@ def _count_returns(best):  # pragma: no cover - numba
 
 
 @numba.njit(cache=True)
-def _points(best, noise, keep, inoise, surf, idx, cos_az, sin_az, cos_el, sin_el, sec_el, albedo,
-            min_range, max_range, pts, out_ch, out_col, out_s, out_i):  # pragma: no cover
+def _points(best, noisy, key, scale_r, scale_i, noise, inoise, keep, surf, idx, cos_az, sin_az,
+            cos_el, sin_el, sec_el, albedo, min_range, max_range, pts, out_ch, out_col, out_s,
+            out_i):  # pragma: no cover - numba
     """Returns (finite ``best``, column-major) -> noisy Velodyne points and reflectance
     (``albedo[surface, channel]``, 25 % less at 100 m and beyond), written compacted;
-    returns how many are kept. Products, not divisions: the loop is the sweep's largest."""
+    returns how many are kept. The noises of return ``k`` are
+    :func:`~dstenv.sensing.draws.beam_normal_pair`'s ``k``-th of stream ``key`` times
+    ``scale_r`` / ``scale_i`` (``noise``, ``inoise``: the one-word step, NaN where the
+    rest is drawn here; zero when not ``noisy``). Products, not divisions: the loop is
+    the sweep's largest."""
     m = 0
     k = -1
     for j in range(best.shape[0]):
@@ -249,15 +258,29 @@ def _points(best, noise, keep, inoise, surf, idx, cos_az, sin_az, cos_el, sin_el
             if not best[j, c] < np.inf:
                 continue
             k += 1
-            r = best[j, c] * sec_el[c] + noise[k]
-            if not keep[k] or r > max_range or r < min_range:
+            if not keep[k]:
                 continue
+            nr = 0.0
+            ni = 0.0
+            if noisy:
+                nr = noise[k]
+                if not nr == nr:
+                    nr = beam_normal_rest(key, k, 0)
+                nr = 0.0 + scale_r * nr
+            r = best[j, c] * sec_el[c] + nr
+            if r > max_range or r < min_range:
+                continue
+            if noisy:
+                ni = inoise[k]
+                if not ni == ni:
+                    ni = beam_normal_rest(key, k, 1)
+                ni = 0.0 + scale_i * ni
             ce = cos_el[c] * r
             pts[m, 0] = ce * cos_az[j]
             pts[m, 1] = ce * sin_az[j]
             pts[m, 2] = r * sin_el[c]
             s = surf[j, c]
-            v = albedo[s, c] * (1.0 - min(r * 0.0025, 0.25)) + inoise[k]
+            v = albedo[s, c] * (1.0 - min(r * 0.0025, 0.25)) + ni
             pts[m, 3] = min(max(v, 0.0), 1.0)
             out_ch[m] = c
             out_col[m] = j

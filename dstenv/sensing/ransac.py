@@ -22,11 +22,11 @@ def candidates(xyz, r, fit_range, ego_radius, max_z):  # pragma: no cover - numb
     """``(K,) int64`` indices of the points with ``ego_radius < r < fit_range`` and
     ``z < max_z``, in order."""
     out = np.empty(r.shape[0], np.int64)
+    z = xyz[:, 2]
     k = 0
-    for p in range(r.shape[0]):
-        if ego_radius < r[p] < fit_range and xyz[p, 2] < max_z:
-            out[k] = p
-            k += 1
+    for p in range(r.shape[0]):  # branch-free: written always, kept by the count
+        out[k] = p
+        k += (ego_radius < r[p]) & (r[p] < fit_range) & (z[p] < max_z)
     return out[:k]
 
 

@@ -305,6 +305,7 @@ def _column_poses(pose, speed, yaw_rate, tau, azimuth, mount):  # pragma: no cov
     c0 = math.cos(pose[2])
     s0 = math.sin(pose[2])
     turning = abs(yaw_rate) > 1e-9
+    steady = yaw_rate == 0.0  # then yaw is pose[2] in every column: its cos and sin once
     for j in range(n):
         yaw = pose[2] + yaw_rate * tau[j]
         if turning:  # the arc integrated exactly
@@ -313,8 +314,8 @@ def _column_poses(pose, speed, yaw_rate, tau, azimuth, mount):  # pragma: no cov
         else:
             ex = c0 * tau[j]
             ey = s0 * tau[j]
-        cy = math.cos(yaw)
-        sy = math.sin(yaw)
+        cy = c0 if steady else math.cos(yaw)
+        sy = s0 if steady else math.sin(yaw)
         ox[j] = pose[0] + speed * ex + cy * mount[0] - sy * mount[1]
         oy[j] = pose[1] + speed * ey + sy * mount[0] + cy * mount[1]
         a = yaw + azimuth[j]
@@ -329,12 +330,32 @@ def _box_table(agents: Agents, clutter: np.ndarray) -> np.ndarray:
     the agents, then the map's ``clutter`` rows (:func:`_clutter_table`)."""
     if not len(agents):
         return clutter
-    n = len(agents)
-    rows = np.column_stack([
-        agents.xy, np.cos(agents.yaw), np.sin(agents.yaw), agents.length / 2,
-        agents.width / 2, np.zeros(n), agents.height, np.full(n, _AGENT), np.arange(n),
-        np.hypot(agents.length, agents.width) / 2])
-    return np.ascontiguousarray(np.concatenate([rows, clutter]))
+    f64 = np.float64
+    return _agent_rows(np.ascontiguousarray(agents.xy, f64), np.asarray(agents.yaw, f64),
+                       np.asarray(agents.length, f64), np.asarray(agents.width, f64),
+                       np.asarray(agents.height, f64), clutter)
+
+
+@numba.njit(cache=True)
+def _agent_rows(xy, yaw, length, width, height, clutter):  # pragma: no cover - numba
+    """The agents' box rows above ``clutter``'s, in one call (the values of NumPy's
+    ``cos``, ``sin`` and ``hypot``, which are the C library's, as numba's)."""
+    n = xy.shape[0]
+    out = np.empty((n + clutter.shape[0], 11))
+    for i in range(n):
+        out[i, 0] = xy[i, 0]
+        out[i, 1] = xy[i, 1]
+        out[i, 2] = math.cos(yaw[i])
+        out[i, 3] = math.sin(yaw[i])
+        out[i, 4] = length[i] / 2
+        out[i, 5] = width[i] / 2
+        out[i, 6] = 0.0
+        out[i, 7] = height[i]
+        out[i, 8] = _AGENT
+        out[i, 9] = i
+        out[i, 10] = math.hypot(length[i], width[i]) / 2
+    out[n:] = clutter
+    return out
 
 
 def _clutter_table(world_map: WorldMap) -> np.ndarray:

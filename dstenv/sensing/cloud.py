@@ -148,10 +148,10 @@ def _wrap_min(v, half):  # pragma: no cover - numba
     return out
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, error_model="numpy")
 def _classify_bins(r, angle, h, cell, flat, ego_radius, ground_height, low, high, block_height,
                    n_bins):  # pragma: no cover - numba
-    """One pass of the whole road: the masks of
+    """One call of the whole road: the masks of
     :func:`~dstenv.sensing.ground.classify_points` (same rule as
     ``ground._split``), the azimuth bin of every point and the nearest blocking range
     per bin (obstacles at least ``block_height`` tall), as :func:`_azimuth_bins`; the
@@ -163,16 +163,16 @@ def _classify_bins(r, angle, h, cell, flat, ego_radius, ground_height, low, high
     b = np.empty(n, np.int64)
     nearest = np.full(n_bins, np.inf)
     to_bin = n_bins / (2 * math.pi)  # a product, as _azimuth_bins
-    for p in range(n):
+    for p in range(n):  # a loop that vectorises; the blockers in a second one
         away = r[p] > ego_radius
         hp = h[p] - flat[cell[p]]
         height[p] = hp
         ground[p] = away and -3.0 < hp < ground_height
-        o = away and low <= hp <= high
-        obstacle[p] = o
-        k = min(int((angle[p] + math.pi) * to_bin), n_bins - 1)
-        b[p] = k
-        if o and hp >= block_height and r[p] < nearest[k]:
+        obstacle[p] = away and low <= hp <= high
+        b[p] = min(int((angle[p] + math.pi) * to_bin), n_bins - 1)
+    for p in range(n):
+        k = b[p]
+        if obstacle[p] and height[p] >= block_height and r[p] < nearest[k]:
             nearest[k] = r[p]
     return height, ground, obstacle, b, nearest
 

@@ -212,14 +212,23 @@ def cast_boxes(boxes, order, az, rx, ry, drift, ox, oy, ux, uy, slope, neg_slope
 def cast_walls(edges, starts, circles, heights, surface, order, az, rx, ry, drift, ox, oy, ux,
                uy, slope, neg_slope, mount, h_max, best, surf, idx):  # pragma: no cover
     """Building walls: edges ``(E, 4)`` of building ``b`` in ``starts[b]:starts[b+1]``,
-    bounding circles ``(B, 3)``; an edge crossed at t with z(t) in [0, heights[b]]."""
+    bounding circles ``(B, 3)``; an edge crossed at t with z(t) in [0, heights[b]].
+
+    A building at least as tall as the mount is met first at its nearest crossing by
+    every channel that meets it at all (a beam with z in [0, h] at a farther crossing
+    is between the mount height and that z at the nearer one: in [0, h] too, with
+    rounding monotone in t), so only that crossing's channels are walked; a lower
+    one walks every crossing."""
     for b in range(circles.shape[0]):
         cx, cy, rad = circles[b, 0], circles[b, 1], circles[b, 2]
+        h = heights[b]
+        nearest_only = h >= mount
         p0, p1, p2, p3 = _span(cx, cy, rad, rx, ry, drift, h_max, az)
         for q in range(p0, p1 + p3 - p2):
             j = order[q] if q < p1 else order[q - p1 + p2]
             if not _visible(cx, cy, rad, ox[j], oy[j], ux[j], uy[j], h_max):
                 continue
+            t_min = np.inf
             for e in range(starts[b], starts[b + 1]):
                 ax = edges[e, 0] - ox[j]
                 ay = edges[e, 1] - oy[j]
@@ -232,16 +241,28 @@ def cast_walls(edges, starts, circles, heights, surface, order, az, rx, ry, drif
                 sp = (ax * uy[j] - ay * ux[j]) / den
                 if t < 0.0 or sp < 0.0 or sp > 1.0:
                     continue
-                if t > 1e-9:
-                    c0, c1 = _channels(neg_slope, -mount / t, (heights[b] - mount) / t)
+                if nearest_only:
+                    t_min = min(t_min, t)
                 else:
-                    c0, c1 = 0, slope.shape[0]
-                for c in range(c0, c1):
-                    z = mount + slope[c] * t
-                    if t < best[j, c] and 0.0 <= z <= heights[b]:
-                        best[j, c] = t
-                        surf[j, c] = surface
-                        idx[j, c] = b
+                    _wall_hits(t, h, b, j, surface, slope, neg_slope, mount, best, surf, idx)
+            if t_min < np.inf:
+                _wall_hits(t_min, h, b, j, surface, slope, neg_slope, mount, best, surf, idx)
+
+
+@numba.njit(cache=True, inline="always")
+def _wall_hits(t, h, b, j, surface, slope, neg_slope, mount, best, surf, idx):  # pragma: no cover
+    """Column ``j`` crosses a wall of building ``b`` (height ``h``) at ``t``: the channels
+    with z(t) in [0, h] that have nothing nearer."""
+    if t > 1e-9:
+        c0, c1 = _channels(neg_slope, -mount / t, (h - mount) / t)
+    else:
+        c0, c1 = 0, slope.shape[0]
+    for c in range(c0, c1):
+        z = mount + slope[c] * t
+        if t < best[j, c] and 0.0 <= z <= h:
+            best[j, c] = t
+            surf[j, c] = surface
+            idx[j, c] = b
 
 
 @numba.njit(cache=True)

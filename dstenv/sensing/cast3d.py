@@ -25,7 +25,8 @@ of testing every beam against every occluder:
 * Ground by distance: between the kerb top and the road a beam walks the raster
   cell by cell (Amanatides-Woo) only near raised cells; elsewhere it jumps by the
   distance to the nearest raised cell (:func:`raised_distance`, a lower bound from
-  the chessboard distance, two raster passes per map).
+  the chessboard distance, two raster passes per map); the stretch of a column's ray
+  that one such read clears serves the column's other channels.
 """
 
 from __future__ import annotations
@@ -211,14 +212,23 @@ def cast_boxes(boxes, order, az, rx, ry, drift, ox, oy, ux, uy, slope, neg_slope
 def cast_walls(edges, starts, circles, heights, surface, order, az, rx, ry, drift, ox, oy, ux,
                uy, slope, neg_slope, mount, h_max, best, surf, idx):  # pragma: no cover
     """Building walls: edges ``(E, 4)`` of building ``b`` in ``starts[b]:starts[b+1]``,
-    bounding circles ``(B, 3)``; an edge crossed at t with z(t) in [0, heights[b]]."""
+    bounding circles ``(B, 3)``; an edge crossed at t with z(t) in [0, heights[b]].
+
+    A building at least as tall as the mount is met first at its nearest crossing by
+    every channel that meets it at all (a beam with z in [0, h] at a farther crossing
+    is between the mount height and that z at the nearer one: in [0, h] too, with
+    rounding monotone in t), so only that crossing's channels are walked; a lower
+    one walks every crossing."""
     for b in range(circles.shape[0]):
         cx, cy, rad = circles[b, 0], circles[b, 1], circles[b, 2]
+        h = heights[b]
+        nearest_only = h >= mount
         p0, p1, p2, p3 = _span(cx, cy, rad, rx, ry, drift, h_max, az)
         for q in range(p0, p1 + p3 - p2):
             j = order[q] if q < p1 else order[q - p1 + p2]
             if not _visible(cx, cy, rad, ox[j], oy[j], ux[j], uy[j], h_max):
                 continue
+            t_min = np.inf
             for e in range(starts[b], starts[b + 1]):
                 ax = edges[e, 0] - ox[j]
                 ay = edges[e, 1] - oy[j]
@@ -231,16 +241,28 @@ def cast_walls(edges, starts, circles, heights, surface, order, az, rx, ry, drif
                 sp = (ax * uy[j] - ay * ux[j]) / den
                 if t < 0.0 or sp < 0.0 or sp > 1.0:
                     continue
-                if t > 1e-9:
-                    c0, c1 = _channels(neg_slope, -mount / t, (heights[b] - mount) / t)
+                if nearest_only:
+                    t_min = min(t_min, t)
                 else:
-                    c0, c1 = 0, slope.shape[0]
-                for c in range(c0, c1):
-                    z = mount + slope[c] * t
-                    if t < best[j, c] and 0.0 <= z <= heights[b]:
-                        best[j, c] = t
-                        surf[j, c] = surface
-                        idx[j, c] = b
+                    _wall_hits(t, h, b, j, surface, slope, neg_slope, mount, best, surf, idx)
+            if t_min < np.inf:
+                _wall_hits(t_min, h, b, j, surface, slope, neg_slope, mount, best, surf, idx)
+
+
+@numba.njit(cache=True, inline="always")
+def _wall_hits(t, h, b, j, surface, slope, neg_slope, mount, best, surf, idx):  # pragma: no cover
+    """Column ``j`` crosses a wall of building ``b`` (height ``h``) at ``t``: the channels
+    with z(t) in [0, h] that have nothing nearer."""
+    if t > 1e-9:
+        c0, c1 = _channels(neg_slope, -mount / t, (h - mount) / t)
+    else:
+        c0, c1 = 0, slope.shape[0]
+    for c in range(c0, c1):
+        z = mount + slope[c] * t
+        if t < best[j, c] and 0.0 <= z <= h:
+            best[j, c] = t
+            surf[j, c] = surface
+            idx[j, c] = b
 
 
 @numba.njit(cache=True)
@@ -251,7 +273,10 @@ def cast_ground(raster, dist, raised, x0, y0, res, kerb, ox, oy, ux, uy, slope, 
     else the road. ``dist`` from :func:`raised_distance` lets the walk jump: from a
     point of a cell with ``dist = d`` no raised cell lies within ``d`` cells, so the
     walk moves ``d`` cells (less a micrometre) at once, and steps cell by cell only
-    where ``d = 0``."""
+    where ``d = 0``. Such a read also clears ``d`` cells *behind* the point, and the
+    channels of a column share its ray: a later channel whose whole band lies in the
+    stretch cleared by an earlier one's read is road without a read (a quarter of
+    the pass on the bench world; the same results)."""
     hm, wm = raster.shape
     n = slope.shape[0]
     t_top = np.empty(n)  # where each beam sinks below the kerb top, and meets the road
@@ -270,6 +295,11 @@ def cast_ground(raster, dist, raised, x0, y0, res, kerb, ox, oy, ux, uy, slope, 
     # of its channels stay cached for the next column (measured faster than channel
     # by channel, whose ``best`` reads stride a row apart)
     for j in range(ux.shape[0]):
+        # a stretch [lo_ok, hi_ok] of this column's ray known to hold no raised cell (a
+        # jump's reach either side of where ``dist`` was read): the channels share the
+        # ray, so a band inside it is road without a lookup of its own
+        lo_ok = np.inf
+        hi_ok = -np.inf
         for c in range(n):
             if slope[c] >= 0.0 or t_top[c] > h_max or t_top[c] >= best[j, c]:
                 continue
@@ -282,6 +312,12 @@ def cast_ground(raster, dist, raised, x0, y0, res, kerb, ox, oy, ux, uy, slope, 
             hit = min(t_road[c], best[j, c])
             kind = 0
             t = t_top[c]
+            if lo_ok <= t and hit <= hi_ok:  # the whole band is known to be road
+                if hit < best[j, c]:
+                    best[j, c] = hit
+                    surf[j, c] = 0
+                    idx[j, c] = -1
+                continue
             while kerb > 0.0 and t < hit:
                 u = (ox[j] + dxj * t - x0) * inv_res
                 v = (oy[j] + dyj * t - y0) * inv_res
@@ -289,7 +325,10 @@ def cast_ground(raster, dist, raised, x0, y0, res, kerb, ox, oy, ux, uy, slope, 
                 row = int(math.floor(v))
                 if 0 <= row < hm and 0 <= col < wm:
                     if dist[row, col] > 0:
-                        t += dist[row, col] * res - 1e-6
+                        reach = dist[row, col] * res - 1e-6
+                        lo_ok = t - reach
+                        hi_ok = t + reach
+                        t += reach
                         continue
                     if raster[row, col] == raised:
                         hit = t  # the kerb top (t = t_top) or its vertical face

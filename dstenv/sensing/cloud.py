@@ -26,9 +26,8 @@ from typing import Any
 
 import numba
 import numpy as np
-from scipy.ndimage import minimum_filter1d
 
-from dstenv.config import merge_config
+from dstenv.config import Validated, merge_config
 from dstenv.dst import SensorState
 from dstenv.grid import GridSpec
 from dstenv.sensing.ground import (
@@ -40,7 +39,7 @@ from dstenv.sensing.ground import (
 )
 from dstenv.sensing.raycast import sensor_grid
 
-__all__ = ["default_ray_config", "scan_sensor_grid", "cloud_sensor_grid"]
+__all__ = ["default_ray_config", "ray_config", "scan_sensor_grid", "cloud_sensor_grid"]
 
 
 def default_ray_config() -> dict[str, Any]:
@@ -56,6 +55,14 @@ def default_ray_config() -> dict[str, Any]:
         # guard rails free but lets rays clear the cells under cars)
         "block_height": 0.0,
     }
+
+
+def ray_config(config: dict[str, Any] | None) -> Validated:
+    """Ray settings merged over :func:`default_ray_config` and marked validated (a
+    validated one is passed through, as :func:`~dstenv.sensing.ground.ground_config`)."""
+    if isinstance(config, Validated):
+        return config
+    return Validated(merge_config(default_ray_config(), config, "rays"))
 
 
 def scan_sensor_grid(
@@ -114,7 +121,7 @@ def _rays(xyz: np.ndarray, rng: np.ndarray, b: np.ndarray, nearest: np.ndarray,
     x, y = np.ascontiguousarray(xyz[:, 0]), np.ascontiguousarray(xyz[:, 1])
     half = round(0.5 * block_window_deg / azimuth_bin_deg)
     if half > 0:
-        nearest = minimum_filter1d(nearest, 2 * half + 1, mode="wrap")
+        nearest = _wrap_min(nearest, half)
     i0, j0 = spec.ego_cell
     marks = np.zeros(spec.shape, np.uint8)  # the points' own cells
     extent = _extent_marks(x, y, b, rng, ground, obstacle, nearest, occluded_hits, max_range,
@@ -127,9 +134,24 @@ def _rays(xyz: np.ndarray, rng: np.ndarray, b: np.ndarray, nearest: np.ndarray,
 
 
 @numba.njit(cache=True)
+def _wrap_min(v, half):  # pragma: no cover - numba
+    """``(n,)`` minimum of ``v`` over ``[k - half, k + half]`` around the circle
+    (``scipy.ndimage.minimum_filter1d(v, 2 half + 1, mode="wrap")``, without its call
+    overhead)."""
+    n = v.shape[0]
+    out = np.empty(n)
+    for k in range(n):
+        m = v[k]
+        for d in range(-half, half + 1):
+            m = min(m, v[(k + d) % n])
+        out[k] = m
+    return out
+
+
+@numba.njit(cache=True, error_model="numpy")
 def _classify_bins(r, angle, h, cell, flat, ego_radius, ground_height, low, high, block_height,
                    n_bins):  # pragma: no cover - numba
-    """One pass of the whole road: the masks of
+    """One call of the whole road: the masks of
     :func:`~dstenv.sensing.ground.classify_points` (same rule as
     ``ground._split``), the azimuth bin of every point and the nearest blocking range
     per bin (obstacles at least ``block_height`` tall), as :func:`_azimuth_bins`; the
@@ -141,16 +163,16 @@ def _classify_bins(r, angle, h, cell, flat, ego_radius, ground_height, low, high
     b = np.empty(n, np.int64)
     nearest = np.full(n_bins, np.inf)
     to_bin = n_bins / (2 * math.pi)  # a product, as _azimuth_bins
-    for p in range(n):
+    for p in range(n):  # a loop that vectorises; the blockers in a second one
         away = r[p] > ego_radius
         hp = h[p] - flat[cell[p]]
         height[p] = hp
         ground[p] = away and -3.0 < hp < ground_height
-        o = away and low <= hp <= high
-        obstacle[p] = o
-        k = min(int((angle[p] + math.pi) * to_bin), n_bins - 1)
-        b[p] = k
-        if o and hp >= block_height and r[p] < nearest[k]:
+        obstacle[p] = away and low <= hp <= high
+        b[p] = min(int((angle[p] + math.pi) * to_bin), n_bins - 1)
+    for p in range(n):
+        k = b[p]
+        if obstacle[p] and height[p] >= block_height and r[p] < nearest[k]:
             nearest[k] = r[p]
     return height, ground, obstacle, b, nearest
 
@@ -181,22 +203,35 @@ def _extent_marks(x, y, b, rng, ground, obstacle, nearest, occluded_hits, max_ra
     occ = np.uint8(SensorState.OCCUPIED)
     free = np.uint8(SensorState.FREE)
     inv_cell = 1.0 / cell  # a product, not a division a point
+    # consecutive points mostly share a bin (a scan comes column by column): the bin's
+    # extent is kept in a register until the bin changes, not stored and reloaded a point
+    kk = 0
+    acc = ext[0]
     for p in range(x.shape[0]):
         k = b[p]
-        first = rng[p] <= nearest[k]
-        if ground[p] or (obstacle[p] and first):
-            ext[k] = max(ext[k], min(rng[p], nearest[k]))
-        if rng[p] > max_range:
+        nk = nearest[k]
+        rp = rng[p]
+        first = rp <= nk
+        g = ground[p]
+        o = obstacle[p]
+        if g or (o and first):
+            if k != kk:
+                ext[kk] = acc
+                kk = k
+                acc = ext[k]
+            acc = max(acc, min(rp, nk))
+        if rp > max_range:
             continue
-        if not ((ground[p] and first) or (obstacle[p] and (first or occluded_hits))):
+        if not ((g and first) or (o and (first or occluded_hits))):
             continue
         i = int(math.floor(i0 - x[p] * inv_cell + 0.5))
         j = int(math.floor(j0 - y[p] * inv_cell + 0.5))
         if 0 <= i < h and 0 <= j < w:
-            if obstacle[p]:
+            if o:
                 marks[i, j] = occ
             elif marks[i, j] != occ:
                 marks[i, j] = free
+    ext[kk] = acc
     return ext
 
 
@@ -222,7 +257,7 @@ def cloud_sensor_grid(
         CloudError: the scan has no usable ground (see :func:`fit_ground_plane`).
     """
     gcfg = ground_config(ground_cfg)  # merged once, not again in every stage
-    rcfg = merge_config(default_ray_config(), ray_cfg, "rays")
+    rcfg = ray_config(ray_cfg)
     # one copy with contiguous columns (the stages read x, y, z column by column) and
     # the polar coordinates the three stages share, in one pass
     xyz, polar = prepare_points(points, offset)

@@ -27,7 +27,8 @@ from numba.np.random._constants import (
     ziggurat_nor_r_f,
 )
 
-__all__ = ["stream_keys", "beam_normal_pair", "beam_dropout"]
+__all__ = ["stream_keys", "beam_normal_pair", "beam_normal_words", "beam_normal_rest",
+           "beam_dropout"]
 
 _TO_DOUBLE = 1.0 / 9007199254740992.0  # 2**-53: NumPy's next_double
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)  # SplitMix64's increment
@@ -56,21 +57,39 @@ def beam_normal_pair(key, n, scale_a, scale_b):  # pragma: no cover - numba
     gives both (the 64-bit mix is the cost: without AVX-512 it does not vectorise).
     The 1 % that need more take the low halves of the words
     ``mix(w_0 + (2 i + h) G)``, i = 1, 2, ..., ``h`` the half (0 low, 1 high)."""
+    a, b = beam_normal_words(key, n)
+    for k in range(n):
+        if not a[k] == a[k]:
+            a[k] = beam_normal_rest(key, k, 0)
+        if not b[k] == b[k]:
+            b[k] = beam_normal_rest(key, k, 1)
+    for k in range(n):
+        a[k] = 0.0 + scale_a * a[k]
+        b[k] = 0.0 + scale_b * b[k]
+    return a, b
+
+
+@numba.njit(cache=True)
+def beam_normal_words(key, n):  # pragma: no cover - numba
+    """The one-word step of :func:`beam_normal_pair` alone: ``(n,) float64`` standard
+    normals ``a`` and ``b`` of beams ``0 .. n-1``, NaN for the ~1 % whose word is
+    rejected (:func:`beam_normal_rest` gives those), unscaled. Its loop is the cost
+    of the draws; a caller that finishes the rest in its own pass over the beams
+    saves two passes (:mod:`dstenv.sensing.lidar3d`)."""
     a = np.empty(n)
     b = np.empty(n)
     for k in range(n):
         w = _mix(key + np.uint64(k + 1) * _GOLDEN)
         a[k] = _zig32_fast(w & np.uint64(0xFFFFFFFF))
         b[k] = _zig32_fast(w >> np.uint64(32))
-    for k in range(n):
-        if not a[k] == a[k]:
-            a[k] = _zig32_slow(_mix(key + np.uint64(k + 1) * _GOLDEN), 0)
-        if not b[k] == b[k]:
-            b[k] = _zig32_slow(_mix(key + np.uint64(k + 1) * _GOLDEN), 1)
-    for k in range(n):
-        a[k] = 0.0 + scale_a * a[k]
-        b[k] = 0.0 + scale_b * b[k]
     return a, b
+
+
+@numba.njit(cache=True)
+def beam_normal_rest(key, k, half):  # pragma: no cover - numba
+    """Beam ``k``'s standard normal ``half`` (0: ``a``, 1: ``b``) of stream ``key`` where
+    :func:`beam_normal_words` rejected its word (the ziggurat's further words)."""
+    return _zig32_slow(_mix(key + np.uint64(k + 1) * _GOLDEN), half)
 
 
 @numba.njit(cache=True, inline="always")

@@ -22,11 +22,11 @@ def candidates(xyz, r, fit_range, ego_radius, max_z):  # pragma: no cover - numb
     """``(K,) int64`` indices of the points with ``ego_radius < r < fit_range`` and
     ``z < max_z``, in order."""
     out = np.empty(r.shape[0], np.int64)
+    z = xyz[:, 2]
     k = 0
-    for p in range(r.shape[0]):
-        if ego_radius < r[p] < fit_range and xyz[p, 2] < max_z:
-            out[k] = p
-            k += 1
+    for p in range(r.shape[0]):  # branch-free: written always, kept by the count
+        out[k] = p
+        k += (ego_radius < r[p]) & (r[p] < fit_range) & (z[p] < max_z)
     return out[:k]
 
 
@@ -70,7 +70,7 @@ def _tail_sample(words, k, size, n_tri):  # pragma: no cover - numba
     ``integers(0, size, n_tri)``, on the raw 64-bit ``words`` of a fresh generator
     (its 32-bit stream: the low half of a word, then the high half). Returns
     ``(sub, tri, ok)``; ``ok`` is False if the words ran out."""
-    data = np.arange(k)
+    data = np.arange(k, dtype=np.int32)  # half the memory of int64: its cost is touching it
     state = np.zeros(3, np.uint64)  # next word, a half pending, that half
     for i in range(k - 1, k - size - 1, -1):  # NumPy's _shuffle_int
         j = _lemire(words, state, np.uint64(i))
@@ -80,7 +80,7 @@ def _tail_sample(words, k, size, n_tri):  # pragma: no cover - numba
     tri = np.empty(n_tri, np.int64)
     for i in range(n_tri):
         tri[i] = _lemire(words, state, np.uint64(size - 1))
-    return data[k - size:].copy(), tri, state[0] <= words.shape[0]
+    return data[k - size:].astype(np.int64), tri, state[0] <= words.shape[0]
 
 
 @numba.njit(cache=True, inline="always")

@@ -121,6 +121,48 @@ def test_walls_culled_equal_all_columns():
         assert np.array_equal(a, b)
 
 
+def test_walls_match_every_beam_against_every_edge():
+    """Only the nearest crossing of a building at least as tall as the mount is walked;
+    every crossing of a lower one (a wall, a fence): the same as testing every edge."""
+    rng = np.random.default_rng(3)
+    ox, oy, az, slope = _beams(columns=240, channels=24)
+    ux, uy = np.cos(az), np.sin(az)
+    edges, starts, circles = [], [0], []
+    while len(circles) < 16:
+        c = rng.uniform(-40, 40, 2)
+        if np.hypot(*c) < 14:
+            continue
+        ang = np.sort(rng.uniform(0, 2 * math.pi, 6))
+        poly = c + rng.uniform(2, 8, (6, 1)) * np.stack([np.cos(ang), np.sin(ang)], 1)
+        edges.append(np.concatenate([poly, np.roll(poly, -1, 0)], 1))
+        starts.append(starts[-1] + 6)
+        circles.append([*c, 8.0])
+    edges, starts, circles = np.concatenate(edges), np.array(starts), np.array(circles)
+    heights = np.where(np.arange(16) % 3 == 0, rng.uniform(0.3, 1.6, 16),  # below the mount
+                       rng.uniform(2.0, 30.0, 16))
+    out = _buffers(len(az), len(slope))
+    cast_walls(edges, starts, circles, heights, 2, *column_index(ox, oy, az), ox, oy, ux, uy,
+               slope, -slope, MOUNT, 120.0, *out)
+    ref = _buffers(len(az), len(slope))
+    for j in range(len(az)):
+        for b in range(len(circles)):
+            for ax0, ay0, ax1, ay1 in edges[starts[b]:starts[b + 1]]:
+                ax, ay, ex, ey = ax0 - ox[j], ay0 - oy[j], ax1 - ax0, ay1 - ay0
+                den = ux[j] * ey - uy[j] * ex
+                if den == 0.0:
+                    continue
+                t = (ax * ey - ay * ex) / den
+                sp = (ax * uy[j] - ay * ux[j]) / den
+                if t < 0.0 or not 0.0 <= sp <= 1.0:
+                    continue
+                z = MOUNT + slope * t
+                hit = (t < ref[0][j]) & (z >= 0.0) & (z <= heights[b])
+                ref[0][j][hit], ref[1][j][hit], ref[2][j][hit] = t, 2, b
+    assert (ref[2] >= 0).mean() > 0.1 and np.isin(ref[2], np.flatnonzero(heights < MOUNT)).any()
+    for a, b in zip(out, ref, strict=True):
+        assert np.array_equal(a, b)
+
+
 def test_ground_walk_jumps_land_where_the_cell_walk_does():
     rng = np.random.default_rng(2)
     raster = np.full((500, 500), 2, np.uint8)  # road, 0.2 m cells, origin (-50, -50)

@@ -56,3 +56,16 @@ def test_real_cars_in_view_are_occupied(real_root):
     for key, (_, free, occ) in counts.items():
         assert occ > 50, key
         assert occ / (free + occ) > 0.9, (key, free, occ)
+
+
+def test_wrap_min_is_scipys_circular_minimum_filter():
+    from scipy.ndimage import minimum_filter1d
+
+    from dstenv.sensing.cloud import _wrap_min
+
+    rng = np.random.default_rng(1)
+    for n, half in [(1800, 3), (10, 3), (5, 4), (1, 2), (7, 0)]:
+        v = rng.random(n)
+        v[rng.random(n) < 0.3] = np.inf  # bins without a blocker
+        np.testing.assert_array_equal(_wrap_min(v, half),
+                                      minimum_filter1d(v, 2 * half + 1, mode="wrap"))

@@ -58,3 +58,19 @@ def test_beam_draws_depend_on_key_and_index_only():
     keep = beam_dropout(keys[1], 50_000, 0.05)
     assert np.array_equal(beam_dropout(keys[1], 3000, 0.05), keep[:3000])
     assert not np.array_equal(beam_dropout(keys[0], 50_000, 0.05), keep)
+
+
+def test_one_word_step_and_rest_are_beam_normal_pair():
+    from dstenv.sensing.draws import beam_normal_rest, beam_normal_words
+
+    key = np.uint64(987654321)
+    a, b = beam_normal_words(key, 20000)
+    rejected = np.isnan(a) | np.isnan(b)
+    assert 100 < rejected.sum() < 800  # ~1 % a half
+    for k in np.flatnonzero(np.isnan(a)):
+        a[k] = beam_normal_rest(key, k, 0)
+    for k in np.flatnonzero(np.isnan(b)):
+        b[k] = beam_normal_rest(key, k, 1)
+    ref_a, ref_b = beam_normal_pair(key, 20000, 0.5, 2.0)
+    np.testing.assert_array_equal(0.0 + 0.5 * a, ref_a)
+    np.testing.assert_array_equal(0.0 + 2.0 * b, ref_b)

@@ -159,3 +159,27 @@ def test_bad_model_and_section_are_named():
         Hdl64({"model": "hdl32"})
     with pytest.raises(ConfigError, match="lidar.hdl64.azimuth_step"):
         Hdl64({"model": "hdl64", "hdl64": {"azimuth_step": 0.0}})
+
+
+@pytest.mark.parametrize("yaw_rate", [0.0, 0.4])
+def test_column_poses_are_the_numpy_formulas_bit_for_bit(yaw_rate):
+    import math
+
+    from dstenv.sensing.lidar3d import _column_poses
+
+    lidar = Hdl64({"model": "hdl64", "mount_x": 0.8, "mount_y": -0.3})
+    pose, speed, tau = np.array([12.5, -3.25, 2.1]), 7.5, lidar._tau
+    ox, oy, world_az, ux, uy = _column_poses(pose, speed, yaw_rate, tau, lidar.azimuth,
+                                             lidar.mount)
+    yaw = pose[2] + yaw_rate * tau
+    if yaw_rate:
+        ex = (np.sin(yaw) - math.sin(pose[2])) / yaw_rate
+        ey = (math.cos(pose[2]) - np.cos(yaw)) / yaw_rate
+    else:
+        ex, ey = math.cos(pose[2]) * tau, math.sin(pose[2]) * tau
+    cy, sy = np.cos(yaw), np.sin(yaw)
+    np.testing.assert_array_equal(ox, pose[0] + speed * ex + cy * 0.8 - sy * -0.3)
+    np.testing.assert_array_equal(oy, pose[1] + speed * ey + sy * 0.8 + cy * -0.3)
+    np.testing.assert_array_equal(world_az, yaw + lidar.azimuth)
+    np.testing.assert_array_equal(ux, np.cos(yaw + lidar.azimuth))
+    np.testing.assert_array_equal(uy, np.sin(yaw + lidar.azimuth))

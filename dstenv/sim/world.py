@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from dstenv.config import ConfigError, section
-from dstenv.sim import spawn
+from dstenv.sim import pullin, spawn
 from dstenv.sim.citygen import generate_city
 from dstenv.sim.clutter import street_clutter
 from dstenv.sim.ego import bicycle_step, hits, pure_pursuit, pursuit_lookahead
@@ -161,6 +161,10 @@ class World:
             n = int(st["parked"][:-1].sum())
             for _ in range(self.rng.poisson(rate * dt * n) if n else 0):
                 spawn.pull_out(self._map, st, self.config, self.rng, ROUTE_LEN)
+        rate = cfg["traffic"]["pull_in_rate"]
+        if rate > 0:  # cars pulling into spaces (a parked one far away pulls out for each)
+            pullin.settle(self._map, st, self.config, self.rng, ROUTE_LEN)
+            pullin.start_pull_ins(self._map, st, rate, dt, self.rng)
         self.time = round(self.time + dt, 9)
         self.steps += 1
         self._update_flags()

@@ -100,7 +100,7 @@ def default_config() -> dict[str, Any]:
             "pull_out_rate": 0.002,  # [1/s] chance per second that a parked car pulls out
             # [1/s] chance per second that a moving car on a kerb-side lane pulls into a
             # free space ahead (a parked car far from the ego pulls out for each)
-            "pull_in_rate": 0.0,
+            "pull_in_rate": 0.01,
             "delivery_halt_factor": 4.0,  # [-] vans / trucks halt this much longer than cars
             # -- double parking and lane changes (0 in the clean scenario)
             "double_park_prob": 0.03,  # [-] share of parked vehicles standing in the kerb

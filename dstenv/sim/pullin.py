@@ -55,16 +55,14 @@ BALANCE_DIST = 60.0  # [m] a car that parks makes one this far from the ego pull
 _EDGE_MIN, _EDGE_MAX = -0.1, 0.3  # [m] lane-side wheels beyond the road edge
 
 
-def eligible(st: dict[str, np.ndarray], world_map: WorldMap) -> np.ndarray:
-    """``(B-1,) bool``: the non-ego rows that may decide to pull in now."""
-    net = world_map.lanes
-    lane = st["route"][:-1, 0]
-    ok = st["mobile"][:-1] & (st["akind"][:-1] == AgentKind.CAR) & (st["v"][:-1] > MIN_SPEED)
-    ok &= (st["lc"][:-1] == 0.0) & (st["halt"][:-1] <= 0.0) & ~st["hazard"][:-1]
-    ok &= st["park"][:-1, 0] < 0.0
-    ok &= lane >= 0
-    ok[ok] &= (net.kind[lane[ok]] == LaneKind.ROAD) & net.rightmost[lane[ok]]
-    return ok
+def eligible(st: dict[str, np.ndarray], world_map: WorldMap, i: int) -> bool:
+    """Whether row ``i`` (not the ego) may decide to pull in now."""
+    lane = int(st["route"][i, 0])
+    return bool(st["mobile"][i] and st["akind"][i] == AgentKind.CAR and st["v"][i] > MIN_SPEED
+                and st["lc"][i] == 0.0 and st["halt"][i] <= 0.0 and not st["hazard"][i]
+                and st["park"][i, 0] < 0.0 and lane >= 0
+                and world_map.lanes.kind[lane] == LaneKind.ROAD
+                and world_map.lanes.rightmost[lane])
 
 
 def _road_edge(world_map: WorldMap, x: float, y: float, h: float) -> float:
@@ -97,7 +95,16 @@ def find_space(world_map: WorldMap, st: dict[str, np.ndarray], i: int
     ln, s_i, v = int(st["route"][i, 0]), float(st["s"][i]), float(st["v"][i])
     hl, hw = float(st["hl"][i]), float(st["hw"][i])
     d_min = v * v / (2.0 * PICK_DECEL) + 3.0
-    d = np.hypot(*(slots[:, :2] - st["xy"][i]).T)
+    # slots ahead on the right, roughly (the lane may bend): the rest are never checked
+    rel = slots[:, :2] - st["xy"][i]
+    c, s = np.cos(st["yaw"][i]), np.sin(st["yaw"][i])
+    lon, side = rel[:, 0] * c + rel[:, 1] * s, rel[:, 1] * c - rel[:, 0] * s
+    near = np.flatnonzero((lon > d_min - 5.0) & (lon < LOOK_AHEAD + 5.0) & (side < -0.5)
+                          & (side > -8.0))
+    if len(near) == 0:
+        return None
+    d = np.full(len(slots), np.inf)
+    d[near] = np.hypot(rel[near, 0], rel[near, 1])
     geo = (net.pts, net.start, net.npts, net.ds)
     others = np.flatnonzero(np.arange(len(st["v"])) != i)
     busy = np.flatnonzero(st["park"][:, 0] >= 0.0)  # targets of cars already pulling in
@@ -108,9 +115,7 @@ def find_space(world_map: WorldMap, st: dict[str, np.ndarray], i: int
         tgt[k] = tx - st["park"][j, 1] * np.sin(th), ty + st["park"][j, 1] * np.cos(th)
     obs = world_map.obstacles
     low = np.flatnonzero(obs.z_min < 1.0) if len(obs) else np.zeros(0, np.int64)
-    for k in np.argsort(d):
-        if d[k] > LOOK_AHEAD + 10.0:
-            break
+    for k in near[np.argsort(d[near])]:
         sx, sy = slots[k, :2]
         s_c, lat_c, dist = project_on_lane(*geo, ln, sx, sy, s_i + d[k], d[k] + 10.0)
         if not (d_min <= s_c - s_i <= LOOK_AHEAD and hl + 1.0 < s_c < net.length[ln] - hl - 1.0
@@ -146,13 +151,18 @@ def find_space(world_map: WorldMap, st: dict[str, np.ndarray], i: int
 
 def start_pull_ins(world_map: WorldMap, st: dict[str, np.ndarray], rate: float, dt: float,
                    rng: np.random.Generator) -> int:
-    """Draw which eligible cars decide to park this step (``rate`` [1/s] per car) and
-    give those that find a space their target (``park`` row). Returns how many started."""
-    ok = np.flatnonzero(eligible(st, world_map))
+    """Draw which cars decide to park this step (``rate`` [1/s] per car: a Poisson number
+    of decisions over all non-ego rows, each for a random row; a row that is not
+    :func:`eligible` ignores it, so every eligible car decides at ``rate``) and give
+    those that find a space their target (``park`` row). Returns how many started.
+
+    (Drawing over all rows, not over the eligible ones, keeps the step cheap: nothing
+    is computed for the ~99 % of steps without a decision.)"""
+    n = len(st["v"]) - 1
     started = 0
-    for _ in range(rng.poisson(rate * dt * len(ok)) if len(ok) else 0):
-        i = int(ok[rng.integers(len(ok))])
-        if st["park"][i, 0] >= 0.0:
+    for _ in range(rng.poisson(rate * dt * n) if n > 0 else 0):
+        i = int(rng.integers(n))
+        if not eligible(st, world_map, i):
             continue
         space = find_space(world_map, st, i)
         if space is not None:

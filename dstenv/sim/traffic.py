@@ -154,16 +154,20 @@ def traffic_step(net, nbr, st, idm, rules, t, dt, u, ego_auto):
     end), its heading turned along the move.
 
     A car pulling into a space (``park[i, 0] >= 0``, set by :mod:`dstenv.sim.pullin`)
-    brakes at ``PARK_DECEL`` to stop with its centre at the target arc length (a
-    leader beyond the target is left to the gap clamp), neither halts, drifts nor
-    changes lanes, and once its whole body is beside the space and the run-in behind
-    it (``2 hl + 0.3`` m before the target) slides sideways to the target offset at
-    up to ``lateral_speed`` (heading along the move); a sideways step that would
-    touch a body (a cyclist beside it) is dropped and it rolls on in the lane. It stays a body in its lane for everyone behind until it is out of it.
+    stops with its centre at the target arc length: never faster than the braking
+    curve of ``PARK_DECEL``, and once on it (or past it) at the constant deceleration
+    that stops it there (a leader beyond the target is left to the gap clamp). It
+    neither halts, drifts nor changes lanes; once its whole body is beside the space
+    and the run-in behind it (``2 hl + 0.3`` m before the target) it slides sideways
+    to the target offset at up to ``lateral_speed`` (heading along the move); a
+    sideways step that would touch a body (a cyclist beside it) is dropped and it
+    rolls on in the lane. It is a body in its lane for everyone behind until it is
+    out of it.
 
     Returns:
-        ``(accel, gap)`` of the ego under autopilot: IDM acceleration [m/s^2] and the
-        free distance ahead of it [m] (1e9 when nothing is in the way).
+        ``(accel, gap, pulling)``: of the ego under autopilot the IDM acceleration
+        [m/s^2] and the free distance ahead of it [m] (1e9 when nothing is in the
+        way); the number of cars pulling into a space.
     """
     (pts, hdg, start, npts, ds, length, lkind, node, turn, group, vmax, succ_ptr, succ,
      conf_ptr, conf, node_control, node_phase) = net
@@ -381,9 +385,12 @@ def traffic_step(net, nbr, st, idm, rules, t, dt, u, ego_auto):
     # 5. motion of the non-ego agents
     old_xy, old_yaw, old_s, old_route = xy.copy(), yaw.copy(), s.copy(), route.copy()
     old_lat = lat.copy()
+    pulling = 0
     for i in range(nb_rows - 1):
         if not mobile[i]:
             continue
+        if park[i, 0] >= 0.0:
+            pulling += 1
         vn = max(v[i] + acc[i] * dt, 0.0)
         dist = 0.5 * (v[i] + vn) * dt
         if vn == 0.0 and acc[i] < 0.0:
@@ -471,7 +478,7 @@ def traffic_step(net, nbr, st, idm, rules, t, dt, u, ego_auto):
             old_xy[i, 0], old_xy[i, 1], old_yaw[i], old_s[i], 0.0
         route[i, :] = old_route[i, :]
         lat[i] = old_lat[i]
-    return acc[ego], gaps[ego]
+    return acc[ego], gaps[ego], pulling
 
 
 @nb.njit(cache=True)

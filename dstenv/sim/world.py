@@ -128,7 +128,7 @@ class World:
         net = self._map.lanes
         auto = ego_action is None
         u = self.rng.random((len(st["v"]), n_randoms(ROUTE_LEN)))
-        acc, gap = traffic_step(spawn.net_tuple(net), self._nbr, spawn.state_tuple(st), st["idm"],
+        acc, gap, pulling = traffic_step(spawn.net_tuple(net), self._nbr, spawn.state_tuple(st), st["idm"],
                                 spawn.rules_tuple(cfg["traffic"], net.lane_width), self.time,
                                 dt, u, auto)
         e = len(st["v"]) - 1
@@ -163,7 +163,8 @@ class World:
                 spawn.pull_out(self._map, st, self.config, self.rng, ROUTE_LEN)
         rate = cfg["traffic"]["pull_in_rate"]
         if rate > 0:  # cars pulling into spaces (a parked one far away pulls out for each)
-            pullin.settle(self._map, st, self.config, self.rng, ROUTE_LEN)
+            if pulling:
+                pullin.settle(self._map, st, self.config, self.rng, ROUTE_LEN)
             pullin.start_pull_ins(self._map, st, rate, dt, self.rng)
         self.time = round(self.time + dt, 9)
         self.steps += 1

@@ -25,7 +25,7 @@ STRIP = 2.2  # [m] kerb strip east of the south arm's northbound lane: x in [LW,
 SLOT_Y = np.arange(-55.0, -12.0, 6.0)  # slot centres along it (northbound: yaw pi/2)
 HOLD = (0.0, 0.0)
 BUSY = {"map": {"blocks_x": 3, "blocks_y": 3},
-        "traffic": {"pull_in_rate": 0.02, "parked_density": 0.3, "pull_out_rate": 0.0}}
+        "traffic": {"pull_in_rate": 0.1, "parked_density": 0.3, "pull_out_rate": 0.0}}
 
 
 def _world(parked_at=(-43.0, -19.0, -13.0)):
@@ -55,10 +55,10 @@ def test_space_is_the_nearest_free_slot_with_room_to_drive_in():
     car = w.add_agent(AgentKind.CAR, lane, 2.0, speed=5.0)
     st = w._state
     y0 = w.map.lanes.polyline(lane)[0, 1]  # where the lane starts (s = 0)
-    # slots ahead far enough to stop at 1.2 m/s^2 (+5 m): y >= -42.6; y = -37 has the car
-    # parked at -43 in its run-in, -31 is free with one car length behind it
+    # slots far enough ahead to stop at 2 m/s^2 (+3 m): y >= -45.75; -43 is taken, -37
+    # has the car parked at -43 in its run-in, -31 is free with one car length behind it
     s, lat = pullin.find_space(w.map, st, car)
-    assert 5.0 ** 2 / (2 * PARK_DECEL) + 5.0 <= s - 2.0
+    assert 5.0 ** 2 / (2 * pullin.PICK_DECEL) + 3.0 <= s - 2.0
     assert s == pytest.approx(-31.0 - y0, abs=0.01)
     edge = -lat - st["hw"][car] - LW / 2  # lane-side wheels beyond the road edge [m]
     assert -0.15 <= edge <= 0.35
@@ -110,7 +110,7 @@ def test_car_pulls_in_stops_parked_in_the_strip_and_turns_static():
     assert (lookup(w.map, inner) == MapClass.INTERMEDIATE).all()
     # braked comfortably, then stood: moving, then static
     decel = -np.diff(speeds) / 0.1
-    assert decel.max() <= PARK_DECEL * 1.3
+    assert decel.max() <= PARK_DECEL * 1.05  # (on the braking curve: far from the space)
     assert labels[0] == "moving" and labels[-1] == "static"
     assert labels.index("static") > 10 and "moving" not in labels[labels.index("static"):]
     for _ in range(60):  # the follower drives on past it
@@ -121,26 +121,24 @@ def test_car_pulls_in_stops_parked_in_the_strip_and_turns_static():
 
 def test_city_pull_ins_are_seeded_keep_traffic_steady_and_never_overlap():
     runs = []
-    for _ in range(2):
+    for run in range(2):
         w = World(BUSY, seed=7)
         st = w._state
         n_rows, mobile0 = len(st["v"]), int(st["mobile"].sum())
         parked_ever, traj = set(), []
-        for _ in range(400):
+        for step in range(400):
             was = st["park"][:, 0] >= 0
             w.step()
             traj.append(w.agents.xy.copy())
             parked_ever |= set(np.flatnonzero(was & st["parked"]).tolist())
+            if run == 0 and step % 4 == 0:
+                assert _overlaps(w) == 0
         assert len(st["v"]) == n_rows
-        assert abs(int(st["mobile"].sum()) - mobile0) <= 1  # a far parked car left for each
+        assert int(st["mobile"].sum()) == mobile0  # a far parked car left for each
         runs.append((parked_ever, traj))
     assert len(runs[0][0]) >= 2
     assert runs[0][0] == runs[1][0]
     assert all(np.array_equal(a, b) for a, b in zip(runs[0][1], runs[1][1]))
-    a = World(BUSY, seed=7)
-    for _ in range(150):
-        a.step()
-        assert _overlaps(a) == 0
 
 
 def test_zero_rate_never_starts_a_pull_in():

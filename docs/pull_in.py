@@ -5,6 +5,7 @@ car decides to park to the step it is parked (red: moving, blue: static), with i
 path so far as a line::
 
     python docs/pull_in.py --out docs/img/pull-in.png
+    python docs/pull_in.py --stats   # pull-ins of the default scenario, 3 x 300 s
 
 The city is the ``default`` scenario's 3 x 3 blocks with a high ``pull_in_rate``
 (0.05 1/s, so that a pull-in comes early); the first car that parks is drawn. The run
@@ -49,11 +50,54 @@ def _config() -> dict:
     return cfg
 
 
+def stats(scenario: str, seeds: range, steps: int) -> dict[str, float]:
+    """Pull-ins of a shipped scenario at its default ``pull_in_rate``: decisions (by
+    eligible cars), how many found a space, cars parked, per minute and per car."""
+    from dstenv.sim import pullin
+
+    cfg = load_scenario(scenario, {"world": default_config()})["world"]
+    found = tried = parked = 0
+    elig_s = 0.0  # eligible car-seconds
+    real = pullin.find_space
+
+    def counting(*a):
+        nonlocal found, tried
+        tried += 1
+        out = real(*a)
+        found += out is not None
+        return out
+
+    pullin.find_space = counting
+    try:
+        for seed in seeds:
+            w = World(cfg, seed=seed)
+            st = w._state
+            for _ in range(steps):
+                was = st["park"][:, 0] >= 0
+                elig_s += w.config["dt"] * sum(pullin.eligible(st, w.map, i)
+                                               for i in range(len(st["v"]) - 1))
+                w.step()
+                parked += int((was & st["parked"]).sum())
+    finally:
+        pullin.find_space = real
+    minutes = len(seeds) * steps * cfg["dt"] / 60.0
+    return {"decisions": tried, "found": found, "found_share": found / max(tried, 1),
+            "parked": parked, "parked_per_min": parked / minutes,
+            "eligible_cars_mean": elig_s / (minutes * 60.0),
+            "minutes_to_park": elig_s / 60.0 / max(parked, 1)}
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--out", default="docs/img/pull-in.png")
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--stats", action="store_true",
+                    help="print pull-in figures of the default scenario instead (3 x 300 s)")
     args = ap.parse_args(argv)
+    if args.stats:
+        for k, v in stats("default", range(3), 3000).items():
+            print(f"{k}: {v:.3g}")
+        return 0
     import matplotlib
 
     matplotlib.use("Agg")

@@ -148,6 +148,34 @@ def test_zero_rate_never_starts_a_pull_in():
         assert (w._state["park"][:, 0] < 0).all()
 
 
+def test_zero_rate_reproduces_the_traffic_before_pull_ins():
+    """With ``pull_in_rate = 0`` the traffic step (which now carries the pull-in state)
+    gives the trajectories of the code before pull-ins bit for bit: the digest was taken
+    with commit 90fcc83 (no pull-ins) running this scene (two-lane signalised cross, 12
+    cars, cyclists, a delivery stop; 300 steps). A numba / numpy upgrade that changes
+    rounding would change it too."""
+    import hashlib
+
+    w = World({"traffic": {"cars": 0, "cyclists": 0, "pedestrians": 0, "pull_in_rate": 0.0}},
+              seed=5, world_map=cross_map(Control.SIGNAL, 2))
+    net = w.map.lanes
+    for x, y in ((LW / 2, -TRIM), (1.5 * LW, -TRIM), (-LW / 2, TRIM), (TRIM, LW / 2)):
+        lane = lane_ending_near(net, x, y)
+        for s in (5.0, 17.0, 29.0):
+            w.add_agent(AgentKind.CAR, lane, s, speed=6.0)
+        if net.rightmost[lane]:
+            w.add_agent(AgentKind.CYCLIST, lane, 40.0, speed=4.0)
+    k = w.add_agent(AgentKind.CAR, lane_ending_near(net, 1.5 * LW, -TRIM), 44.0)
+    w._state["halt"][k] = 8.0  # a delivery stop in the kerb lane
+    h = hashlib.sha256()
+    for _ in range(300):
+        w.step()
+        a = w.agents
+        for arr in (a.xy, a.yaw, a.speed, w.ego_pose):
+            h.update(np.ascontiguousarray(arr).tobytes())
+    assert h.hexdigest()[:16] == "4333932498d1298d"
+
+
 def test_pull_in_rate_is_validated_by_name():
     with pytest.raises(ValueError, match="traffic.pull_in_rate"):
         World({"traffic": {"pull_in_rate": -0.01}}, seed=0)

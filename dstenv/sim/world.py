@@ -128,9 +128,9 @@ class World:
         net = self._map.lanes
         auto = ego_action is None
         u = self.rng.random((len(st["v"]), n_randoms(ROUTE_LEN)))
-        acc, gap, pulling = traffic_step(spawn.net_tuple(net), self._nbr, spawn.state_tuple(st), st["idm"],
-                                spawn.rules_tuple(cfg["traffic"], net.lane_width), self.time,
-                                dt, u, auto)
+        acc, gap, pulling = traffic_step(
+            spawn.net_tuple(net), self._nbr, spawn.state_tuple(st), st["idm"],
+            spawn.rules_tuple(cfg["traffic"], net.lane_width), self.time, dt, u, auto)
         e = len(st["v"]) - 1
         x, y, yaw, v = st["xy"][e, 0], st["xy"][e, 1], st["yaw"][e], st["v"][e]
         if auto:

@@ -6,6 +6,7 @@ path so far as a line::
 
     python docs/pull_in.py --out docs/img/pull-in.png
     python docs/pull_in.py --stats   # pull-ins of the default scenario, 3 x 300 s
+    python docs/pull_in.py --bench   # world step cost, pull_in_rate 0 vs 0.01 (paired)
 
 The city is the ``default`` scenario's 3 x 3 blocks with a high ``pull_in_rate``
 (0.05 1/s, so that a pull-in comes early); the first car that parks is drawn. The run
@@ -87,13 +88,49 @@ def stats(scenario: str, seeds: range, steps: int) -> dict[str, float]:
             "minutes_to_park": elig_s / 60.0 / max(parked, 1)}
 
 
+def step_cost(rounds: int = 40) -> tuple[float, float]:
+    """Median world step [ms] of the ``dstenv bench world`` city with ``pull_in_rate`` 0
+    and 0.01, paired: each round steps two deep copies of one state (alternating which
+    goes first), so both time the same traffic."""
+    import copy
+    import time
+
+    from dstenv.sim.bench import BENCH_CONFIG
+
+    cfg = {"map": dict(BENCH_CONFIG["map"]),
+           "traffic": {**BENCH_CONFIG["traffic"], "pull_in_rate": 0.01}}
+    base = World(cfg, seed=0)
+    for _ in range(20):
+        base.step()
+    times: dict[float, list[float]] = {0.0: [], 0.01: []}
+    for rnd in range(rounds):
+        for rate in ((0.0, 0.01) if rnd % 2 else (0.01, 0.0)):
+            w = copy.deepcopy(base)
+            w.config["traffic"]["pull_in_rate"] = rate
+            w.step()
+            for _ in range(30):
+                t0 = time.perf_counter()
+                w.step()
+                times[rate].append(time.perf_counter() - t0)
+        for _ in range(10):
+            base.step()
+    return float(np.median(times[0.0]) * 1e3), float(np.median(times[0.01]) * 1e3)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--out", default="docs/img/pull-in.png")
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--stats", action="store_true",
                     help="print pull-in figures of the default scenario instead (3 x 300 s)")
+    ap.add_argument("--bench", action="store_true",
+                    help="print the world step cost of pull-ins (rate 0 vs 0.01, paired)")
     args = ap.parse_args(argv)
+    if args.bench:
+        off, on = step_cost()
+        print(f"world step (bench world city): pull_in_rate 0: {off:.3f} ms, 0.01: {on:.3f} ms,"
+              f" ratio {on / off:.3f}")
+        return 0
     if args.stats:
         for k, v in stats("default", range(3), 3000).items():
             print(f"{k}: {v:.3g}")

@@ -98,6 +98,9 @@ def default_config() -> dict[str, Any]:
             "drift_time": 3.0,  # [s] correlation time of that drift
             "lateral_speed": 0.6,  # [m/s] sideways speed of a car pulling out of a space
             "pull_out_rate": 0.002,  # [1/s] chance per second that a parked car pulls out
+            # [1/s] chance per second that a moving car on a kerb-side lane pulls into a
+            # free space ahead (a parked car far from the ego pulls out for each)
+            "pull_in_rate": 0.01,
             "delivery_halt_factor": 4.0,  # [-] vans / trucks halt this much longer than cars
             # -- double parking and lane changes (0 in the clean scenario)
             "double_park_prob": 0.03,  # [-] share of parked vehicles standing in the kerb
@@ -223,6 +226,7 @@ RULES: dict[str, Any] = {
         "drift_time": between(0.2, 60.0, "s"),
         "lateral_speed": between(0.1, 3.0, _MS),
         "pull_out_rate": between(0.0, 0.1, "1/s"),
+        "pull_in_rate": between(0.0, 0.1, "1/s"),
         "delivery_halt_factor": between(1.0, 20.0),
         "double_park_prob": PROB,
         "double_park_duration": between(0.0, 3600.0, "s"),

@@ -192,7 +192,7 @@ def lane_changes(net, nbr, st, idm, planner, gaps, leads, blocker, dt, u, lc_rat
      conf_ptr, conf, node_control, node_phase) = net
     left, right, opp = nbr
     (xy, yaw, v, hl, hw, akind, mobile, parked, route, s, lat, grant, req_t, stop_clock,
-     halt, stuck, still, lat_goal, lc, hazard) = st
+     halt, stuck, still, lat_goal, lc, hazard, park) = st
     nb_rows = xy.shape[0]
     for i in range(nb_rows - 1):  # never the ego
         if not planner[i] or akind[i] == _PED:
@@ -212,8 +212,8 @@ def lane_changes(net, nbr, st, idm, planner, gaps, leads, blocker, dt, u, lc_rat
             elif s[i] >= length[ln] - 1.0:  # (cannot happen: the pass ends before the line)
                 lat_goal[i], lc[i] = base, LC_MOVING
             continue
-        if lkind[ln] != _K_ROAD or halt[i] > 0.0 or hazard[i]:
-            continue
+        if lkind[ln] != _K_ROAD or halt[i] > 0.0 or hazard[i] or park[i, 0] >= 0.0:
+            continue  # (a car pulling into a space keeps its lane)
         j = blocker[i]
         v0 = min(idm[i, 0], vmax[ln])
         motive = 0

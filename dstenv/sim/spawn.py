@@ -7,7 +7,9 @@ The world state is a dict of structure-of-arrays over B rows, the ego last:
 ``lat_goal`` it returns to, junction
 ``grant`` (reserved connector), request time ``req_t``, ``stop_clock``, ``halt``
 timer, ``stuck``, ``still`` (standstill time), ``lc`` (lane change / pass, see
-:mod:`dstenv.sim.lanechange`), ``hazard`` (double parked, hazard lights on), ``idm
+:mod:`dstenv.sim.lanechange`), ``hazard`` (double parked, hazard lights on), ``park
+(B,2)`` (a car pulling into a space: target arc length on ``route[:,0]`` and lateral
+offset [m]; -1 / 0 when none, see :mod:`dstenv.sim.pullin`), ``idm
 (B,5)`` (desired speed, accel, comfortable decel, headway, jam gap) and ``height``
 [m] (body height).
 """
@@ -34,7 +36,7 @@ BODY = {
 }
 _TRAFFIC_FIELDS = ("xy", "yaw", "v", "hl", "hw", "akind", "mobile", "parked", "route", "s",
                    "lat", "grant", "req_t", "stop_clock", "halt", "stuck", "still", "lat_goal",
-                   "lc", "hazard")
+                   "lc", "hazard", "park")
 _FIELDS = (*_TRAFFIC_FIELDS, "idm", "height")
 #: size ranges of the vehicle classes: (C, 3) low and high length, width, height [m]
 _CLASS_LO = np.array([[VEHICLE_CLASSES[c][d][0] for d in range(3)] for c in VEHICLE_CLASSES])
@@ -97,7 +99,8 @@ def _empty(k: int) -> dict[str, np.ndarray]:
             "lat": np.zeros(0), "grant": np.zeros(0, np.int64), "req_t": np.zeros(0),
             "stop_clock": np.zeros(0), "halt": np.zeros(0), "stuck": np.zeros(0, bool),
             "still": np.zeros(0), "lat_goal": np.zeros(0), "lc": np.zeros(0),
-            "hazard": np.zeros(0, bool), "idm": np.zeros((0, 5)), "height": np.zeros(0)}
+            "hazard": np.zeros(0, bool), "park": np.zeros((0, 2)), "idm": np.zeros((0, 5)),
+            "height": np.zeros(0)}
 
 
 def add_row(st: dict[str, np.ndarray], kind: AgentKind, xy, yaw: float, length: float,
@@ -114,7 +117,7 @@ def add_row(st: dict[str, np.ndarray], kind: AgentKind, xy, yaw: float, length: 
            "route": (np.full((1, k), -1) if route is None else np.asarray(route).reshape(1, k)),
            "s": [s], "lat": [lat], "grant": [-1], "req_t": [np.inf], "stop_clock": [0.0],
            "halt": [0.0], "stuck": [False], "still": [0.0], "lat_goal": [lat], "lc": [0.0],
-           "hazard": [False],
+           "hazard": [False], "park": np.array([[-1.0, 0.0]]),
            "idm": np.asarray(idm, float).reshape(1, 5),
            "height": [AGENT_HEIGHT[int(kind)] if height is None else height]}
     at = len(st["v"]) if at is None else at
@@ -145,10 +148,15 @@ def _add_parked(st: dict[str, np.ndarray], slots: np.ndarray, rng: np.random.Gen
             "grant": np.full(n, -1, np.int64), "req_t": np.full(n, np.inf),
             "stop_clock": np.zeros(n), "halt": np.zeros(n), "stuck": np.zeros(n, bool),
             "still": np.zeros(n), "lat_goal": np.zeros(n), "lc": np.zeros(n),
-            "hazard": np.zeros(n, bool), "idm": np.zeros((n, 5)),
+            "hazard": np.zeros(n, bool), "park": _no_park(n), "idm": np.zeros((n, 5)),
             "height": height}
     for f in _FIELDS:
         st[f] = np.concatenate([st[f], rows[f].astype(st[f].dtype)])
+
+
+def _no_park(n: int) -> np.ndarray:
+    """``(n, 2)`` rows of ``park`` for agents that are not pulling into a space."""
+    return np.tile([-1.0, 0.0], (n, 1))
 
 
 def _free(st, xy, yaw, length, width, gap) -> bool:
@@ -196,7 +204,8 @@ def _mobile(world_map, st, rng, cfg, kind, lanes, cdf, k, *, lane=None, s=None, 
                      "grant": np.full(m, -1, np.int64), "req_t": np.full(m, np.inf),
                      "stop_clock": np.zeros(m), "halt": np.zeros(m), "stuck": np.zeros(m, bool),
                      "still": np.zeros(m), "lat_goal": lat_a.copy(), "lc": np.zeros(m),
-                     "hazard": np.zeros(m, bool), "idm": idm, "height": height},
+                     "hazard": np.zeros(m, bool), "park": _no_park(m), "idm": idm,
+                     "height": height},
                 len(st["v"]) if at is None else at)
     return int(m)
 
@@ -339,16 +348,23 @@ def _task(world_map, st, rng, cfg, k, slots, taken) -> None:
 
 
 def pull_out(world_map: WorldMap, st: dict[str, np.ndarray], cfg: dict[str, Any],
-             rng: np.random.Generator, k: int) -> int | None:
+             rng: np.random.Generator, k: int, min_ego_dist: float = 0.0) -> int | None:
     """A random parked car pulls out: it becomes a mobile agent on the nearest road lane
     heading its way, starting from its parking position (``lat`` = its offset from the
     lane centre, ``lat_goal`` = 0), so it moves sideways into the lane as it sets off.
+
+    Args:
+        min_ego_dist: [m] draw only among parked cars at least this far from the ego
+            (0: any).
 
     Returns:
         The agent's row, or None when the drawn car has no lane next to it.
     """
     net, tr = world_map.lanes, cfg["traffic"]
-    rows = np.flatnonzero(st["parked"][:-1] & (st["akind"][:-1] == AgentKind.CAR))
+    pick = st["parked"][:-1] & (st["akind"][:-1] == AgentKind.CAR)
+    if min_ego_dist > 0:
+        pick &= np.hypot(*(st["xy"][:-1] - st["xy"][-1]).T) >= min_ego_dist
+    rows = np.flatnonzero(pick)
     if len(rows) == 0:
         return None
     i = int(rows[rng.integers(len(rows))])
@@ -371,7 +387,7 @@ def pull_out(world_map: WorldMap, st: dict[str, np.ndarray], cfg: dict[str, Any]
     st["yaw"][i] = h
     st["idm"][i] = (tr["speed_limit"] * rng.uniform(0.8, 1.2), amax, bcomf, headway, jam)
     st["grant"][i], st["req_t"][i], st["halt"][i], st["still"][i] = -1, np.inf, 0.0, 0.0
-    st["lc"][i], st["hazard"][i] = 0.0, False
+    st["lc"][i], st["hazard"][i], st["park"][i] = 0.0, False, (-1.0, 0.0)
     return i
 
 
@@ -405,5 +421,6 @@ def respawn(world_map: WorldMap, st: dict[str, np.ndarray], i: int, rng: np.rand
     st["req_t"][i], st["stop_clock"][i], st["halt"][i], st["still"][i] = np.inf, 0.0, 0.0, 0.0
     st["lc"][i], st["hazard"][i], st["lat"][i], st["lat_goal"][i] = 0.0, False, keep["lat"], \
         keep["lat"]
+    st["park"][i] = (-1.0, 0.0)
     st["xy"][i] = x - keep["lat"] * np.sin(h), y + keep["lat"] * np.cos(h)
     st["yaw"][i] = h

@@ -49,6 +49,7 @@ REPLACE_DIST = 90.0  # [m] ... replaced, if it is at least this far from the ego
 LC_YAW = 0.2  # [-] sideways speed / speed (at least 2.5 m/s) while changing lanes: the
 #               heading turns at most ~0.2 rad off the lane
 LC_LAT_ACCEL = 0.8  # [m/s^2] lateral deceleration at the end of a lane change
+PARK_DECEL = 1.2  # [m/s^2] braking of a car pulling into a space (it stops at the target)
 
 
 def n_randoms(n_route: int) -> int:
@@ -131,9 +132,11 @@ def traffic_step(net, nbr, st, idm, rules, t, dt, u, ego_auto):
             (:func:`dstenv.sim.lanechange.lane_neighbours`).
         st: state arrays over B rows (ego last) ``(xy, yaw, v, hl, hw, akind, mobile,
             parked, route, s, lat, grant, req_t, stop_clock, halt, stuck, still,
-            lat_goal, lc, hazard)`` (``lc``: lane-change state of
+            lat_goal, lc, hazard, park)`` (``lc``: lane-change state of
             :mod:`dstenv.sim.lanechange`; ``hazard``: double parked, hazard lights on,
-            cleared when its halt ends).
+            cleared when its halt ends; ``park (B, 2)``: a car pulling into a space,
+            target arc length on its lane and lateral offset [m], ``park[:, 0] < 0``:
+            none).
         idm: ``(B, 5)`` desired speed, max accel, comfortable decel, headway, jam gap.
         rules: ``(signal_green, stop_duration, halt_rate, halt_mean, pause_rate,
             pause_mean, crossing_prob, drift, drift_time, lateral_speed,
@@ -150,14 +153,26 @@ def traffic_step(net, nbr, st, idm, rules, t, dt, u, ego_auto):
     (``LC_YAW * max(v, 2.5)`` at low speed, braking at ``LC_LAT_ACCEL`` towards the
     end), its heading turned along the move.
 
+    A car pulling into a space (``park[i, 0] >= 0``, set by :mod:`dstenv.sim.pullin`)
+    stops with its centre at the target arc length: never faster than the braking
+    curve of ``PARK_DECEL``, and once on it (or past it) at the constant deceleration
+    that stops it there (a leader beyond the target is left to the gap clamp). It
+    neither halts, drifts nor changes lanes; once its whole body is beside the space
+    and the run-in behind it (``2 hl + 0.3`` m before the target) it slides sideways
+    to the target offset at up to ``lateral_speed`` (heading along the move); a
+    sideways step that would touch a body (a cyclist beside it) is dropped and it
+    rolls on in the lane. It is a body in its lane for everyone behind until it is
+    out of it.
+
     Returns:
-        ``(accel, gap)`` of the ego under autopilot: IDM acceleration [m/s^2] and the
-        free distance ahead of it [m] (1e9 when nothing is in the way).
+        ``(accel, gap, pulling)``: of the ego under autopilot the IDM acceleration
+        [m/s^2] and the free distance ahead of it [m] (1e9 when nothing is in the
+        way); the number of cars pulling into a space.
     """
     (pts, hdg, start, npts, ds, length, lkind, node, turn, group, vmax, succ_ptr, succ,
      conf_ptr, conf, node_control, node_phase) = net
     (xy, yaw, v, hl, hw, akind, mobile, parked, route, s, lat, grant, req_t, stop_clock,
-     halt, stuck, still, lat_goal, lc, hazard) = st
+     halt, stuck, still, lat_goal, lc, hazard, park) = st
     (green, stop_dur, halt_rate, halt_mean, pause_rate, pause_mean, cross_prob, drift,
      drift_time, lat_speed, delivery, lc_rate, lc_time, lane_width) = rules
     nb_rows = xy.shape[0]
@@ -344,13 +359,19 @@ def traffic_step(net, nbr, st, idm, rules, t, dt, u, ego_auto):
         if not planner[i]:
             continue
         v0, amax, bcomf, headway, jam = idm[i, 0], idm[i, 1], idm[i, 2], idm[i, 3], idm[i, 4]
-        if vlims[i] < 0.05:
+        vl, park_d = vlims[i], -1.0
+        if park[i, 0] >= 0.0:  # pulling into a space: never faster than the braking curve
+            park_d = max(park[i, 0] - s[i], 0.0)
+            vl = min(vl, np.sqrt(2.0 * PARK_DECEL * park_d))
+        if vl < 0.05:
             a = -min(bcomf, v[i] / dt)
         else:
-            a = amax * (1.0 - (v[i] / vlims[i]) ** 4)
-        if gaps[i] < 1e8:
+            a = amax * (1.0 - (v[i] / vl) ** 4)
+        if gaps[i] < 1e8 and not (park_d >= 0.0 and gaps[i] > park_d):
             dyn = v[i] * headway + v[i] * (v[i] - leads[i]) / (2 * np.sqrt(amax * bcomf))
             a -= amax * ((jam + max(0.0, dyn)) / max(gaps[i], 0.01)) ** 2
+        if park_d >= 0.0 and v[i] * v[i] >= 2.0 * PARK_DECEL * park_d:
+            a = min(a, -v[i] * v[i] / (2.0 * max(park_d, 1e-6)))  # stops at the target
         acc[i] = min(max(a, -3.0 if akind[i] == PEDESTRIAN else -9.0), amax)
     # 4. lane changes and passes; a vehicle that changed lanes re-draws its route
     lane_changes(net, nbr, st, idm, planner, gaps, leads, blocker, dt, u, lc_rate, lc_time,
@@ -364,9 +385,12 @@ def traffic_step(net, nbr, st, idm, rules, t, dt, u, ego_auto):
     # 5. motion of the non-ego agents
     old_xy, old_yaw, old_s, old_route = xy.copy(), yaw.copy(), s.copy(), route.copy()
     old_lat = lat.copy()
+    pulling = 0
     for i in range(nb_rows - 1):
         if not mobile[i]:
             continue
+        if park[i, 0] >= 0.0:
+            pulling += 1
         vn = max(v[i] + acc[i] * dt, 0.0)
         dist = 0.5 * (v[i] + vn) * dt
         if vn == 0.0 and acc[i] < 0.0:
@@ -375,6 +399,8 @@ def traffic_step(net, nbr, st, idm, rules, t, dt, u, ego_auto):
         if dist > allowed:
             dist = allowed
             vn = min(vn, dist / dt)
+        if park[i, 0] >= 0.0 and dist >= park[i, 0] - s[i]:  # at the target: stop there
+            dist, vn = max(park[i, 0] - s[i], 0.0), 0.0
         v[i] = vn
         s[i] += dist
         while s[i] > length[route[i, 0]]:
@@ -391,11 +417,17 @@ def traffic_step(net, nbr, st, idm, rules, t, dt, u, ego_auto):
                 last, u[i, 0], succ_ptr, succ, lkind, turn, cross_prob)
         dlat = 0.0
         if akind[i] != PEDESTRIAN:
+            if park[i, 0] >= 0.0 and park[i, 0] - s[i] < 2.0 * hl[i] + 0.3:
+                lat_goal[i] = park[i, 1]  # all of it is beside the space: move over
             off = lat[i] - lat_goal[i]
             if lc[i] != LC_NONE:  # changing lanes / passing: smooth sideways move
                 vlat = min(1.2 * lane_width / lc_time, LC_YAW * max(v[i], 2.5),
                            np.sqrt(2.0 * LC_LAT_ACCEL * abs(off)) + 0.05)
                 step = vlat * dt
+                dlat = -min(max(off, -step), step)
+                off = off + dlat
+            elif park[i, 0] >= 0.0:  # pulling in: sideways, slowing down at the end
+                step = min(lat_speed, np.sqrt(2.0 * LC_LAT_ACCEL * abs(off)) + 0.05) * dt
                 dlat = -min(max(off, -step), step)
                 off = off + dlat
             elif drift > 0.0 and v[i] > 1.0 and abs(off) < 2.0 * drift:
@@ -423,7 +455,7 @@ def traffic_step(net, nbr, st, idm, rules, t, dt, u, ego_auto):
         elif akind[i] == PEDESTRIAN:
             if lkind[route[i, 0]] == K_WALK and u[i, 1] < pause_rate * dt:
                 halt[i] = min(-pause_mean * np.log(max(u[i, 2], 1e-9)), 4.0 * pause_mean)
-        elif akind[i] == CAR and lkind[route[i, 0]] == K_ROAD and \
+        elif akind[i] == CAR and lkind[route[i, 0]] == K_ROAD and park[i, 0] < 0.0 and \
                 length[route[i, 0]] - s[i] > 25.0 and u[i, 1] < halt_rate * dt:
             # vans and trucks (longer than 4.9 m) halt like delivery vans: longer
             mean = halt_mean * (delivery if hl[i] > 2.45 else 1.0)
@@ -434,15 +466,30 @@ def traffic_step(net, nbr, st, idm, rules, t, dt, u, ego_auto):
         if not mobile[i] or (old_s[i] == s[i] and old_route[i, 0] == route[i, 0]
                              and old_lat[i] == lat[i]):
             continue
-        for j in range(nb_rows):
-            if j == i:
+        if not _touches(i, xy, yaw, hl, hw, old_xy, old_yaw):
+            continue
+        if park[i, 0] >= 0.0 and lat[i] != old_lat[i]:  # pulling in: roll on, not sideways
+            lat[i] = old_lat[i]
+            x, y, h = lane_pose(pts, hdg, start, npts, ds, route[i, 0], s[i])
+            xy[i, 0], xy[i, 1], yaw[i] = x - lat[i] * np.sin(h), y + lat[i] * np.cos(h), h
+            if not _touches(i, xy, yaw, hl, hw, old_xy, old_yaw):
                 continue
-            jx, jy, jh = (xy[j, 0], xy[j, 1], yaw[j]) if j < i else \
-                (old_xy[j, 0], old_xy[j, 1], old_yaw[j])
-            if box_overlap(xy[i, 0], xy[i, 1], yaw[i], hl[i], hw[i], jx, jy, jh, hl[j], hw[j]):
-                xy[i, 0], xy[i, 1], yaw[i], s[i], v[i] = \
-                    old_xy[i, 0], old_xy[i, 1], old_yaw[i], old_s[i], 0.0
-                route[i, :] = old_route[i, :]
-                lat[i] = old_lat[i]
-                break
-    return acc[ego], gaps[ego]
+        xy[i, 0], xy[i, 1], yaw[i], s[i], v[i] = \
+            old_xy[i, 0], old_xy[i, 1], old_yaw[i], old_s[i], 0.0
+        route[i, :] = old_route[i, :]
+        lat[i] = old_lat[i]
+    return acc[ego], gaps[ego], pulling
+
+
+@nb.njit(cache=True)
+def _touches(i, xy, yaw, hl, hw, old_xy, old_yaw):
+    """Row ``i``'s footprint overlaps another (rows before ``i`` at their new, rows
+    after it at their old pose)."""
+    for j in range(xy.shape[0]):
+        if j == i:
+            continue
+        jx, jy, jh = (xy[j, 0], xy[j, 1], yaw[j]) if j < i else \
+            (old_xy[j, 0], old_xy[j, 1], old_yaw[j])
+        if box_overlap(xy[i, 0], xy[i, 1], yaw[i], hl[i], hw[i], jx, jy, jh, hl[j], hw[j]):
+            return True
+    return False

@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from dstenv.config import ConfigError, section
-from dstenv.sim import spawn
+from dstenv.sim import pullin, spawn
 from dstenv.sim.citygen import generate_city
 from dstenv.sim.clutter import street_clutter
 from dstenv.sim.ego import bicycle_step, hits, pure_pursuit, pursuit_lookahead
@@ -128,9 +128,9 @@ class World:
         net = self._map.lanes
         auto = ego_action is None
         u = self.rng.random((len(st["v"]), n_randoms(ROUTE_LEN)))
-        acc, gap = traffic_step(spawn.net_tuple(net), self._nbr, spawn.state_tuple(st), st["idm"],
-                                spawn.rules_tuple(cfg["traffic"], net.lane_width), self.time,
-                                dt, u, auto)
+        acc, gap, pulling = traffic_step(
+            spawn.net_tuple(net), self._nbr, spawn.state_tuple(st), st["idm"],
+            spawn.rules_tuple(cfg["traffic"], net.lane_width), self.time, dt, u, auto)
         e = len(st["v"]) - 1
         x, y, yaw, v = st["xy"][e, 0], st["xy"][e, 1], st["yaw"][e], st["v"][e]
         if auto:
@@ -161,6 +161,11 @@ class World:
             n = int(st["parked"][:-1].sum())
             for _ in range(self.rng.poisson(rate * dt * n) if n else 0):
                 spawn.pull_out(self._map, st, self.config, self.rng, ROUTE_LEN)
+        rate = cfg["traffic"]["pull_in_rate"]
+        if rate > 0:  # cars pulling into spaces (a parked one far away pulls out for each)
+            if pulling:
+                pullin.settle(self._map, st, self.config, self.rng, ROUTE_LEN)
+            pullin.start_pull_ins(self._map, st, rate, dt, self.rng)
         self.time = round(self.time + dt, 9)
         self.steps += 1
         self._update_flags()

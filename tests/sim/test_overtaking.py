@@ -215,3 +215,25 @@ def test_new_knobs_are_validated_by_name():
         with pytest.raises(ValueError, match=f"traffic.{key}"):
             World({"traffic": {key: bad}}, seed=0)
 
+
+
+def test_default_city_changes_lanes_and_passes_halted_vehicles():
+    """Issue 12: in the shipped default scenario (not boosted rates) vehicles change lanes
+    and get past halted delivery vans / double-parked cars on their own."""
+    from dstenv.config import load_scenario
+    from dstenv.sim import default_config
+
+    w = World(load_scenario("default", {"world": default_config()})["world"], seed=0)
+    st = w._state
+    changes = passes = past_halted = 0
+    for _ in range(1500):  # 150 s
+        lane0, lc0, s0 = st["route"][:, 0].copy(), st["lc"].copy(), st["s"].copy()
+        halted = (st["halt"] > 0) | st["hazard"]
+        w.step()
+        moved = np.flatnonzero((st["lc"] == -1) & (lane0 != st["route"][:, 0]) & (lc0 != -1))
+        borrow = np.flatnonzero((st["lc"] > 0) & (lc0 <= 0))  # onto the oncoming lane
+        changes, passes = changes + len(moved), passes + len(borrow)
+        for i in np.concatenate([moved, borrow]):  # a halted vehicle ahead on its old lane
+            ahead = (lane0 == lane0[i]) & halted & (s0 > s0[i]) & (s0 - s0[i] < 45.0)
+            past_halted += int(ahead.any())
+    assert changes >= 20 and passes >= 1 and past_halted >= 2

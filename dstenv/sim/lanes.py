@@ -8,19 +8,20 @@ lanes carry pedestrians. ``WorldMap.lanes`` holds a :class:`LaneNetwork`.
 
 from __future__ import annotations
 
-import functools
-
 from dataclasses import dataclass
 from enum import IntEnum
 
 import numba as nb
 import numpy as np
 
+# the polyline kernels live in lanegeom; re-exported here, where lanes are built
+from dstenv.sim.lanegeom import (SPACING, bezier, cut_polyline, fillet_curve,  # noqa: F401
+                                 offset_polyline, resample)
+
 __all__ = ["LaneKind", "Control", "Turn", "LaneNetwork", "NetworkBuilder", "lane_pose",
            "project_on_lane", "resample", "offset_polyline", "cut_polyline", "bezier",
            "fillet_curve"]
 
-SPACING = 0.5  # [m] largest distance between resampled lane points
 CONFLICT_DIST = 2.6  # [m] connectors closer than this somewhere conflict
 LATERAL_ACCEL = 2.5  # [m/s^2] comfortable lateral acceleration in turns
 
@@ -50,116 +51,6 @@ class Turn(IntEnum):
     LEFT = 1
     RIGHT = 2
     UTURN = 3
-
-
-def resample(poly: np.ndarray, spacing: float = SPACING) -> np.ndarray:
-    """Evenly spaced points along a polyline: ``(K, 2) -> (M, 2) float64``, same ends."""
-    poly = _distinct(np.ascontiguousarray(poly, np.float64))
-    if len(poly) < 2:
-        raise ValueError("lane polyline needs two distinct points")
-    return _resample(poly, float(spacing))
-
-
-@nb.njit(cache=True)
-def _distinct(poly):  # pragma: no cover - numba
-    """The points of ``poly (K, 2)`` more than 1e-9 m from their predecessor in
-    ``poly`` (the first is always kept)."""
-    keep = np.ones(poly.shape[0], np.bool_)
-    for i in range(1, poly.shape[0]):
-        keep[i] = np.hypot(poly[i, 0] - poly[i - 1, 0], poly[i, 1] - poly[i - 1, 1]) > 1e-9
-    return poly[keep]
-
-
-@nb.njit(cache=True)
-def _resample(poly, spacing):  # pragma: no cover - numba
-    """:func:`resample` of a polyline without repeated points (one pass, no temporaries
-    beyond the output: generating a city resamples thousands of lanes)."""
-    k = poly.shape[0]
-    cum = np.empty(k)
-    cum[0] = 0.0
-    for i in range(1, k):
-        cum[i] = cum[i - 1] + np.hypot(poly[i, 0] - poly[i - 1, 0], poly[i, 1] - poly[i - 1, 1])
-    n = max(int(np.ceil(cum[-1] / spacing)), 1) + 1
-    out = np.empty((n, 2))
-    step = cum[-1] / (n - 1)
-    j = 0
-    for m in range(n):
-        t = m * step if m < n - 1 else cum[-1]
-        while j < k - 2 and cum[j + 1] < t:
-            j += 1
-        d = cum[j + 1] - cum[j]
-        f = (t - cum[j]) / d if d > 0 else 0.0
-        f = min(max(f, 0.0), 1.0)
-        out[m, 0] = poly[j, 0] + f * (poly[j + 1, 0] - poly[j, 0])
-        out[m, 1] = poly[j, 1] + f * (poly[j + 1, 1] - poly[j, 1])
-    return out
-
-
-def cut_polyline(poly: np.ndarray, s0: float, s1: float) -> np.ndarray:
-    """The piece of a polyline between arc lengths ``s0 < s1`` [m]."""
-    poly = np.asarray(poly, np.float64)
-    cum = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(poly, axis=0).T))])
-    inner = poly[(cum > s0) & (cum < s1)]
-    a = [np.interp(s0, cum, poly[:, 0]), np.interp(s0, cum, poly[:, 1])]
-    b = [np.interp(s1, cum, poly[:, 0]), np.interp(s1, cum, poly[:, 1])]
-    return np.vstack([a, inner, b])
-
-
-def offset_polyline(poly: np.ndarray, d: float) -> np.ndarray:
-    """Polyline shifted by ``d`` [m] to its left (negative: right), mitred joints."""
-    poly = np.asarray(poly, np.float64)
-    t = np.diff(poly, axis=0)
-    t /= np.maximum(np.hypot(t[:, 0], t[:, 1]), 1e-12)[:, None]
-    n_seg = np.stack([-t[:, 1], t[:, 0]], -1)
-    n_pt = np.vstack([n_seg[:1], n_seg[:-1] + n_seg[1:], n_seg[-1:]])
-    n_pt /= np.maximum(np.hypot(n_pt[:, 0], n_pt[:, 1]), 1e-12)[:, None]
-    cosh = np.ones(len(poly))
-    cosh[1:-1] = np.clip(np.einsum("ij,ij->i", n_pt[1:-1], n_seg[1:]), 0.5, 1.0)
-    return poly + n_pt * (d / cosh)[:, None]
-
-
-def bezier(p0, h0: float, p1, h1: float, n: int = 24, k: float = 0.42) -> np.ndarray:
-    """Cubic Bezier leaving ``p0`` at heading ``h0`` and reaching ``p1`` at ``h1``."""
-    p0, p1 = np.asarray(p0, float), np.asarray(p1, float)
-    d = k * np.hypot(*(p1 - p0))
-    c0 = p0 + d * np.array([np.cos(h0), np.sin(h0)])
-    c1 = p1 - d * np.array([np.cos(h1), np.sin(h1)])
-    b0, b1, b2, b3 = _bernstein(n)
-    return b0 * p0 + b1 * c0 + b2 * c1 + b3 * p1
-
-
-@functools.lru_cache(maxsize=8)
-def _bernstein(n: int) -> tuple[np.ndarray, ...]:
-    """The cubic Bernstein weights of :func:`bezier` at ``n`` steps, each ``(n, 1)``
-    (read-only; computed as the curve's own expression would)."""
-    t = np.linspace(0, 1, n)[:, None]
-    out = ((1 - t) ** 3, 3 * (1 - t) ** 2 * t, 3 * (1 - t) * t ** 2, t ** 3)
-    for a in out:
-        a.flags.writeable = False
-    return out
-
-
-def fillet_curve(p0, h0: float, p1, h1: float, r: float) -> np.ndarray | None:
-    """Straight - circular arc of radius ``r`` - straight from ``p0`` (heading ``h0``) to
-    ``p1`` (heading ``h1``); None when the two lines do not meet ahead with room for the arc."""
-    p0, p1 = np.asarray(p0, float), np.asarray(p1, float)
-    d0, d1 = np.array([np.cos(h0), np.sin(h0)]), np.array([np.cos(h1), np.sin(h1)])
-    cross = d0[0] * d1[1] - d0[1] * d1[0]
-    if abs(cross) < 1e-3:
-        return None
-    t0 = ((p1 - p0)[0] * d1[1] - (p1 - p0)[1] * d1[0]) / cross
-    corner = p0 + t0 * d0
-    theta = float(np.angle(np.exp(1j * (h1 - h0))))
-    tl = r * np.tan(abs(theta) / 2)
-    a, b = corner - tl * d0, corner + tl * d1
-    if (a - p0) @ d0 < 0 or (p1 - b) @ d1 < 0:
-        return None
-    side = np.sign(theta)  # +1: centre on the left
-    centre = a + side * r * np.array([-d0[1], d0[0]])
-    ang0 = np.arctan2(*(a - centre)[::-1])
-    arc = ang0 + np.linspace(0, theta, max(int(abs(theta) * r / 0.4), 4))
-    pts = centre + r * np.stack([np.cos(arc), np.sin(arc)], -1)
-    return np.vstack([p0, pts, p1])
 
 
 @dataclass

@@ -28,7 +28,7 @@ import numba as nb
 import numpy as np
 
 from dstenv.sim.lanes import SPACING, NetworkBuilder
-from dstenv.sim.lanes import _resample as _resample_line
+from dstenv.sim.lanegeom import _resample as _resample_line
 from dstenv.sim.types import Obstacles
 
 __all__ = ["Warp", "draw_warp", "warp_lanes", "warp_boxes", "warp_obstacles"]

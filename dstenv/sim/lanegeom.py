@@ -14,7 +14,8 @@ import functools
 import numba as nb
 import numpy as np
 
-__all__ = ["SPACING", "resample", "cut_polyline", "offset_polyline", "bezier", "fillet_curve"]
+__all__ = ["SPACING", "resample", "resample_many", "cut_polyline", "offset_polyline", "bezier",
+           "fillet_curve", "interp_row"]
 
 SPACING = 0.5  # [m] largest distance between resampled lane points
 
@@ -62,6 +63,32 @@ def _resample(poly, spacing):  # pragma: no cover - numba
     return out
 
 
+def resample_many(pts: np.ndarray, ptr: np.ndarray, spacing: float = SPACING
+                  ) -> list[np.ndarray]:
+    """:func:`resample` of many polylines without repeated points at once: the lines
+    ``pts[ptr[i]:ptr[i + 1]]`` (``pts (P, 2) float64``, ``ptr (L + 1,) int64``) ->
+    ``L`` arrays ``(M_i, 2) float64`` (views of one array)."""
+    out, optr = _resample_many(np.ascontiguousarray(pts, np.float64),
+                               np.asarray(ptr, np.int64), float(spacing))
+    bounds = optr.tolist()
+    return [out[bounds[i]:bounds[i + 1]] for i in range(len(bounds) - 1)]
+
+
+@nb.njit(cache=True)
+def _resample_many(pts, ptr, spacing):  # pragma: no cover - numba
+    n_l = ptr.shape[0] - 1
+    optr = np.zeros(n_l + 1, np.int64)
+    for i in range(n_l):  # the point counts, with :func:`_resample`'s arithmetic
+        total = 0.0
+        for j in range(ptr[i] + 1, ptr[i + 1]):
+            total = total + np.hypot(pts[j, 0] - pts[j - 1, 0], pts[j, 1] - pts[j - 1, 1])
+        optr[i + 1] = optr[i] + max(int(np.ceil(total / spacing)), 1) + 1
+    out = np.empty((optr[n_l], 2))
+    for i in range(n_l):
+        out[optr[i]:optr[i + 1]] = _resample(pts[ptr[i]:ptr[i + 1]], spacing)
+    return out, optr
+
+
 def cut_polyline(poly: np.ndarray, s0: float, s1: float) -> np.ndarray:
     """The piece of a polyline ``(K, 2)`` between arc lengths ``s0 < s1`` [m]:
     ``(M, 2) float64``, the points strictly inside and the two interpolated ends
@@ -70,8 +97,9 @@ def cut_polyline(poly: np.ndarray, s0: float, s1: float) -> np.ndarray:
 
 
 @nb.njit(cache=True)
-def _interp(s, cum, poly, out, row):  # pragma: no cover - numba
-    """``np.interp(s, cum, poly[:, c])`` for both columns, as numpy computes it."""
+def interp_row(s, cum, poly, out, row):  # pragma: no cover - numba
+    """``out[row] = np.interp(s, cum, poly[:, c])`` for both columns ``c``, as numpy
+    computes it (``cum (K,)`` increasing arc lengths of the points ``poly (K, 2)``)."""
     k = cum.shape[0]
     for c in range(2):
         if s < cum[0]:
@@ -105,13 +133,13 @@ def _cut(poly, s0, s1):  # pragma: no cover - numba
     for i in range(k):
         inner += s0 < cum[i] < s1
     out = np.empty((inner + 2, 2))
-    _interp(s0, cum, poly, out, 0)
+    interp_row(s0, cum, poly, out, 0)
     m = 1
     for i in range(k):
         if s0 < cum[i] < s1:
             out[m, 0], out[m, 1] = poly[i, 0], poly[i, 1]
             m += 1
-    _interp(s1, cum, poly, out, m)
+    interp_row(s1, cum, poly, out, m)
     return out
 
 

@@ -126,3 +126,84 @@ def test_fillet_curve_matches_numpy_bit_for_bit(seed):
     assert made > 100  # the cases above mostly have room for the arc
     # parallel lines: no corner, no fillet
     assert fillet_curve(np.zeros(2), 0.0, np.array([10.0, 3.0]), 0.0, 5.0) is None
+
+
+def test_lane_lengths_and_speed_limits_match_numpy():
+    """``NetworkBuilder.build``'s per-lane kernel against the numpy loop it replaces
+    (pairwise sums, ``np.angle(np.exp(1j * dh))``), on lanes of 2 to 700 points."""
+    from dstenv.sim.lanes import LATERAL_ACCEL, LaneKind, NetworkBuilder, _pairwise_sum
+
+    rng = np.random.default_rng(5)
+    for n in [0, 1, 7, 8, 9, 64, 128, 129, 300, 1000]:
+        a = rng.uniform(0.1, 0.5, n)
+        assert _pairwise_sum(a, 0, n) == a.sum()
+    builder = NetworkBuilder()
+    for k in range(60):
+        n = int(rng.integers(2, 700)) if k % 3 else int(rng.integers(2, 12))
+        poly = np.cumsum(rng.normal(size=(n, 2)) + [0.4, 0.0], 0)
+        builder.add(poly, LaneKind.CONNECTOR if k % 2 else LaneKind.ROAD)
+    net = builder.build(np.zeros((0, 2)), np.zeros(0), np.zeros(0), 3.25)
+    d_all = np.diff(net.pts, axis=0)
+    h_all, seg_all = np.arctan2(d_all[:, 1], d_all[:, 0]), np.hypot(d_all[:, 0], d_all[:, 1])
+    for i in range(len(net)):
+        a, b = net.start[i], net.start[i] + net.npts[i] - 1
+        length = float(seg_all[a:b].sum())
+        vmax = 30.0
+        h = h_all[a:b]
+        if net.kind[i] == LaneKind.CONNECTOR and len(h) > 4:
+            dh = np.abs(np.angle(np.exp(1j * (h[4:] - h[:-4]))))
+            vmax = min(30.0, np.sqrt(LATERAL_ACCEL / max(dh.max() / (4 * length / len(h)), 1e-6)))
+        assert net.length[i] == length and net.vmax[i] == vmax
+    assert (net.vmax < 30.0).any()  # some connectors are curved enough to be limited
+
+
+def test_sidewalk_split_matches_numpy():
+    """The sidewalk ring split (``sidewalks._split``) against its numpy expression."""
+    from dstenv.sim.sidewalks import _split, rounded_rect
+
+    def ref_split(ring, cuts):
+        cum = np.concatenate([[0], np.cumsum(np.hypot(*np.diff(ring, axis=0).T))])
+        total, out = cum[-1], []
+        for i, s0 in enumerate(cuts):
+            s1 = cuts[(i + 1) % len(cuts)] + (total if i + 1 == len(cuts) else 0.0)
+            s = np.concatenate([[s0], cum[(cum > s0) & (cum < s1)],
+                                cum[cum < s1 - total] + total if s1 > total else [], [s1]])
+            s = np.where(s > total, s - total, s)
+            out.append(np.stack([np.interp(s, cum, ring[:, 0]),
+                                 np.interp(s, cum, ring[:, 1])], -1))
+        return out
+
+    rng = np.random.default_rng(6)
+    for _ in range(200):
+        x0, y0 = rng.uniform(-300, 300, 2)
+        ring = rounded_rect(x0, x0 + rng.uniform(5, 150), y0, y0 + rng.uniform(5, 150))
+        total = float(np.hypot(*np.diff(ring, axis=0).T).sum())
+        cuts = sorted(rng.uniform(0, total, int(rng.integers(1, 9))).tolist())
+        got, ref = _split(ring, cuts), ref_split(ring, cuts)
+        assert len(got) == len(ref) == len(cuts)
+        for g, r in zip(got, ref):
+            np.testing.assert_array_equal(g, r)
+        # consecutive pieces meet: each ends where the next starts
+        for i in range(len(got)):
+            np.testing.assert_allclose(got[i][-1], got[(i + 1) % len(got)][0], atol=1e-9)
+
+
+def test_rounded_rect_matches_numpy():
+    from dstenv.sim.sidewalks import _QUARTER, rounded_rect
+
+    def ref(x0, x1, y0, y1, r=1.0):
+        r = min(r, (x1 - x0) / 3, (y1 - y0) / 3)
+        pts = [np.stack([cx + r * np.cos(a0 + _QUARTER), cy + r * np.sin(a0 + _QUARTER)], -1)
+               for cx, cy, a0 in ((x1 - r, y0 + r, -np.pi / 2), (x1 - r, y1 - r, 0.0),
+                                  (x0 + r, y1 - r, np.pi / 2), (x0 + r, y0 + r, np.pi))]
+        ring = np.concatenate(pts)
+        return np.vstack([ring, ring[:1]])
+
+    rng = np.random.default_rng(7)
+    for _ in range(200):
+        x0, y0 = rng.uniform(-300, 300, 2)
+        box = (x0, x0 + rng.uniform(1, 150), y0, y0 + rng.uniform(1, 150))
+        np.testing.assert_array_equal(rounded_rect(*box), ref(*box))
+    ring = rounded_rect(0.0, 10.0, 0.0, 6.0)
+    assert ring.shape == (21, 2) and (ring[0] == ring[-1]).all()
+    assert ring[:, 0].min() == 0.0 and ring[:, 1].max() == 6.0  # touches the box

@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["SLOT_LENGTH", "VEHICLE_CLASSES", "side_slots", "draw_vehicles"]
+__all__ = ["SLOT_LENGTH", "VEHICLE_CLASSES", "CLASS_LO", "CLASS_HI", "side_slots", "draw_vehicles"]
 
 SLOT_LENGTH = 6.0  # [m] length of one kerbside parking slot (lattice layout)
 
@@ -34,6 +34,9 @@ VEHICLE_CLASSES: dict[str, tuple[tuple[float, float], tuple[float, float], tuple
     "truck": ((6.5, 8.5), (2.3, 2.5), (3.0, 3.5)),
 }
 _NAMES = tuple(VEHICLE_CLASSES)
+#: ``(4, 3)`` lower and upper bounds of length, width, height per class [m]
+CLASS_LO = np.array([[VEHICLE_CLASSES[k][d][0] for d in range(3)] for k in _NAMES])
+CLASS_HI = np.array([[VEHICLE_CLASSES[k][d][1] for d in range(3)] for k in _NAMES])
 
 
 def draw_vehicles(mix: list[float] | tuple[float, ...], n: int,
@@ -50,9 +53,7 @@ def draw_vehicles(mix: list[float] | tuple[float, ...], n: int,
     """
     p = np.asarray(mix, np.float64)
     cls = rng.choice(len(_NAMES), size=n, p=p / p.sum())
-    lo = np.array([[VEHICLE_CLASSES[k][d][0] for d in range(3)] for k in _NAMES])
-    hi = np.array([[VEHICLE_CLASSES[k][d][1] for d in range(3)] for k in _NAMES])
-    size = lo[cls] + rng.random((n, 3)) * (hi[cls] - lo[cls])
+    size = CLASS_LO[cls] + rng.random((n, 3)) * (CLASS_HI[cls] - CLASS_LO[cls])
     return cls, size
 
 

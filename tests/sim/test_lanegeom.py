@@ -207,3 +207,56 @@ def test_rounded_rect_matches_numpy():
     ring = rounded_rect(0.0, 10.0, 0.0, 6.0)
     assert ring.shape == (21, 2) and (ring[0] == ring[-1]).all()
     assert ring[:, 0].min() == 0.0 and ring[:, 1].max() == 6.0  # touches the box
+
+
+def test_resample_many_matches_one_by_one():
+    from dstenv.sim.lanegeom import resample, resample_many
+
+    rng = np.random.default_rng(8)
+    polys = list(_polys(rng, 50))
+    ptr = np.cumsum([0] + [len(p) for p in polys])
+    many = resample_many(np.concatenate(polys), ptr)
+    assert len(many) == len(polys)
+    for got, poly in zip(many, polys):
+        np.testing.assert_array_equal(got, resample(poly))
+        assert np.hypot(*np.diff(got, axis=0).T).max() <= 0.5 + 1e-9
+
+
+def test_fillet_corners_match_numpy():
+    """The kerb fillets painted by ``raster.fillet_corners`` against its numpy version."""
+    from dstenv.sim.raster import Surface, fillet_corners
+    from dstenv.sim.types import MapClass
+
+    def ref(raster, surface, face, r, res):
+        x0, x1, y0, y1 = face
+        for cx, cy, sx, sy in ((x0, y0, 1, 1), (x1, y0, -1, 1), (x0, y1, 1, -1),
+                               (x1, y1, -1, -1)):
+            c_lo, c_hi = (int(np.floor(min(cx, cx + sx * r) / res)),
+                          int(np.ceil(max(cx, cx + sx * r) / res)))
+            r_lo, r_hi = (int(np.floor(min(cy, cy + sy * r) / res)),
+                          int(np.ceil(max(cy, cy + sy * r) / res)))
+            cols, rows = np.arange(c_lo, c_hi), np.arange(r_lo, r_hi)
+            xc, yc = (cols + 0.5) * res, (rows + 0.5) * res
+            ox, oy = cx + sx * r, cy + sy * r
+            m = (((xc[None, :] - ox) ** 2 + (yc[:, None] - oy) ** 2 > r * r)
+                 & ((xc[None, :] - ox) * sx < 0) & ((yc[:, None] - oy) * sy < 0)
+                 & ((xc - cx) * sx >= 0)[None, :] & ((yc - cy) * sy >= 0)[:, None])
+            rr, cc = np.nonzero(m)
+            rr, cc = rows[rr], cols[cc]
+            ok = (rr >= 0) & (rr < raster.shape[0]) & (cc >= 0) & (cc < raster.shape[1])
+            raster[rr[ok], cc[ok]] = MapClass.ROAD
+            surface[rr[ok], cc[ok]] = Surface.ROAD
+
+    rng = np.random.default_rng(9)
+    for _ in range(40):
+        res = float(rng.choice([0.1, 0.2, 0.33]))
+        x0, y0 = rng.uniform(-5, 60, 2)  # some corners off the raster
+        face = (x0, x0 + rng.uniform(10, 60), y0, y0 + rng.uniform(10, 60))
+        r = float(rng.uniform(1, 6))
+        a = [np.full((300, 320), MapClass.INTERMEDIATE, np.uint8) for _ in range(2)]
+        b = [np.full((300, 320), Surface.SIDEWALK, np.uint8) for _ in range(2)]
+        fillet_corners(a[0], b[0], face, r, res)
+        ref(a[1], b[1], face, r, res)
+        np.testing.assert_array_equal(a[0], a[1])
+        np.testing.assert_array_equal(b[0], b[1])
+    assert (a[0] == MapClass.ROAD).any()  # the fillets painted something

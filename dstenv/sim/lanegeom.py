@@ -22,10 +22,19 @@ SPACING = 0.5  # [m] largest distance between resampled lane points
 
 def resample(poly: np.ndarray, spacing: float = SPACING) -> np.ndarray:
     """Evenly spaced points along a polyline: ``(K, 2) -> (M, 2) float64``, same ends."""
-    poly = _distinct(np.ascontiguousarray(poly, np.float64))
-    if len(poly) < 2:
+    out = _resample_distinct(np.ascontiguousarray(poly, np.float64), float(spacing))
+    if not len(out):
         raise ValueError("lane polyline needs two distinct points")
-    return _resample(poly, float(spacing))
+    return out
+
+
+@nb.njit(cache=True)
+def _resample_distinct(poly, spacing):  # pragma: no cover - numba
+    """:func:`_resample` of the :func:`_distinct` points; empty when fewer than two."""
+    poly = _distinct(poly)
+    if poly.shape[0] < 2:
+        return np.empty((0, 2))
+    return _resample(poly, spacing)
 
 
 @nb.njit(cache=True)

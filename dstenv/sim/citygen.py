@@ -206,8 +206,7 @@ def generate_city(cfg: dict[str, Any], traffic: dict[str, Any], rng: np.random.G
                       ys[j] + hwy[j] + pad, org, res, v)
     for face in faces:
         fillet_corners(raster, surface, face, curb + 0.5 * sw, res)
-    for centre, d, hw in zebras:
-        _zebra(surface, centre, d, hw, res)
+    _zebras(surface, zebras, res)
     medians = [(e.poly, e.median, reach[e.u] + STOP_MARGIN, reach[e.v] + STOP_MARGIN)
                for e in edges if e.median > 0]
     for poly, wid, t_u, t_v in medians:
@@ -309,10 +308,18 @@ def _degree(vseg: np.ndarray, hseg: np.ndarray, i: int, j: int) -> int:
                     i < nx - 1 and hseg[i, j], i > 0 and hseg[i - 1, j]]))
 
 
-def _zebra(surface, centre, d, hw, res):
-    """Paint a zebra crossing 3 m wide across a street (drawing only)."""
-    p = np.array([-d[1], d[0]])
-    k = np.arange(-hw + 0.25, hw, 1.0)[:, None]  # one stripe per row
+def _zebras(surface, zebras, res):
+    """Paint zebra crossings 3 m wide across streets (drawing only): ``zebras`` is a list
+    of ``(centre (2,), direction along the street (2,), street half width)``; one
+    stripe per metre, all stripes of all crossings in one call, in order."""
+    if not zebras:
+        return
+    ks = [np.arange(-hw + 0.25, hw, 1.0) for _, _, hw in zebras]
+    n = [len(k) for k in ks]
+    k = np.concatenate(ks)[:, None]
+    centre = np.repeat(np.array([z[0] for z in zebras], np.float64), n, axis=0)
+    d = np.repeat(np.array([z[1] for z in zebras], np.float64), n, axis=0)
+    p = np.stack([-d[:, 1], d[:, 0]], -1)
     a = centre + p * k - d * 1.5
     b = centre + p * (k + 0.5) + d * 1.5
     fill_rects(surface, np.stack([np.minimum(a[:, 0], b[:, 0]), np.maximum(a[:, 0], b[:, 0]),

@@ -109,8 +109,14 @@ def side_slots(start: np.ndarray, along: np.ndarray, inward: np.ndarray, length:
         clear = size[:, 0] / 2
     centres = start + along * s[:, None] + inward * lat[:, None]
     if len(avoid):
+        need = clear + curb + sw  # [m] least distance of each vehicle to a crosswalk end
+        # only the ends within reach of the side matter (a city has thousands)
+        lo, hi = centres.min(0) - need.max(), centres.max(0) + need.max()
+        avoid = avoid[(avoid[:, 0] >= lo[0]) & (avoid[:, 0] <= hi[0]) &
+                      (avoid[:, 1] >= lo[1]) & (avoid[:, 1] <= hi[1])]
+    if len(avoid):
         near = np.hypot(avoid[None, :, 0] - centres[:, None, 0],
                         avoid[None, :, 1] - centres[:, None, 1]).min(1)
-        ok = near >= clear + curb + sw
+        ok = near >= need
         centres, heading, size = centres[ok], heading[ok], size[ok]
     return np.column_stack([centres, heading, size]).reshape(-1, 6)

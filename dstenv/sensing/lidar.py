@@ -199,20 +199,27 @@ class Lidar:
             _, self._edges, self._starts, self._boxes = cached
             self._map = world_map
             return
-        edges, starts, boxes = [], [0], []
-        for b, poly in enumerate(world_map.buildings):
-            poly = np.asarray(poly, dtype=np.float64)
+        polys = [np.asarray(poly, dtype=np.float64) for poly in world_map.buildings]
+        for b, poly in enumerate(polys):
             if poly.ndim != 2 or poly.shape[1] != 2 or poly.shape[0] < 3:
                 raise ValueError(f"WorldMap.buildings[{b}]: expected a (K>=3, 2) polygon, "
                                  f"got shape {poly.shape}")
-            e = np.concatenate([poly, np.roll(poly, -1, axis=0)], axis=1)
-            e = e[np.any(e[:, :2] != e[:, 2:], axis=1)]  # drop the closing duplicate vertex
-            edges.append(e)
-            starts.append(starts[-1] + len(e))
-            boxes.append(np.concatenate([poly.min(0), poly.max(0)]))
-        self._edges = np.ascontiguousarray(np.concatenate(edges)) if edges else np.zeros((0, 4))
-        self._starts = np.asarray(starts, dtype=np.int64)
-        self._boxes = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)
+        if polys:  # all polygons at once: each vertex with the next one of its polygon
+            n = np.array([len(poly) for poly in polys], dtype=np.int64)
+            first = np.cumsum(n) - n
+            pts = np.concatenate(polys)
+            nxt = np.arange(1, len(pts) + 1)
+            nxt[first + n - 1] = first
+            e = np.concatenate([pts, pts[nxt]], axis=1)
+            keep = np.any(e[:, :2] != e[:, 2:], axis=1)  # drop the closing duplicate vertex
+            counts = np.bincount(np.repeat(np.arange(len(polys)), n)[keep], minlength=len(polys))
+            self._edges = np.ascontiguousarray(e[keep])
+            self._starts = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+            self._boxes = np.concatenate([np.minimum.reduceat(pts, first),
+                                          np.maximum.reduceat(pts, first)], axis=1)
+        else:
+            self._edges, self._starts = np.zeros((0, 4)), np.zeros(1, np.int64)
+            self._boxes = np.zeros((0, 4))
         self._map = world_map
         if len(self._edge_cache) >= _EDGE_CACHE:
             self._edge_cache.pop(next(iter(self._edge_cache)))

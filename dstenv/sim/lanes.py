@@ -8,19 +8,20 @@ lanes carry pedestrians. ``WorldMap.lanes`` holds a :class:`LaneNetwork`.
 
 from __future__ import annotations
 
-import functools
-
 from dataclasses import dataclass
 from enum import IntEnum
 
 import numba as nb
 import numpy as np
 
+# the polyline kernels live in lanegeom; re-exported here, where lanes are built
+from dstenv.sim.lanegeom import (SPACING, bezier, cut_polyline, fillet_curve,  # noqa: F401
+                                 offset_polyline, resample)
+
 __all__ = ["LaneKind", "Control", "Turn", "LaneNetwork", "NetworkBuilder", "lane_pose",
            "project_on_lane", "resample", "offset_polyline", "cut_polyline", "bezier",
            "fillet_curve"]
 
-SPACING = 0.5  # [m] largest distance between resampled lane points
 CONFLICT_DIST = 2.6  # [m] connectors closer than this somewhere conflict
 LATERAL_ACCEL = 2.5  # [m/s^2] comfortable lateral acceleration in turns
 
@@ -50,116 +51,6 @@ class Turn(IntEnum):
     LEFT = 1
     RIGHT = 2
     UTURN = 3
-
-
-def resample(poly: np.ndarray, spacing: float = SPACING) -> np.ndarray:
-    """Evenly spaced points along a polyline: ``(K, 2) -> (M, 2) float64``, same ends."""
-    poly = _distinct(np.ascontiguousarray(poly, np.float64))
-    if len(poly) < 2:
-        raise ValueError("lane polyline needs two distinct points")
-    return _resample(poly, float(spacing))
-
-
-@nb.njit(cache=True)
-def _distinct(poly):  # pragma: no cover - numba
-    """The points of ``poly (K, 2)`` more than 1e-9 m from their predecessor in
-    ``poly`` (the first is always kept)."""
-    keep = np.ones(poly.shape[0], np.bool_)
-    for i in range(1, poly.shape[0]):
-        keep[i] = np.hypot(poly[i, 0] - poly[i - 1, 0], poly[i, 1] - poly[i - 1, 1]) > 1e-9
-    return poly[keep]
-
-
-@nb.njit(cache=True)
-def _resample(poly, spacing):  # pragma: no cover - numba
-    """:func:`resample` of a polyline without repeated points (one pass, no temporaries
-    beyond the output: generating a city resamples thousands of lanes)."""
-    k = poly.shape[0]
-    cum = np.empty(k)
-    cum[0] = 0.0
-    for i in range(1, k):
-        cum[i] = cum[i - 1] + np.hypot(poly[i, 0] - poly[i - 1, 0], poly[i, 1] - poly[i - 1, 1])
-    n = max(int(np.ceil(cum[-1] / spacing)), 1) + 1
-    out = np.empty((n, 2))
-    step = cum[-1] / (n - 1)
-    j = 0
-    for m in range(n):
-        t = m * step if m < n - 1 else cum[-1]
-        while j < k - 2 and cum[j + 1] < t:
-            j += 1
-        d = cum[j + 1] - cum[j]
-        f = (t - cum[j]) / d if d > 0 else 0.0
-        f = min(max(f, 0.0), 1.0)
-        out[m, 0] = poly[j, 0] + f * (poly[j + 1, 0] - poly[j, 0])
-        out[m, 1] = poly[j, 1] + f * (poly[j + 1, 1] - poly[j, 1])
-    return out
-
-
-def cut_polyline(poly: np.ndarray, s0: float, s1: float) -> np.ndarray:
-    """The piece of a polyline between arc lengths ``s0 < s1`` [m]."""
-    poly = np.asarray(poly, np.float64)
-    cum = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(poly, axis=0).T))])
-    inner = poly[(cum > s0) & (cum < s1)]
-    a = [np.interp(s0, cum, poly[:, 0]), np.interp(s0, cum, poly[:, 1])]
-    b = [np.interp(s1, cum, poly[:, 0]), np.interp(s1, cum, poly[:, 1])]
-    return np.vstack([a, inner, b])
-
-
-def offset_polyline(poly: np.ndarray, d: float) -> np.ndarray:
-    """Polyline shifted by ``d`` [m] to its left (negative: right), mitred joints."""
-    poly = np.asarray(poly, np.float64)
-    t = np.diff(poly, axis=0)
-    t /= np.maximum(np.hypot(t[:, 0], t[:, 1]), 1e-12)[:, None]
-    n_seg = np.stack([-t[:, 1], t[:, 0]], -1)
-    n_pt = np.vstack([n_seg[:1], n_seg[:-1] + n_seg[1:], n_seg[-1:]])
-    n_pt /= np.maximum(np.hypot(n_pt[:, 0], n_pt[:, 1]), 1e-12)[:, None]
-    cosh = np.ones(len(poly))
-    cosh[1:-1] = np.clip(np.einsum("ij,ij->i", n_pt[1:-1], n_seg[1:]), 0.5, 1.0)
-    return poly + n_pt * (d / cosh)[:, None]
-
-
-def bezier(p0, h0: float, p1, h1: float, n: int = 24, k: float = 0.42) -> np.ndarray:
-    """Cubic Bezier leaving ``p0`` at heading ``h0`` and reaching ``p1`` at ``h1``."""
-    p0, p1 = np.asarray(p0, float), np.asarray(p1, float)
-    d = k * np.hypot(*(p1 - p0))
-    c0 = p0 + d * np.array([np.cos(h0), np.sin(h0)])
-    c1 = p1 - d * np.array([np.cos(h1), np.sin(h1)])
-    b0, b1, b2, b3 = _bernstein(n)
-    return b0 * p0 + b1 * c0 + b2 * c1 + b3 * p1
-
-
-@functools.lru_cache(maxsize=8)
-def _bernstein(n: int) -> tuple[np.ndarray, ...]:
-    """The cubic Bernstein weights of :func:`bezier` at ``n`` steps, each ``(n, 1)``
-    (read-only; computed as the curve's own expression would)."""
-    t = np.linspace(0, 1, n)[:, None]
-    out = ((1 - t) ** 3, 3 * (1 - t) ** 2 * t, 3 * (1 - t) * t ** 2, t ** 3)
-    for a in out:
-        a.flags.writeable = False
-    return out
-
-
-def fillet_curve(p0, h0: float, p1, h1: float, r: float) -> np.ndarray | None:
-    """Straight - circular arc of radius ``r`` - straight from ``p0`` (heading ``h0``) to
-    ``p1`` (heading ``h1``); None when the two lines do not meet ahead with room for the arc."""
-    p0, p1 = np.asarray(p0, float), np.asarray(p1, float)
-    d0, d1 = np.array([np.cos(h0), np.sin(h0)]), np.array([np.cos(h1), np.sin(h1)])
-    cross = d0[0] * d1[1] - d0[1] * d1[0]
-    if abs(cross) < 1e-3:
-        return None
-    t0 = ((p1 - p0)[0] * d1[1] - (p1 - p0)[1] * d1[0]) / cross
-    corner = p0 + t0 * d0
-    theta = float(np.angle(np.exp(1j * (h1 - h0))))
-    tl = r * np.tan(abs(theta) / 2)
-    a, b = corner - tl * d0, corner + tl * d1
-    if (a - p0) @ d0 < 0 or (p1 - b) @ d1 < 0:
-        return None
-    side = np.sign(theta)  # +1: centre on the left
-    centre = a + side * r * np.array([-d0[1], d0[0]])
-    ang0 = np.arctan2(*(a - centre)[::-1])
-    arc = ang0 + np.linspace(0, theta, max(int(abs(theta) * r / 0.4), 4))
-    pts = centre + r * np.stack([np.cos(arc), np.sin(arc)], -1)
-    return np.vstack([p0, pts, p1])
 
 
 @dataclass
@@ -303,8 +194,6 @@ class NetworkBuilder:
         npts = np.array([len(p) for p in self.polys], np.int64)
         start = np.concatenate([[0], np.cumsum(npts)[:-1]]).astype(np.int64)
         pts = np.concatenate(self.polys) if self.polys else np.zeros((0, 2))
-        length = np.zeros(len(npts))
-        vmax = np.full(len(npts), 30.0)
         # segment headings and lengths of all lanes at once (a lane's last point keeps
         # its last segment's heading; the segments across lane ends are not used)
         d_all = np.diff(pts, axis=0)
@@ -313,18 +202,11 @@ class NetworkBuilder:
         hdg = np.append(h_all, 0.0) if len(pts) else np.zeros(0)
         if len(npts):
             hdg[start + npts - 1] = hdg[start + npts - 2]
-        for i in range(len(npts)):
-            a, b = start[i], start[i] + npts[i] - 1
-            length[i] = float(seg_all[a:b].sum())
-            h = h_all[a:b]
-            if self.attrs[i][0] == LaneKind.CONNECTOR and len(h) > 4:
-                dh = np.abs(np.angle(np.exp(1j * (h[4:] - h[:-4]))))  # over ~2 m
-                kappa = dh.max() / (4 * length[i] / len(h))
-                vmax[i] = min(30.0, np.sqrt(LATERAL_ACCEL / max(kappa, 1e-6)))
         attrs = np.array(self.attrs, dtype=np.int64).reshape(-1, 5)
+        length, vmax = _lane_stats(seg_all, h_all, start, npts, attrs[:, 0] == LaneKind.CONNECTOR)
         succ_ptr = np.cumsum([0] + [len(s) for s in self.links]).astype(np.int64)
         succ = np.array([b for s in self.links for b in s], np.int64)
-        conflicts = self._conflicts(attrs)
+        conflicts = self._conflicts(attrs, succ_ptr, succ)
         conf_ptr = np.cumsum([0] + [len(c) for c in conflicts]).astype(np.int64)
         conf = np.array([b for c in conflicts for b in c], np.int64)
         return LaneNetwork(
@@ -337,34 +219,56 @@ class NetworkBuilder:
             node_control=np.asarray(node_control, np.uint8),
             node_phase=np.asarray(node_phase, np.float64), lane_width=float(lane_width))
 
-    def _conflicts(self, attrs: np.ndarray) -> list[list[int]]:
+    def _conflicts(self, attrs: np.ndarray, succ_ptr: np.ndarray, succ: np.ndarray
+                   ) -> list[list[int]]:
+        """Conflicting connectors of each lane (in the order of the pairs ``a < b`` of
+        each junction): not from a common lane, and merging into a common lane or
+        closer than :data:`CONFLICT_DIST` somewhere."""
         out: list[list[int]] = [[] for _ in self.polys]
-        pred: dict[int, list[int]] = {}
-        for a, succs in enumerate(self.links):
-            for b in succs:
-                pred.setdefault(b, []).append(a)
+        # predecessors in CSR form (the order within a lane does not matter)
+        src = np.repeat(np.arange(len(self.links), dtype=np.int64), np.diff(succ_ptr))
+        order = np.argsort(succ, kind="stable")
+        pred, pred_ptr = src[order], np.searchsorted(succ[order], np.arange(len(self.links) + 1))
         conn = np.flatnonzero(attrs[:, 0] == LaneKind.CONNECTOR) if len(attrs) else []
         by_node: dict[int, list[int]] = {}
         for c in conn:
             by_node.setdefault(int(attrs[c, 1]), []).append(int(c))
-        pred_of = {b: set(a) for b, a in pred.items()}
-        empty: set[int] = set()
         for members in by_node.values():
             pts = [self.polys[m][::2] for m in members]
             ptr = np.cumsum([0] + [len(q) for q in pts]).astype(np.int64)
             d2 = _pair_dist2(np.concatenate(pts), ptr)  # (M, M) least squared distances
-            for ia, a in enumerate(members):
-                for ib in range(ia + 1, len(members)):
-                    b = members[ib]
-                    # from the same lane: one behind the other, car following keeps them
-                    # apart; into the same lane: they merge, so they conflict
-                    if pred_of.get(a, empty) & pred_of.get(b, empty):
-                        continue
-                    merge = set(self.links[a]) & set(self.links[b])
-                    if merge or d2[ia, ib] < CONFLICT_DIST ** 2:
-                        out[a].append(b)
-                        out[b].append(a)
+            ia, ib = np.nonzero(_conflict_pairs(np.array(members, np.int64), d2, pred_ptr,
+                                                pred, succ_ptr, succ, CONFLICT_DIST ** 2))
+            for x, y in zip(ia.tolist(), ib.tolist()):
+                out[members[x]].append(members[y])
+                out[members[y]].append(members[x])
         return out
+
+
+@nb.njit(cache=True)
+def _share(ptr, vals, a, b):  # pragma: no cover - numba
+    """Lanes ``a`` and ``b`` have a common entry in the CSR lists ``vals[ptr[l]:ptr[l+1]]``."""
+    for i in range(ptr[a], ptr[a + 1]):
+        for j in range(ptr[b], ptr[b + 1]):
+            if vals[i] == vals[j]:
+                return True
+    return False
+
+
+@nb.njit(cache=True)
+def _conflict_pairs(members, d2, pred_ptr, pred, succ_ptr, succ, dist2):  # pragma: no cover
+    """``(M, M) bool`` upper triangle: connectors ``members[i] < members[j]`` of one
+    junction conflict. From the same lane: one behind the other, car following keeps
+    them apart; into the same lane: they merge, so they conflict."""
+    m = members.shape[0]
+    out = np.zeros((m, m), np.bool_)
+    for ia in range(m):
+        for ib in range(ia + 1, m):
+            a, b = members[ia], members[ib]
+            if _share(pred_ptr, pred, a, b):
+                continue
+            out[ia, ib] = _share(succ_ptr, succ, a, b) or d2[ia, ib] < dist2
+    return out
 
 
 @nb.njit(cache=True)
@@ -382,3 +286,57 @@ def _pair_dist2(pts, ptr):  # pragma: no cover - numba
                     best = min(best, dx * dx + dy * dy)
             out[a, b] = best
     return out
+
+
+@nb.njit(cache=True)
+def _pairwise_sum(a, lo, n):  # pragma: no cover - numba
+    """``a[lo:lo + n].sum()`` as numpy adds (pairwise, 8 accumulators, blocks of 128):
+    the same bits as the numpy expression it replaces."""
+    if n < 8:
+        res = 0.0
+        for i in range(lo, lo + n):
+            res += a[i]
+        return res
+    if n <= 128:
+        r0, r1, r2, r3 = a[lo], a[lo + 1], a[lo + 2], a[lo + 3]
+        r4, r5, r6, r7 = a[lo + 4], a[lo + 5], a[lo + 6], a[lo + 7]
+        i = 8
+        while i < n - (n % 8):
+            r0 += a[lo + i]
+            r1 += a[lo + i + 1]
+            r2 += a[lo + i + 2]
+            r3 += a[lo + i + 3]
+            r4 += a[lo + i + 4]
+            r5 += a[lo + i + 5]
+            r6 += a[lo + i + 6]
+            r7 += a[lo + i + 7]
+            i += 8
+        res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+        while i < n:
+            res += a[lo + i]
+            i += 1
+        return res
+    n2 = n // 2
+    n2 -= n2 % 8
+    return _pairwise_sum(a, lo, n2) + _pairwise_sum(a, lo + n2, n - n2)
+
+
+@nb.njit(cache=True)
+def _lane_stats(seg, h, start, npts, connector):  # pragma: no cover - numba
+    """Length ``(L,)`` [m] and curvature speed limit ``(L,)`` [m/s] of every lane from
+    the segment lengths ``seg`` and headings ``h`` of all points: a connector's
+    curvature is its largest heading change over 4 segments (~2 m)."""
+    n_l = start.shape[0]
+    length = np.zeros(n_l)
+    vmax = np.full(n_l, 30.0)
+    for i in range(n_l):
+        a, n = start[i], npts[i] - 1
+        length[i] = 0.0 + _pairwise_sum(seg, a, n)
+        if connector[i] and n > 4:
+            dh = 0.0
+            for j in range(a, a + n - 4):
+                x = h[j + 4] - h[j]
+                dh = max(dh, abs(np.arctan2(np.sin(x), np.cos(x))))  # |np.angle(e^ix)|
+            kappa = dh / (4 * length[i] / n)
+            vmax[i] = min(30.0, np.sqrt(LATERAL_ACCEL / max(kappa, 1e-6)))
+    return length, vmax

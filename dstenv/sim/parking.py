@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["SLOT_LENGTH", "VEHICLE_CLASSES", "side_slots", "draw_vehicles"]
+__all__ = ["SLOT_LENGTH", "VEHICLE_CLASSES", "CLASS_LO", "CLASS_HI", "side_slots", "draw_vehicles"]
 
 SLOT_LENGTH = 6.0  # [m] length of one kerbside parking slot (lattice layout)
 
@@ -34,6 +34,9 @@ VEHICLE_CLASSES: dict[str, tuple[tuple[float, float], tuple[float, float], tuple
     "truck": ((6.5, 8.5), (2.3, 2.5), (3.0, 3.5)),
 }
 _NAMES = tuple(VEHICLE_CLASSES)
+#: ``(4, 3)`` lower and upper bounds of length, width, height per class [m]
+CLASS_LO = np.array([[VEHICLE_CLASSES[k][d][0] for d in range(3)] for k in _NAMES])
+CLASS_HI = np.array([[VEHICLE_CLASSES[k][d][1] for d in range(3)] for k in _NAMES])
 
 
 def draw_vehicles(mix: list[float] | tuple[float, ...], n: int,
@@ -50,9 +53,7 @@ def draw_vehicles(mix: list[float] | tuple[float, ...], n: int,
     """
     p = np.asarray(mix, np.float64)
     cls = rng.choice(len(_NAMES), size=n, p=p / p.sum())
-    lo = np.array([[VEHICLE_CLASSES[k][d][0] for d in range(3)] for k in _NAMES])
-    hi = np.array([[VEHICLE_CLASSES[k][d][1] for d in range(3)] for k in _NAMES])
-    size = lo[cls] + rng.random((n, 3)) * (hi[cls] - lo[cls])
+    size = CLASS_LO[cls] + rng.random((n, 3)) * (CLASS_HI[cls] - CLASS_LO[cls])
     return cls, size
 
 
@@ -108,8 +109,14 @@ def side_slots(start: np.ndarray, along: np.ndarray, inward: np.ndarray, length:
         clear = size[:, 0] / 2
     centres = start + along * s[:, None] + inward * lat[:, None]
     if len(avoid):
+        need = clear + curb + sw  # [m] least distance of each vehicle to a crosswalk end
+        # only the ends within reach of the side matter (a city has thousands)
+        lo, hi = centres.min(0) - need.max(), centres.max(0) + need.max()
+        avoid = avoid[(avoid[:, 0] >= lo[0]) & (avoid[:, 0] <= hi[0]) &
+                      (avoid[:, 1] >= lo[1]) & (avoid[:, 1] <= hi[1])]
+    if len(avoid):
         near = np.hypot(avoid[None, :, 0] - centres[:, None, 0],
                         avoid[None, :, 1] - centres[:, None, 1]).min(1)
-        ok = near >= clear + curb + sw
+        ok = near >= need
         centres, heading, size = centres[ok], heading[ok], size[ok]
     return np.column_stack([centres, heading, size]).reshape(-1, 6)

@@ -192,23 +192,29 @@ def fillet_corners(raster: np.ndarray, surface: np.ndarray, face: tuple[float, .
                    res: float) -> None:
     """Round the kerb at the four corners of a block ``face = (x0, x1, y0, y1)`` [m]
     (radius ``r`` [m]): the cut-off corners become road in both rasters (origin
-    ``(0, 0)``, cell size ``res``), in place."""
-    x0, x1, y0, y1 = face
-    for cx, cy, sx, sy in ((x0, y0, 1, 1), (x1, y0, -1, 1), (x0, y1, 1, -1), (x1, y1, -1, -1)):
-        c_lo, c_hi = (int(np.floor(min(cx, cx + sx * r) / res)),
-                      int(np.ceil(max(cx, cx + sx * r) / res)))
-        r_lo, r_hi = (int(np.floor(min(cy, cy + sy * r) / res)),
-                      int(np.ceil(max(cy, cy + sy * r) / res)))
-        cols, rows = np.arange(c_lo, c_hi), np.arange(r_lo, r_hi)
-        xc, yc = (cols + 0.5) * res, (rows + 0.5) * res
-        inside_x = (xc - cx) * sx >= 0
-        inside_y = (yc - cy) * sy >= 0
+    ``(0, 0)``, cell size ``res``), in place. A cell is cut off when its centre lies
+    inside the block, in the corner's ``r x r`` square and outside the circle of radius
+    ``r`` centred ``(r, r)`` into the block."""
+    _fillet_corners(raster, surface, *(float(v) for v in face), float(r), float(res),
+                    np.uint8(MapClass.ROAD), np.uint8(Surface.ROAD))
+
+
+@nb.njit(cache=True)
+def _fillet_corners(raster, surface, x0, x1, y0, y1, r, res, road, s_road):  # pragma: no cover
+    h, w = raster.shape
+    corners = ((x0, y0, 1, 1), (x1, y0, -1, 1), (x0, y1, 1, -1), (x1, y1, -1, -1))
+    for k in range(4):
+        cx, cy, sx, sy = corners[k]
         ox, oy = cx + sx * r, cy + sy * r
-        far = ((xc[None, :] - ox) ** 2 + (yc[:, None] - oy) ** 2 > r * r)
-        corner = ((xc[None, :] - ox) * sx < 0) & ((yc[:, None] - oy) * sy < 0)
-        m = far & corner & inside_x[None, :] & inside_y[:, None]
-        rr, cc = np.nonzero(m)
-        rr, cc = rows[rr], cols[cc]
-        ok = (rr >= 0) & (rr < raster.shape[0]) & (cc >= 0) & (cc < raster.shape[1])
-        raster[rr[ok], cc[ok]] = MapClass.ROAD
-        surface[rr[ok], cc[ok]] = Surface.ROAD
+        c_lo, c_hi = int(np.floor(min(cx, ox) / res)), int(np.ceil(max(cx, ox) / res))
+        r_lo, r_hi = int(np.floor(min(cy, oy) / res)), int(np.ceil(max(cy, oy) / res))
+        for row in range(max(r_lo, 0), min(r_hi, h)):
+            yc = (row + 0.5) * res
+            if not ((yc - cy) * sy >= 0 and (yc - oy) * sy < 0):
+                continue
+            for col in range(max(c_lo, 0), min(c_hi, w)):
+                xc = (col + 0.5) * res
+                if ((xc - cx) * sx >= 0 and (xc - ox) * sx < 0
+                        and (xc - ox) ** 2 + (yc - oy) ** 2 > r * r):
+                    raster[row, col] = road
+                    surface[row, col] = s_road

@@ -165,7 +165,7 @@ def _connect(builder: NetworkBuilder, node: int, deg: int, by_edge: dict, a: int
                 continue
             k_out = nb_ - 1
         b, _, _, _, hb, pb = next(o for o in outs if o[2] == k_out)
-        if np.hypot(*(pb - pa)) < 1e-6:
+        if np.hypot(pb[0] - pa[0], pb[1] - pa[1]) < 1e-6:
             continue
         poly = None
         if turn == Turn.RIGHT and ka == na - 1:

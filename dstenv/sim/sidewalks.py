@@ -11,6 +11,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from dstenv.sim.lanegeom import interp_row
 from dstenv.sim.lanes import LaneKind, NetworkBuilder
 
 __all__ = ["rounded_rect", "add_block_rings"]
@@ -23,15 +24,25 @@ _QUARTER.flags.writeable = False
 
 def rounded_rect(x0: float, x1: float, y0: float, y1: float,
                  r: float = CORNER_RADIUS) -> np.ndarray:
-    """Closed counter-clockwise ring around a box with rounded corners: ``(K, 2)``."""
-    r = min(r, (x1 - x0) / 3, (y1 - y0) / 3)
-    a = _QUARTER
-    pts = []
-    for cx, cy, a0 in ((x1 - r, y0 + r, -np.pi / 2), (x1 - r, y1 - r, 0.0),
-                       (x0 + r, y1 - r, np.pi / 2), (x0 + r, y0 + r, np.pi)):
-        pts.append(np.stack([cx + r * np.cos(a0 + a), cy + r * np.sin(a0 + a)], -1))
-    ring = np.concatenate(pts)
-    return np.vstack([ring, ring[:1]])
+    """Closed counter-clockwise ring around a box with rounded corners: ``(21, 2)
+    float64`` (four quarter arcs of 5 points, the first point repeated at the end)."""
+    return _rounded_rect(float(x0), float(x1), float(y0), float(y1),
+                         min(r, (x1 - x0) / 3, (y1 - y0) / 3), _QUARTER)
+
+
+@nb.njit(cache=True)
+def _rounded_rect(x0, x1, y0, y1, r, quarter):  # pragma: no cover - numba
+    q = quarter.shape[0]
+    out = np.empty((4 * q + 1, 2))
+    corners = ((x1 - r, y0 + r, -np.pi / 2), (x1 - r, y1 - r, 0.0),
+               (x0 + r, y1 - r, np.pi / 2), (x0 + r, y0 + r, np.pi))
+    for k in range(4):
+        cx, cy, a0 = corners[k]
+        for j in range(q):
+            out[k * q + j, 0] = cx + r * np.cos(a0 + quarter[j])
+            out[k * q + j, 1] = cy + r * np.sin(a0 + quarter[j])
+    out[4 * q] = out[0]
+    return out
 
 
 def _arc(ring: np.ndarray, p: np.ndarray) -> tuple[float, float]:
@@ -57,18 +68,45 @@ def _arc_nb(ring, px, py):  # pragma: no cover - numba
 
 
 def _split(ring: np.ndarray, cuts: list[float]) -> list[np.ndarray]:
-    """Pieces of a closed ring between consecutive arc lengths ``cuts`` (sorted)."""
-    seg = np.hypot(*np.diff(ring, axis=0).T)
-    cum = np.concatenate([[0], np.cumsum(seg)])
-    total = cum[-1]
-    out = []
-    for i, s0 in enumerate(cuts):
-        s1 = cuts[(i + 1) % len(cuts)] + (total if i + 1 == len(cuts) else 0.0)
-        s = np.concatenate([[s0], cum[(cum > s0) & (cum < s1)],
-                            cum[cum < s1 - total] + total if s1 > total else [], [s1]])
-        s = np.where(s > total, s - total, s)
-        out.append(np.stack([np.interp(s, cum, ring[:, 0]), np.interp(s, cum, ring[:, 1])], -1))
-    return out
+    """Pieces of a closed ring ``(K, 2)`` between consecutive arc lengths ``cuts``
+    (sorted; the last piece wraps past the ring's start): ``(M_i, 2) float64`` each."""
+    pts, ptr = _split_nb(np.ascontiguousarray(ring, np.float64), np.asarray(cuts, np.float64))
+    return [pts[ptr[i]:ptr[i + 1]] for i in range(len(cuts))]
+
+
+@nb.njit(cache=True)
+def _split_nb(ring, cuts):  # pragma: no cover - numba
+    """:func:`_split` as one array ``(P, 2)`` and offsets ``(len(cuts) + 1,)``; each
+    piece is its two cut points and the ring's points strictly between, interpolated
+    on the cumulative arc length as ``np.interp`` does (same bits as numpy)."""
+    k, n = ring.shape[0], cuts.shape[0]
+    cum = np.empty(k)
+    cum[0] = 0.0
+    for j in range(1, k):
+        cum[j] = cum[j - 1] + np.hypot(ring[j, 0] - ring[j - 1, 0], ring[j, 1] - ring[j - 1, 1])
+    total = cum[k - 1]
+    out = np.empty((n * (2 * k + 2), 2))
+    ptr = np.zeros(n + 1, np.int64)
+    m = 0
+    for i in range(n):
+        s0 = cuts[i]
+        s1 = cuts[i + 1] + 0.0 if i + 1 < n else cuts[0] + total
+        interp_row(s0 - total if s0 > total else s0, cum, ring, out, m)
+        m += 1
+        for j in range(k):
+            if s0 < cum[j] < s1:
+                interp_row(cum[j], cum, ring, out, m)
+                m += 1
+        if s1 > total:  # the piece wraps past the ring's start
+            for j in range(k):
+                if cum[j] < s1 - total:
+                    s = cum[j] + total
+                    interp_row(s - total if s > total else s, cum, ring, out, m)
+                    m += 1
+        interp_row(s1 - total if s1 > total else s1, cum, ring, out, m)
+        m += 1
+        ptr[i + 1] = m
+    return out[:m], ptr
 
 
 def add_block_rings(builder: NetworkBuilder, faces: list[tuple[float, float, float, float]],

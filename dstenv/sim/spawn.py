@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from dstenv.sim.lanes import LaneKind, LaneNetwork, lane_pose, project_on_lane
-from dstenv.sim.parking import VEHICLE_CLASSES
+from dstenv.sim.parking import CLASS_HI, CLASS_LO
 from dstenv.sim.placement import free_spot, near_any, place_mobile, plan_route_nb
 from dstenv.sim.types import AGENT_HEIGHT, AgentKind, WorldMap
 
@@ -39,8 +39,7 @@ _TRAFFIC_FIELDS = ("xy", "yaw", "v", "hl", "hw", "akind", "mobile", "parked", "r
                    "lc", "hazard", "park")
 _FIELDS = (*_TRAFFIC_FIELDS, "idm", "height")
 #: size ranges of the vehicle classes: (C, 3) low and high length, width, height [m]
-_CLASS_LO = np.array([[VEHICLE_CLASSES[c][d][0] for d in range(3)] for c in VEHICLE_CLASSES])
-_CLASS_HI = np.array([[VEHICLE_CLASSES[c][d][1] for d in range(3)] for c in VEHICLE_CLASSES])
+_CLASS_LO, _CLASS_HI = CLASS_LO, CLASS_HI
 
 
 def net_tuple(net: LaneNetwork) -> tuple:

@@ -28,7 +28,7 @@ import numba as nb
 import numpy as np
 
 from dstenv.sim.lanes import SPACING, NetworkBuilder
-from dstenv.sim.lanes import _resample as _resample_line
+from dstenv.sim.lanegeom import resample_many
 from dstenv.sim.types import Obstacles
 
 __all__ = ["Warp", "draw_warp", "warp_lanes", "warp_boxes", "warp_obstacles"]
@@ -215,11 +215,9 @@ def warp_lanes(builder: NetworkBuilder, warp: Warp) -> None:
     """Warp every lane collected so far, in place (re-sampled to the even spacing)."""
     if not builder.polys:
         return
-    n = np.array([len(p) for p in builder.polys])
-    pts = warp.points(np.concatenate(builder.polys))
+    ptr = np.cumsum([0] + [len(p) for p in builder.polys])
     # the lanes' points were already distinct and in order: re-sample without checks
-    builder.polys = [_resample_line(np.ascontiguousarray(p), SPACING)
-                     for p in np.split(pts, np.cumsum(n)[:-1])]
+    builder.polys = resample_many(warp.points(np.concatenate(builder.polys)), ptr, SPACING)
 
 
 def warp_boxes(warp: Warp, rows: np.ndarray) -> np.ndarray:

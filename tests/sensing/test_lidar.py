@@ -197,3 +197,25 @@ def test_config_is_validated():
         Lidar({"buildings": "voxels"})
     with pytest.raises(ValueError, match="pose"):
         Lidar().sweep(rect_map([]), NO_AGENTS, np.zeros(2), _rng())
+
+
+def test_building_edges_flattened_like_one_polygon_at_a_time():
+    """``Lidar._load_polygons`` (all polygons at once) gives the per-polygon edge list:
+    each vertex to the next, a repeated closing vertex dropped, boxes per building."""
+    wm = rect_map([(1.0, 3.0, 1.0, 2.0), (-5.0, -2.0, 4.0, 9.0)])
+    closed = np.array([[10.0, 10.0], [12.0, 10.0], [11.0, 13.0], [10.0, 10.0]])
+    wm.buildings = list(wm.buildings) + [closed]
+    lidar = Lidar({"beams": 8})
+    lidar._load_polygons(wm)
+    edges, starts, boxes = [], [0], []
+    for poly in wm.buildings:
+        poly = np.asarray(poly, np.float64)
+        e = np.concatenate([poly, np.roll(poly, -1, axis=0)], axis=1)
+        e = e[np.any(e[:, :2] != e[:, 2:], axis=1)]
+        edges.append(e)
+        starts.append(starts[-1] + len(e))
+        boxes.append(np.concatenate([poly.min(0), poly.max(0)]))
+    np.testing.assert_array_equal(lidar._edges, np.concatenate(edges))
+    np.testing.assert_array_equal(lidar._starts, starts)
+    np.testing.assert_array_equal(lidar._boxes, boxes)
+    assert starts[-1] - starts[-2] == 3  # the triangle's closing vertex is not an edge

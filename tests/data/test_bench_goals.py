@@ -28,3 +28,14 @@ def test_print_goals_marks_missing_rows(capsys):
     out = capsys.readouterr().out
     assert "median of 3" in out and "n/a" in out and "not here" in out
     assert "0.51" in out and "512,345" in out
+
+
+def test_steady_rate_cancels_start_up(monkeypatch, tmp_path):
+    from dstenv.data import bench_goals
+
+    # a run costs 5 s of start-up plus 0.1 s per frame
+    monkeypatch.setattr(bench_goals, "_generate_seconds",
+                        lambda config, frames, workers, tmp: 5.0 + 0.1 * frames)
+    r = bench_goals._generate_rates({}, 40, 2, tmp_path)
+    assert r["steady"] == 36_000.0  # 10 frames/s, start-up gone
+    assert r["short_run"] == 3600 * 40 / 9.0  # start-up included

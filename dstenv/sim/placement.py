@@ -23,7 +23,7 @@ import numba as nb
 import numpy as np
 
 from dstenv.sim.lanes import lane_pose
-from dstenv.sim.traffic import choose_successor
+from dstenv.sim.routing import choose_successor
 
 __all__ = ["free_spot", "near_any", "plan_route_nb", "place_mobile", "TRIES"]
 

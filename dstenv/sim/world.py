@@ -16,8 +16,8 @@ from dstenv.sim.clutter import street_clutter
 from dstenv.sim.ego import bicycle_step, hits, pure_pursuit, pursuit_lookahead
 from dstenv.sim.lanes import Control, LaneKind, LaneNetwork, Turn, lane_pose, project_on_lane
 from dstenv.sim.lanechange import lane_neighbours
-from dstenv.sim.traffic import (choose_successor, n_randoms, route_point, signal_green,
-                                traffic_step)
+from dstenv.sim.routing import choose_successor, route_point, signal_green
+from dstenv.sim.traffic import n_randoms, traffic_step
 from dstenv.sim.types import AgentKind, Agents, WorldMap
 
 __all__ = ["World"]

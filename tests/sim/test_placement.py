@@ -15,7 +15,7 @@ from dstenv.sim.kerbside import _arange
 from dstenv.sim.lanes import LaneKind
 from dstenv.sim.placement import free_spot, near_any, plan_route_nb
 from dstenv.sim.raster import fill_rect, fill_rects, paint_where
-from dstenv.sim.traffic import choose_successor
+from dstenv.sim.routing import choose_successor
 
 from .clean import clean_world
 

@@ -7,7 +7,8 @@ lanes planned in ``route[i, 1:]``. One step:
 2. the front agent of each lane requests the next controlled connector; requests are
    granted oldest first if the junction's rule allows (green light / full stop at
    a stop sign), no granted or older waiting connector conflicts and the exit lane
-   has room (vehicles from one lane may follow each other through);
+   has room (vehicles from one lane may follow each other through); steps 1-2 are
+   :func:`dstenv.sim.routing.grant_connectors`;
 3. each agent looks along its route for the nearest body (agent or ego) inside
    its corridor, an ungranted stop line or a blocked crosswalk, and takes the
    IDM acceleration towards it (of two standing agents that block each other,

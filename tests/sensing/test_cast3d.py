@@ -91,22 +91,35 @@ def test_boxes_culled_by_azimuth_and_slope_match_every_beam_against_every_box():
         assert np.array_equal(a, b)
 
 
+def _random_buildings(rng: np.random.Generator, vertices: int, spread: float, clear: float,
+                      *, tries: int = 0, count: int = 0
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Random star-shaped footprints centred in ``[-spread, spread]^2`` and at least
+    ``clear`` m from the sensor: ``tries`` draws (some dropped) or exactly ``count``.
+
+    Returns:
+        ``edges (E, 4)``, ``starts (P + 1,)``, bounding ``circles (P, 3)``.
+    """
+    edges, starts, circles = [], [0], []
+    drawn = 0
+    while (drawn < tries) if tries else (len(circles) < count):
+        drawn += 1
+        c = rng.uniform(-spread, spread, 2)
+        if np.hypot(*c) < clear:
+            continue
+        ang = np.sort(rng.uniform(0, 2 * math.pi, vertices))
+        poly = c + rng.uniform(2, 8, (vertices, 1)) * np.stack([np.cos(ang), np.sin(ang)], 1)
+        edges.append(np.concatenate([poly, np.roll(poly, -1, 0)], 1))
+        starts.append(starts[-1] + vertices)
+        circles.append([*c, 8.0])
+    return np.concatenate(edges), np.array(starts), np.array(circles)
+
+
 def test_walls_culled_equal_all_columns():
     rng = np.random.default_rng(1)
     ox, oy, az, slope = _beams(columns=720, channels=32)
     ux, uy = np.cos(az), np.sin(az)
-    edges, starts, circles = [], [0], []
-    for _ in range(25):
-        c = rng.uniform(-60, 60, 2)
-        if np.hypot(*c) < 15:
-            continue
-        ang = np.sort(rng.uniform(0, 2 * math.pi, 5))
-        poly = c + rng.uniform(2, 8, (5, 1)) * np.stack([np.cos(ang), np.sin(ang)], 1)
-        edges.append(np.concatenate([poly, np.roll(poly, -1, 0)], 1))
-        starts.append(starts[-1] + 5)
-        circles.append([*c, 8.0])
-    edges, starts = np.concatenate(edges), np.array(starts)
-    circles = np.array(circles)
+    edges, starts, circles = _random_buildings(rng, 5, 60.0, 15.0, tries=25)
     heights = rng.uniform(2.0, 30.0, len(circles))
     results = []
     for drift in (None, np.inf):  # np.inf: every column tests every building
@@ -127,17 +140,7 @@ def test_walls_match_every_beam_against_every_edge():
     rng = np.random.default_rng(3)
     ox, oy, az, slope = _beams(columns=240, channels=24)
     ux, uy = np.cos(az), np.sin(az)
-    edges, starts, circles = [], [0], []
-    while len(circles) < 16:
-        c = rng.uniform(-40, 40, 2)
-        if np.hypot(*c) < 14:
-            continue
-        ang = np.sort(rng.uniform(0, 2 * math.pi, 6))
-        poly = c + rng.uniform(2, 8, (6, 1)) * np.stack([np.cos(ang), np.sin(ang)], 1)
-        edges.append(np.concatenate([poly, np.roll(poly, -1, 0)], 1))
-        starts.append(starts[-1] + 6)
-        circles.append([*c, 8.0])
-    edges, starts, circles = np.concatenate(edges), np.array(starts), np.array(circles)
+    edges, starts, circles = _random_buildings(rng, 6, 40.0, 14.0, count=16)
     heights = np.where(np.arange(16) % 3 == 0, rng.uniform(0.3, 1.6, 16),  # below the mount
                        rng.uniform(2.0, 30.0, 16))
     out = _buffers(len(az), len(slope))

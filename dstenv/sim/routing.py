@@ -3,9 +3,11 @@ phases and the connector grants of :func:`dstenv.sim.traffic.traffic_step`.
 
 Grants, each step (:func:`grant_connectors`): junction connectors are held by the
 agents on them and by granted reservations; the front agent of each lane asks for the
-next controlled connector once within its braking distance (+ 3 m); requests are
-granted oldest first if the junction's rule allows (green light / full stop at a stop
-sign), no held or older waiting connector conflicts and the exit lane has room.
+next controlled connector (looking through uncontrolled ones: bends, roundabout ring
+pieces) once within its braking distance (+ 3 m); requests are granted oldest first,
+those from inside a junction (circulating) before those entering it, if the junction's
+rule allows (green light / full stop at a stop sign), no held or older waiting
+connector conflicts and the exit lane has room.
 """
 
 from __future__ import annotations
@@ -123,10 +125,12 @@ def grant_connectors(planner, route, s, v, hl, akind, grant, req_t, stop_clock, 
                 ln = route[i, k]
                 if ln < 0 or d > 60.0:
                     break
-                if lkind[ln] == K_CONN:
-                    if node_control[node[ln]] != C_NONE:
-                        req_c[i] = ln
+                if lkind[ln] == K_CONN and node_control[node[ln]] != C_NONE:
+                    req_c[i] = ln
                     break
+                # an uncontrolled connector (a bend, a roundabout's ring piece) is looked
+                # through: its stop line is the next controlled one's, which the agent
+                # may reach with its body still behind it
                 if front[ln] >= 0:  # someone is ahead on the way: it asks first
                     break
                 d += length[ln]
@@ -139,7 +143,18 @@ def grant_connectors(planner, route, s, v, hl, akind, grant, req_t, stop_clock, 
             stop_clock[i] = 0.0
         elif req_t[i] == np.inf:
             req_t[i] = t
-    order = np.argsort(req_t)
+    # oldest first; but a request from a connector (circulating in a roundabout, or
+    # coming out of a bend) goes before those entering from a road: entering traffic
+    # yields to the traffic already in the junction
+    key = req_t.copy()
+    for i in range(nb_rows):
+        if req_c[i] >= 0 and key[i] < np.inf:
+            for k in range(1, n_route):
+                if route[i, k] == req_c[i]:
+                    if lkind[route[i, k - 1]] == K_CONN:
+                        key[i] -= 1e9
+                    break
+    order = np.argsort(key)
     waiting = np.full(nb_rows, -1)  # connectors of older requests that may go but wait
     n_wait = 0
     for oi in range(nb_rows):

@@ -7,7 +7,10 @@ import threading
 
 import numpy as np
 
-from dstenv.dst._kernel import REACHABLE, fused_update, grid_view, kernel_params, plane_grid
+from dstenv.dst._kernel import (
+    REACHABLE, ROW_PLANES, fused_update, grid_view, history_rows, inplace_update, kernel_params,
+    plane_grid,
+)
 from dstenv.dst.frame import NUM_CLASSES, NUM_SETS, OMEGA
 from dstenv.dst.params import DSTParams
 
@@ -36,7 +39,10 @@ class PerceptionGridFilter:
             plain Python threads started per update (the kernel releases the GIL), so
             nothing persists across ``fork``; they only pay on otherwise idle cores:
             when the cores are busy a band that waits for a time slice stalls the
-            whole update.
+            whole update. With one thread the grid is updated in place (rows in
+            the order the motion allows, a small ring of overwritten rows for
+            sources behind the current row): ~25 % less memory traffic at 256 x 256
+            than the double buffer that bands of rows need.
 
     Attributes:
         masses: ``(32, H, W) float32`` current perception grid (read-only view).
@@ -72,10 +78,13 @@ class PerceptionGridFilter:
         self._bands = np.linspace(0, h, min(self.threads, h) + 1).round().astype(int).tolist()
         self.params = params if params is not None else DSTParams.default()
         self._prm = kernel_params(self.params)
-        # Two state buffers (flat planes with a vacuous pad, see _kernel); updates write
-        # the other one, and the unreachable sets stay 0 forever.
-        self._buf = [plane_grid(NUM_SETS, (h, w)) for _ in range(2)]
-        self._zbuf = [plane_grid(1, (h, w))[0] for _ in range(2)]
+        # State buffers (flat planes with a vacuous pad, see _kernel): one, updated in
+        # place, for one thread; two for bands of rows (updates write the other one).
+        # The unreachable sets stay 0 forever.
+        n_buf = 1 if self.threads == 1 else 2
+        self._buf = [plane_grid(NUM_SETS, (h, w)) for _ in range(n_buf)]
+        self._zbuf = [plane_grid(1, (h, w))[0] for _ in range(n_buf)]
+        self._hist = np.empty((ROW_PLANES, w), np.float32)  # in-place ring, grown on demand
         self._betp = plane_grid(NUM_CLASSES, (h, w))
         self._cur = 0
         self.reset()
@@ -138,6 +147,13 @@ class PerceptionGridFilter:
         warp_on = (dx, dy, dyaw) != (0.0, 0.0, 0.0)
         # cos/sin by numpy, as reference.source_cells, so both pick the same source cells
         geo = np.array([np.cos(dyaw), np.sin(dyaw), dx, dy, self.cell_size])
+        if self.threads == 1:
+            k_hist, desc = history_rows(geo, self.shape) if warp_on else (0, False)
+            if k_hist * self.shape[1] > self._hist.shape[1]:
+                self._hist = np.empty((ROW_PLANES, k_hist * self.shape[1]), np.float32)
+            inplace_update(self._buf[0], self._zbuf[0], sensor, gis, warp_on, geo, self._prm,
+                           self._betp, self._hist, k_hist, desc)
+            return self.masses.copy() if copy else self.masses
         nxt = 1 - self._cur
         args = (
             self._buf[self._cur], self._zbuf[self._cur], sensor, gis, warp_on, geo, self._prm,

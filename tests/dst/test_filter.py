@@ -6,7 +6,9 @@ import numpy as np
 import pytest
 
 from dstenv.dst import M, NUM_SETS, OMEGA, DSTParams, PerceptionGridFilter, pignistic, vacuous
-from dstenv.dst._kernel import REACHABLE
+from dstenv.dst._kernel import (
+    REACHABLE, ROW_PLANES, history_rows, inplace_update, kernel_params, plane_grid,
+)
 from dstenv.dst.reference import reference_update
 from dstenv.grid import GridSpec, relative_pose
 
@@ -162,6 +164,43 @@ def test_threads_give_identical_results():
         assert np.array_equal(one.update(sensor, gis, motion), two.update(sensor, gis, motion))
         assert np.array_equal(one.zeta, two.zeta)
         assert np.array_equal(one.pignistic(), two.pignistic())
+
+
+@pytest.mark.parametrize("motion, ring, desc", [
+    ((0.0, 0.0, 0.3), True, False),     # a turn: sources behind the current row
+    ((0.0, 0.0, -0.3), True, False),
+    ((0.33, 0.02, 0.004), False, True),  # forward at 10 Hz: rows bottom-up, no ring
+    ((-2.0, 0.5, 0.05), False, False),   # sources ahead of the rows in ascending order
+    ((0.5, 0.0, 0.2), True, True),
+])
+def test_in_place_update_equals_the_double_buffer(motion, ring, desc):
+    # threads=1 updates in place (rows ordered by the motion, a ring of overwritten
+    # rows); threads=2 reads one buffer and writes the other: same bits
+    rng = np.random.default_rng(9)
+    shape = (64, 48)
+    geo = np.array([np.cos(motion[2]), np.sin(motion[2]), motion[0], motion[1], 0.33])
+    k_hist, down = history_rows(geo, shape)
+    assert (k_hist > 0) == ring and down == desc
+    one, two = PerceptionGridFilter(shape), PerceptionGridFilter(shape, threads=2)
+    for _ in range(3):
+        sensor = rng.integers(0, 3, shape).astype(np.uint8)
+        gis = rng.integers(0, 4, shape).astype(np.uint8)
+        assert np.array_equal(one.update(sensor, gis, motion), two.update(sensor, gis, motion))
+        assert np.array_equal(one.zeta, two.zeta)
+        assert np.array_equal(one.pignistic(), two.pignistic())
+
+
+def test_in_place_update_refuses_a_short_ring():
+    # a turn needs the ring; without it the kernel stops instead of reading new values
+    h, w = 32, 32
+    m = plane_grid(NUM_SETS, (h, w))
+    m[OMEGA] = 1.0
+    geo = np.array([np.cos(0.3), np.sin(0.3), 0.0, 0.0, 0.33])
+    assert history_rows(geo, (h, w))[0] > 0
+    with pytest.raises(RuntimeError, match="history ring too short"):
+        inplace_update(m, plane_grid(1, (h, w))[0], full((h, w), 1), full((h, w), 2), True, geo,
+                       kernel_params(DSTParams.default()), plane_grid(5, (h, w)),
+                       np.empty((ROW_PLANES, w), np.float32), 0, False)
 
 
 @pytest.mark.parametrize("threads", [0, 10_000, 1.5])

@@ -257,3 +257,24 @@ def test_params_validation_and_presets():
     with pytest.raises(ValueError, match="unknown DST parameter 'alfa'"):
         DSTParams.from_dict({"alfa": 0.2})
     assert DSTParams.from_dict(DSTParams.paper().to_dict()) == DSTParams.paper()
+
+
+def test_betp_written_into_the_callers_array():
+    rng = np.random.default_rng(4)
+    shape = (12, 9)
+    f, g = PerceptionGridFilter(shape), PerceptionGridFilter(shape)
+    for _ in range(3):
+        sensor = rng.integers(0, 3, shape).astype(np.uint8)
+        gis = rng.integers(0, 4, shape).astype(np.uint8)
+        out = np.full((5, *shape), np.nan, np.float32)
+        f.update(sensor, gis, (0.4, 0.1, 0.05), betp=out)
+        g.update(sensor, gis, (0.4, 0.1, 0.05))
+        np.testing.assert_array_equal(out, g.pignistic())
+        np.testing.assert_array_equal(f.pignistic(), out)
+        np.testing.assert_allclose(out, pignistic(g.masses), atol=2e-6)
+    f.reset()
+    np.testing.assert_allclose(f.pignistic(), 0.2)
+    for bad in (np.empty((5, *shape), np.float64), np.empty((5, 12, 10), np.float32),
+                np.empty((5, 9, 12), np.float32).transpose(0, 2, 1)):
+        with pytest.raises(ValueError, match="betp must be a writeable C-contiguous float32"):
+            f.update(sensor, gis, betp=bad)

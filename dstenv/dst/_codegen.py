@@ -129,7 +129,7 @@ def inplace_update(m, zeta, sensor, gis, warp_on, geo, prm, betp, hist, k_hist,
     for r in range(h):
         i = h - 1 - r if desc else r
         inplace_row(i, m, zeta, sensor, gis, warp_on, geo, prm, betp, rb, src, hist, k_hist,
-                    desc)
+                    desc, m, zeta)
 '''
 """The whole update in place, one thread: rows in ascending order (descending when
 ``desc``), with a ring of the ``k_hist`` last overwritten rows (``hist``:
@@ -236,47 +236,68 @@ def _row() -> list[str]:
 
 
 def _row_inplace() -> list[str]:
-    """Steps 1-8 for row i of a grid updated in place (:data:`INPLACE_DRIVER`): each run
-    of consecutive sources is copied into the row buffer from the state, or, for a row
-    this update has already overwritten, from the history ring ``hist`` (the original
-    rows ``i - k_hist .. i - 1``, or ``i + 1 .. i + k_hist`` when ``desc``); then row i
-    is saved to the ring and overwritten."""
+    """Steps 1-8 for row i of a grid updated in place (:data:`INPLACE_DRIVER`). A row
+    whose sources are one run in a row not yet visited is read in place (as in
+    :func:`_row`); otherwise each run of consecutive sources is copied into the row
+    buffer from the state, or, for a row this update has already overwritten, from the
+    history ring ``hist`` (the original rows ``i - k_hist .. i - 1``, or
+    ``i + 1 .. i + k_hist`` when ``desc``). Row i is saved to the ring (when there is
+    one) before it is overwritten."""
     nr = len(REACHABLE)
+    save = [  # row i into the ring, before it is overwritten
+        "if k_hist > 0:",
+        "    base = (i % k_hist) * w",
+        "    for t in range(w):",
+        "        s, at = np.uint64(base + t), np.uint64(row + t)",
+    ]
+    save += [f"        hist[{k}, s] = m[{a}, at]" for k, a in enumerate(REACHABLE)]
+    save += [f"        hist[{nr}, s] = zeta[at]"]
     lines = [
         "    row_sources(i, h, w, warp_on, geo, src)",
         "    row = i * w",
+        "    single = True",
+        "    for j in range(1, w):",
+        "        if src[j] != src[j - 1] + 1:",
+        "            single = False",
+        "            break",
+        "    # one run from a row not yet overwritten and not row i itself: read it through",
+        "    # m_src (the same array; the rows touched are disjoint, as noalias requires)",
+        "    if single and ((src[w - 1] // w < i) if desc else (src[0] // w > i)):",
+        *("        " + line for line in save),
+        "        off = src[0]",
+        "        for t in range(w):",
+        "            s, u, at = np.uint64(off + t), np.uint64(t), np.uint64(row + t)",
+    ]
+    lines += _cell("    ", [f"m_src[{a}, s]" for a in REACHABLE] + ["z_src[s]"], "m", "zeta")
+    lines += [
+        "        return",
         "    a = 0",
         "    for j in range(1, w + 1):",
         "        if j < w and src[j] == src[j - 1] + 1:",
         "            continue",
-        "        off = src[a] - a",
-        "        srow = src[a] // w  # one row per run: sj moves by at most 2 a column",
-        "        lag = (srow - i) if desc else (i - srow)",
-        "        if srow < h and lag > 0:",
-        "            if lag > k_hist:",
-        "                raise RuntimeError('inplace_update: history ring too short')",
-        "            off = off + ((srow % k_hist) - srow) * w",
-        "            for t in range(a, j):",
-        "                s, u = np.uint64(off + t), np.uint64(t)",
+        "        while a < j:  # the run, split where it crosses into the next row",
+        "            srow = src[a] // w",
+        "            e = min(j, a + (srow + 1) * w - src[a])",
+        "            off = src[a] - a",
+        "            lag = (srow - i) if desc else (i - srow)",
+        "            if srow < h and lag > 0:",
+        "                if lag > k_hist:",
+        "                    raise RuntimeError('inplace_update: history ring too short')",
+        "                off = off + ((srow % k_hist) - srow) * w",
+        "                for t in range(a, e):",
+        "                    s, u = np.uint64(off + t), np.uint64(t)",
     ]
-    lines += [f"                rb[{k}, u] = hist[{k}, s]" for k in range(nr + 1)]
+    lines += [f"                    rb[{k}, u] = hist[{k}, s]" for k in range(nr + 1)]
     lines += [
-        "        else:",
-        "            for t in range(a, j):",
-        "                s, u = np.uint64(off + t), np.uint64(t)",
+        "            else:",
+        "                for t in range(a, e):",
+        "                    s, u = np.uint64(off + t), np.uint64(t)",
     ]
-    lines += [f"                rb[{k}, u] = m[{a}, s]" for k, a in enumerate(REACHABLE)]
+    lines += [f"                    rb[{k}, u] = m[{a}, s]" for k, a in enumerate(REACHABLE)]
     lines += [
-        f"                rb[{nr}, u] = zeta[s]",
-        "        a = j",
-        "    if k_hist > 0:",
-        "        base = (i % k_hist) * w",
-        "        for t in range(w):",
-        "            s, at = np.uint64(base + t), np.uint64(row + t)",
-    ]
-    lines += [f"            hist[{k}, s] = m[{a}, at]" for k, a in enumerate(REACHABLE)]
-    lines += [
-        f"            hist[{nr}, s] = zeta[at]",
+        f"                    rb[{nr}, u] = zeta[s]",
+        "            a = e",
+        *("    " + line for line in save),
         "    for t in range(w):",
         "        u, at = np.uint64(t), np.uint64(row + t)",
     ]
@@ -362,7 +383,7 @@ def render() -> str:
         "@nb.njit(cache=True, nogil=True, error_model='numpy', fastmath={'contract'},",
         "         pipeline_class=NoAliasCompiler)",
         "def inplace_row(i, m, zeta, sensor, gis, warp_on, geo, prm, betp, rb, src,",
-        "                hist, k_hist, desc):  # pragma: no cover - compiled",
+        "                hist, k_hist, desc, m_src, z_src):  # pragma: no cover - compiled",
         "    h, w = sensor.shape",
         "    " + ", ".join(PRM) + " = " + ", ".join(f"prm[{k}]" for k in range(len(PRM))),
         "    zero, one = np.float32(0.0), np.float32(1.0)",

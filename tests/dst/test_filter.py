@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from dstenv.dst import M, NUM_SETS, OMEGA, DSTParams, PerceptionGridFilter, pignistic, vacuous
+from dstenv.dst import filter as filter_module
 from dstenv.dst._kernel import (
     REACHABLE, ROW_PLANES, history_rows, inplace_update, kernel_params, plane_grid,
 )
@@ -136,9 +137,13 @@ def test_reset_and_determinism():
         assert np.array_equal(a, b)
 
 
-def test_large_rotation_and_leaving_the_grid():
+@pytest.mark.parametrize("in_place", [False, True])
+def test_large_rotation_and_leaving_the_grid(in_place, monkeypatch):
     # runs of consecutive source cells are short under a large turn, and a long jump
-    # makes every cell come from outside (the vacuous pad); both must match the reference
+    # makes every cell come from outside (the vacuous pad); both must match the reference,
+    # with the double buffer and in place (a turn of 2.5 rad needs a ring of most rows)
+    if in_place:
+        monkeypatch.setattr(filter_module, "IN_PLACE_MIN_CELLS", 0)
     rng = np.random.default_rng(11)
     shape, params = (40, 37), DSTParams.default()
     f = PerceptionGridFilter(shape, params, cell_size=0.5)
@@ -166,6 +171,7 @@ def test_threads_give_identical_results():
         assert np.array_equal(one.pignistic(), two.pignistic())
 
 
+@pytest.mark.skipif((os.cpu_count() or 1) < 2, reason="a single CPU")
 @pytest.mark.parametrize("motion, ring, desc", [
     ((0.0, 0.0, 0.3), True, False),     # a turn: sources behind the current row
     ((0.0, 0.0, -0.3), True, False),
@@ -173,7 +179,8 @@ def test_threads_give_identical_results():
     ((-2.0, 0.5, 0.05), False, False),   # sources ahead of the rows in ascending order
     ((0.5, 0.0, 0.2), True, True),
 ])
-def test_in_place_update_equals_the_double_buffer(motion, ring, desc):
+def test_in_place_update_equals_the_double_buffer(motion, ring, desc, monkeypatch):
+    monkeypatch.setattr(filter_module, "IN_PLACE_MIN_CELLS", 0)  # small grids in place too
     # threads=1 updates in place (rows ordered by the motion, a ring of overwritten
     # rows); threads=2 reads one buffer and writes the other: same bits
     rng = np.random.default_rng(9)
@@ -278,3 +285,27 @@ def test_betp_written_into_the_callers_array():
                 np.empty((5, 9, 12), np.float32).transpose(0, 2, 1)):
         with pytest.raises(ValueError, match="betp must be a writeable C-contiguous float32"):
             f.update(sensor, gis, betp=bad)
+
+
+@pytest.mark.skipif((os.cpu_count() or 1) < 2, reason="a single CPU")
+@pytest.mark.parametrize("shape", [(2, 2), (3, 3), (5, 2), (1, 7)])
+def test_in_place_update_on_tiny_grids(shape, monkeypatch):
+    monkeypatch.setattr(filter_module, "IN_PLACE_MIN_CELLS", 0)
+    # on 2-3 columns a turn can make a run of consecutive sources cross into the next
+    # row; the in-place kernel splits it (ring rows are not adjacent in memory)
+    rng = np.random.default_rng(2)
+    one, two = PerceptionGridFilter(shape, cell_size=1.0), PerceptionGridFilter(shape, threads=2,
+                                                                                cell_size=1.0)
+    for motion in [(0.0, 0.0, np.pi), (0.4, 1.2, 2.0), (-1.0, 0.0, -1.7), (0.0, 1.0, 0.0)] * 2:
+        sensor = rng.integers(0, 3, shape).astype(np.uint8)
+        gis = rng.integers(0, 4, shape).astype(np.uint8)
+        assert np.array_equal(one.update(sensor, gis, motion), two.update(sensor, gis, motion))
+        assert np.array_equal(one.zeta, two.zeta)
+
+
+def test_in_place_only_for_large_single_thread_grids(monkeypatch):
+    big = int(np.ceil(np.sqrt(filter_module.IN_PLACE_MIN_CELLS)))
+    assert len(PerceptionGridFilter((big, big))._buf) == 1
+    assert len(PerceptionGridFilter((big - 1, big - 1))._buf) == 2
+    monkeypatch.setattr(filter_module, "IN_PLACE_MIN_CELLS", 0)
+    assert len(PerceptionGridFilter((4, 4))._buf) == 1

@@ -16,10 +16,10 @@ from dstenv.dst.params import DSTParams
 
 __all__ = ["PerceptionGridFilter", "IN_PLACE_MIN_CELLS"]
 
-#: grids of at least this many cells are updated in place with one thread: ~20 % faster
-#: at 256 x 256, where the state (~4 MB) streams from memory; a 64 x 64 state fits in
-#: L2 and the double buffer's direct reads are ~10 % faster there (one process, loaded)
-IN_PLACE_MIN_CELLS = 128 * 128
+#: grids of at least this many cells are updated in place with one thread: 10-20 %
+#: faster at 256 x 256, where the state (~4 MB) streams from memory; at 64 x 64 and
+#: 128 x 128 the double buffer was as fast or ~10 % faster (one process, loaded machine)
+IN_PLACE_MIN_CELLS = 256 * 256 // 2
 
 
 class PerceptionGridFilter:

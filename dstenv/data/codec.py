@@ -154,82 +154,71 @@ def quantize(p: np.ndarray, scale: int) -> np.ndarray:
     return out.reshape(np.shape(p))
 
 
-#: cells per block of :func:`quantize_cells` (five rows of this many bytes stay in L1)
-_BLOCK = 512
-
-
 @nb.njit(cache=True, nogil=True, inline="always")
-def _cell(t0, t1, t2, t3, t4, j):  # pragma: no cover - numba
-    """Cell ``j``'s five bytes as the low 40 bits of a uint64 (byte k: channel k)."""
-    u = np.uint64(j)
-    return (np.uint64(t0[u]) | (np.uint64(t1[u]) << np.uint64(8))
-            | (np.uint64(t2[u]) << np.uint64(16)) | (np.uint64(t3[u]) << np.uint64(24))
-            | (np.uint64(t4[u]) << np.uint64(32)))
+def _q(v: np.float32, scale: np.float32) -> np.uint8:  # pragma: no cover - numba
+    """One value of :func:`quantize` (NaN/inf are checked by the caller)."""
+    v = min(max(v, np.float32(0.0)), np.float32(1.0))
+    return np.uint8(np.rint(v * scale))
 
 
 @nb.njit(cache=True, nogil=True)
-def _quantize_cells(p, scale, t, words, out):  # pragma: no cover - numba
-    """Quantise ``p`` ``(5, n)`` into ``out`` (``(5 n,) uint8``, cell-major), the bytes
-    of ``words`` (``(ceil(5 n / 8),) uint64``), block by block: each channel with the
-    vectorised :func:`_quantize` into a row of ``t`` ``(5, _BLOCK)``, then eight cells
-    at a time into five little-endian words (shifts and ors; byte stores at stride 5
-    would not vectorise). Returns False if ``p`` holds NaN/inf."""
+def _quantize_cells(p, bits, scale, out):  # pragma: no cover - numba
+    """Quantise ``p`` ``(5, n) float32`` into ``out`` ``(5 n,) uint8``, cell-major, in
+    one pass; False if ``p`` holds NaN/inf (``bits``: ``p`` viewed as uint32).
+
+    Five byte stores per cell at stride 5 with unsigned indices: LLVM vectorises the
+    loop (interleaved stores), ~2.5x faster than quantising plane by plane and packing
+    the bytes into 64-bit words afterwards (the previous version). The finiteness
+    check is an integer max of the exponent bits (all ones: NaN or inf), a reduction
+    that vectorises without reordering float sums.
+    """
     n = p.shape[1]
-    b = t.shape[1]
-    t0, t1, t2, t3, t4 = t[0], t[1], t[2], t[3], t[4]
-    ok = True
-    for s in range(0, n, b):
-        e = min(s + b, n)
-        for k in range(5):
-            ok &= _quantize(p[k, s:e], scale, t[k, : e - s])
-        m = (e - s) // 8 * 8
-        base = s * 5 // 8  # s is a multiple of b, so of 8
-        for g in range(0, m, 8):
-            v0 = _cell(t0, t1, t2, t3, t4, g)
-            v1 = _cell(t0, t1, t2, t3, t4, g + 1)
-            v2 = _cell(t0, t1, t2, t3, t4, g + 2)
-            v3 = _cell(t0, t1, t2, t3, t4, g + 3)
-            v4 = _cell(t0, t1, t2, t3, t4, g + 4)
-            v5 = _cell(t0, t1, t2, t3, t4, g + 5)
-            v6 = _cell(t0, t1, t2, t3, t4, g + 6)
-            v7 = _cell(t0, t1, t2, t3, t4, g + 7)
-            w = np.uint64(base + g * 5 // 8)
-            words[w] = v0 | (v1 << np.uint64(40))
-            words[w + np.uint64(1)] = ((v1 >> np.uint64(24)) | (v2 << np.uint64(16))
-                                       | (v3 << np.uint64(56)))
-            words[w + np.uint64(2)] = (v3 >> np.uint64(8)) | (v4 << np.uint64(32))
-            words[w + np.uint64(3)] = ((v4 >> np.uint64(32)) | (v5 << np.uint64(8))
-                                       | (v6 << np.uint64(48)))
-            words[w + np.uint64(4)] = (v6 >> np.uint64(16)) | (v7 << np.uint64(24))
-        for j in range(m, e - s):  # the last n % 8 cells
-            for k in range(5):
-                out[(s + j) * 5 + k] = t[k, j]
-    return ok
+    e = np.uint32(0x7F800000)
+    top = np.uint32(0)
+    for j in range(n):
+        u = np.uint64(j)
+        b = np.uint64(5) * u
+        top = max(top, max(max(bits[0, u] & e, bits[1, u] & e),
+                           max(bits[2, u] & e, max(bits[3, u] & e, bits[4, u] & e))))
+        out[b] = _q(p[0, u], scale)
+        out[b + np.uint64(1)] = _q(p[1, u], scale)
+        out[b + np.uint64(2)] = _q(p[2, u], scale)
+        out[b + np.uint64(3)] = _q(p[3, u], scale)
+        out[b + np.uint64(4)] = _q(p[4, u], scale)
+    return top < e
 
 
-def quantize_cells(p: np.ndarray, scale: int) -> np.ndarray:
+def quantize_cells(p: np.ndarray, scale: int, out: np.ndarray | None = None) -> np.ndarray:
     """:func:`quantize` of a ``(5, H, W)`` grid, stored cell-major: ``(H, W, 5) uint8``.
 
     ``out[i, j, k] == quantize(p, scale)[k, i, j]``. The five bytes of a cell side by
     side deflate ~35 % smaller and ~25 % faster than five planes (the classes of a
-    cell are correlated, and repeated cells make long matches); the interleaving
-    costs ~0.1 ms more per 256 x 256 grid than :func:`quantize` (format version 2,
+    cell are correlated, and repeated cells make long matches; format version 2,
     :mod:`dstenv.data.shards`).
 
+    Args:
+        p: ``(5, H, W)`` probabilities (float32; other dtypes are converted).
+        scale: quantisation scale (255 for shards).
+        out: optional ``(H, W, 5) uint8`` C-contiguous array to write into (a reused
+            buffer saves the page faults of a fresh one).
+
     Raises:
-        ValueError: if ``p`` is not ``(5, H, W)`` or holds NaN or inf.
+        ValueError: if ``p`` is not ``(5, H, W)``, ``out`` does not fit, or ``p``
+            holds NaN or inf.
     """
     p = np.ascontiguousarray(p, dtype=np.float32)
     if p.ndim != 3 or p.shape[0] != 5:
         raise ValueError(f"quantize_cells needs a (5, H, W) grid, got shape {p.shape}")
     _, h, w = p.shape
-    n = h * w
-    words = np.empty(-(-5 * n // 8), np.uint64)
-    out = words.view(np.uint8)
-    scratch = np.empty((5, _BLOCK), np.uint8)
-    if not _quantize_cells(p.reshape(5, n), np.float32(scale), scratch, words, out):
+    if out is None:
+        out = np.empty((h, w, 5), np.uint8)
+    elif out.shape != (h, w, 5) or out.dtype != np.uint8 or not out.flags.c_contiguous:
+        raise ValueError(f"quantize_cells: out must be a C-contiguous ({h}, {w}, 5) uint8 "
+                         f"array, got {out.dtype} {out.shape}")
+    flat = p.reshape(5, h * w)
+    if not _quantize_cells(flat, flat.view(np.uint32), np.float32(scale), out.reshape(-1)):
         raise ValueError("probabilities hold NaN/inf")
-    return out[: 5 * n].reshape(h, w, 5)
+    return out
 
 
 @nb.njit(cache=True, nogil=True)

@@ -36,9 +36,10 @@ dataset              shape, dtype            meaning (axes: :mod:`dstenv.grid`)
 Version 1 (dstenv before this layout) stored ``pignistic`` and ``pignistic_prev`` as
 planes, ``(N, 5, H, W)``; everything else is the same. :class:`ShardReader` reads both
 and returns ``(5, H, W)`` either way. Cell-major bytes deflate ~35 % smaller and
-~25 % faster (the classes of a cell are correlated); interleaving them costs a little
-more than the deflate saves (about +10 % writer CPU per frame against version 1,
-measured in one process; see ``docs/throughput.md``).
+~25 % faster (the classes of a cell are correlated); the writer quantises straight
+into the cell-major order in one vectorised pass (:func:`dstenv.data.codec.quantize_cells`,
+~0.04 ms more per cached 256 x 256 grid than plane order, less than deflate saves;
+see ``docs/throughput.md``).
 
 Measured at 256 x 256 at stride 10 (default city, uint8 + ISA-L gzip 1, the
 default): 40 and 47 KB per frame on two episodes where version 1 stored 57 and

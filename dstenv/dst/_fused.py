@@ -352,3 +352,384 @@ def fused_update(m_prev, z_prev, sensor, gis, warp_on, geo, prm,
     src = np.empty(w, np.int64)
     for i in range(first, stop):
         fused_row(i, m_prev, z_prev, sensor, gis, warp_on, geo, prm, m_out, z_out, betp, rb, src)
+
+
+@nb.njit(cache=True, nogil=True, error_model='numpy', fastmath={'contract'},
+         pipeline_class=NoAliasCompiler)
+def inplace_row(i, m, zeta, sensor, gis, warp_on, geo, prm, betp, rb, src,
+                hist, k_hist, desc, m_src, z_src):  # pragma: no cover - compiled
+    h, w = sensor.shape
+    alpha, keep, dinc, ddec, g_occ, g_conf, cs, ncs, cm, ncm = prm[0], prm[1], prm[2], prm[3], prm[4], prm[5], prm[6], prm[7], prm[8], prm[9]
+    zero, one = np.float32(0.0), np.float32(1.0)
+    r2, r3, r4, r5 = np.float32(0.5), np.float32(0.3333333333333333), np.float32(0.25), np.float32(0.2)
+    row_sources(i, h, w, warp_on, geo, src)
+    row = i * w
+    single = True
+    for j in range(1, w):
+        if src[j] != src[j - 1] + 1:
+            single = False
+            break
+    # one run from a row not yet overwritten and not row i itself: read it through
+    # m_src (the same array; the rows touched are disjoint, as noalias requires)
+    if single and ((src[w - 1] // w < i) if desc else (src[0] // w > i)):
+        if k_hist > 0:
+            base = (i % k_hist) * w
+            for t in range(w):
+                s, at = np.uint64(base + t), np.uint64(row + t)
+                hist[0, s] = m[1, at]
+                hist[1, s] = m[2, at]
+                hist[2, s] = m[3, at]
+                hist[3, s] = m[4, at]
+                hist[4, s] = m[8, at]
+                hist[5, s] = m[9, at]
+                hist[6, s] = m[10, at]
+                hist[7, s] = m[12, at]
+                hist[8, s] = m[15, at]
+                hist[9, s] = m[16, at]
+                hist[10, s] = m[24, at]
+                hist[11, s] = m[25, at]
+                hist[12, s] = m[26, at]
+                hist[13, s] = m[28, at]
+                hist[14, s] = m[31, at]
+                hist[15, s] = zeta[at]
+        off = src[0]
+        for t in range(w):
+            s, u, at = np.uint64(off + t), np.uint64(t), np.uint64(row + t)
+            p0 = m_src[1, s]  # {N}
+            p1 = m_src[2, s]  # {W}
+            p2 = m_src[3, s]  # {N,W}
+            p3 = m_src[4, s]  # {I}
+            p4 = m_src[8, s]  # {S}
+            p5 = m_src[9, s]  # {N,S}
+            p6 = m_src[10, s]  # {W,S}
+            p7 = m_src[12, s]  # {I,S}
+            p8 = m_src[15, s]  # {N,W,I,S}
+            p9 = m_src[16, s]  # {M}
+            p10 = m_src[24, s]  # {S,M}
+            p11 = m_src[25, s]  # {N,S,M}
+            p12 = m_src[26, s]  # {W,S,M}
+            p13 = m_src[28, s]  # {I,S,M}
+            p14 = m_src[31, s]  # Omega
+            z = z_src[s]
+            sv, gv = sensor[i, u], gis[i, u]
+            # 2. sensor and map
+            ms3 = cs if (sv == 1) else zero  # {N,W}
+            ms28 = cs if (sv == 2) else zero  # {I,S,M}
+            ms31 = one if (sv == 0) else ncs  # Omega
+            mg4 = cm if (gv == 1) else zero  # {I}
+            mg25 = cm if (gv == 2) else zero  # {N,S,M}
+            mg26 = cm if (gv == 3) else zero  # {W,S,M}
+            mg31 = one if (gv == 0) else ncm  # Omega
+            k = ms3 * mg4  # conflict K
+            total = k >= one  # total conflict: m_sm is vacuous, as in rules.dempster
+            norm = zero if total else one / (one - k)
+            w1 = (ms3 * mg25) * norm  # m_sm({N})
+            w2 = (ms3 * mg26) * norm  # m_sm({W})
+            w3 = (ms3 * mg31) * norm  # m_sm({N,W})
+            w4 = (ms28 * mg4 + ms31 * mg4) * norm  # m_sm({I})
+            w24 = (ms28 * mg25 + ms28 * mg26) * norm  # m_sm({S,M})
+            w25 = (ms31 * mg25) * norm  # m_sm({N,S,M})
+            w26 = (ms31 * mg26) * norm  # m_sm({W,S,M})
+            w28 = (ms28 * mg31) * norm  # m_sm({I,S,M})
+            w31 = one if total else (ms31 * mg31) * norm  # m_sm(Omega)
+            # 3. conflicts, 4. accumulator
+            mf = p0 + p1 + p2
+            mo = p3 + p4 + p7 + p9 + p10 + p13
+            sm_free = w1 + w2 + w3
+            sm_occ = w4 + w24 + w28
+            conflict = mf * sm_occ + mo * sm_free
+            z_dec = max(zero, z - ddec)
+            z_inc = min(one, z + dinc)
+            z = z_dec if conflict > g_conf else (z_inc if mo >= g_occ else z)
+            zeta[at] = z
+            # 5. specialisation (A -> A minus {M}), 6. discounting
+            t10 = z * p10
+            p4 = p4 + t10
+            p10 = p10 - t10
+            t11 = z * p11
+            p5 = p5 + t11
+            p11 = p11 - t11
+            t12 = z * p12
+            p6 = p6 + t12
+            p12 = p12 - t12
+            t13 = z * p13
+            p7 = p7 + t13
+            p13 = p13 - t13
+            t14 = z * p14
+            p8 = p8 + t14
+            p14 = p14 - t14
+            p0 = p0 * keep
+            p1 = p1 * keep
+            p2 = p2 * keep
+            p3 = p3 * keep
+            p4 = p4 * keep
+            p5 = p5 * keep
+            p6 = p6 * keep
+            p7 = p7 * keep
+            p8 = p8 * keep
+            p9 = p9 * keep
+            p10 = p10 * keep
+            p11 = p11 * keep
+            p12 = p12 * keep
+            p13 = p13 * keep
+            p14 = p14 * keep
+            p14 = p14 + alpha
+            # 7. modified conjunctive combination
+            o0 = w1 * (p0 + p2 + p5 + p8 + p11 + p14) + w3 * (p0 + p5 + p11) + w25 * (p0 + p2) + w31 * p0
+            o1 = w2 * (p1 + p2 + p6 + p8 + p12 + p14) + w3 * (p1 + p6 + p12) + w26 * (p1 + p2) + w31 * p1
+            o2 = w3 * (p2 + p8 + p14) + w31 * p2
+            o3 = w4 * (p3 + p7 + p8 + p13 + p14) + w28 * p3 + w31 * p3
+            o4 = w24 * (p4 + p5 + p6 + p7 + p8) + w25 * (p4 + p6 + p7) + w26 * (p4 + p5 + p7) + w28 * (p4 + p5 + p6) + w31 * p4
+            o5 = w25 * (p5 + p8) + w31 * p5
+            o6 = w26 * (p6 + p8) + w31 * p6
+            o7 = w28 * (p7 + p8) + w31 * p7
+            o8 = w31 * p8
+            o9 = w4 * (p0 + p1 + p2) + w24 * (p0 + p1 + p2 + p9) + w25 * p9 + w26 * p9 + w28 * (p0 + p1 + p2 + p9) + w31 * p9
+            o10 = w24 * (p10 + p11 + p12 + p13 + p14) + w25 * (p10 + p12 + p13) + w26 * (p10 + p11 + p13) + w28 * (p10 + p11 + p12) + w31 * p10
+            o11 = w25 * (p11 + p14) + w31 * p11
+            o12 = w26 * (p12 + p14) + w31 * p12
+            o13 = w28 * (p13 + p14) + w31 * p13
+            o14 = w1 * (p1 + p3 + p4 + p6 + p7 + p9 + p10 + p12 + p13) + w2 * (p0 + p3 + p4 + p5 + p7 + p9 + p10 + p11 + p13) + w3 * (p3 + p4 + p7 + p9 + p10 + p13) + w4 * (p4 + p5 + p6 + p9 + p10 + p11 + p12) + w24 * p3 + w25 * (p1 + p3) + w26 * (p0 + p3) + w31 * p14
+            m[1, at] = o0
+            m[2, at] = o1
+            m[3, at] = o2
+            m[4, at] = o3
+            m[8, at] = o4
+            m[9, at] = o5
+            m[10, at] = o6
+            m[12, at] = o7
+            m[15, at] = o8
+            m[16, at] = o9
+            m[24, at] = o10
+            m[25, at] = o11
+            m[26, at] = o12
+            m[28, at] = o13
+            m[31, at] = o14
+            # BetP: each set's share 1/|A| once, then the sum per class
+            q2 = o2 * r2
+            q5 = o5 * r2
+            q6 = o6 * r2
+            q7 = o7 * r2
+            q8 = o8 * r4
+            q10 = o10 * r2
+            q11 = o11 * r3
+            q12 = o12 * r3
+            q13 = o13 * r3
+            q14 = o14 * r5
+            betp[0, at] = o0 + q2 + q5 + q8 + q11 + q14
+            betp[1, at] = o1 + q2 + q6 + q8 + q12 + q14
+            betp[2, at] = o3 + q7 + q8 + q13 + q14
+            betp[3, at] = o4 + q5 + q6 + q7 + q8 + q10 + q11 + q12 + q13 + q14
+            betp[4, at] = o9 + q10 + q11 + q12 + q13 + q14
+        return
+    a = 0
+    for j in range(1, w + 1):
+        if j < w and src[j] == src[j - 1] + 1:
+            continue
+        while a < j:  # the run, split where it crosses into the next row
+            srow = src[a] // w
+            e = min(j, a + (srow + 1) * w - src[a])
+            off = src[a] - a
+            lag = (srow - i) if desc else (i - srow)
+            if srow < h and lag > 0:
+                if lag > k_hist:
+                    raise RuntimeError('inplace_update: history ring too short')
+                off = off + ((srow % k_hist) - srow) * w
+                for t in range(a, e):
+                    s, u = np.uint64(off + t), np.uint64(t)
+                    rb[0, u] = hist[0, s]
+                    rb[1, u] = hist[1, s]
+                    rb[2, u] = hist[2, s]
+                    rb[3, u] = hist[3, s]
+                    rb[4, u] = hist[4, s]
+                    rb[5, u] = hist[5, s]
+                    rb[6, u] = hist[6, s]
+                    rb[7, u] = hist[7, s]
+                    rb[8, u] = hist[8, s]
+                    rb[9, u] = hist[9, s]
+                    rb[10, u] = hist[10, s]
+                    rb[11, u] = hist[11, s]
+                    rb[12, u] = hist[12, s]
+                    rb[13, u] = hist[13, s]
+                    rb[14, u] = hist[14, s]
+                    rb[15, u] = hist[15, s]
+            else:
+                for t in range(a, e):
+                    s, u = np.uint64(off + t), np.uint64(t)
+                    rb[0, u] = m[1, s]
+                    rb[1, u] = m[2, s]
+                    rb[2, u] = m[3, s]
+                    rb[3, u] = m[4, s]
+                    rb[4, u] = m[8, s]
+                    rb[5, u] = m[9, s]
+                    rb[6, u] = m[10, s]
+                    rb[7, u] = m[12, s]
+                    rb[8, u] = m[15, s]
+                    rb[9, u] = m[16, s]
+                    rb[10, u] = m[24, s]
+                    rb[11, u] = m[25, s]
+                    rb[12, u] = m[26, s]
+                    rb[13, u] = m[28, s]
+                    rb[14, u] = m[31, s]
+                    rb[15, u] = zeta[s]
+            a = e
+    if k_hist > 0:
+        base = (i % k_hist) * w
+        for t in range(w):
+            s, at = np.uint64(base + t), np.uint64(row + t)
+            hist[0, s] = m[1, at]
+            hist[1, s] = m[2, at]
+            hist[2, s] = m[3, at]
+            hist[3, s] = m[4, at]
+            hist[4, s] = m[8, at]
+            hist[5, s] = m[9, at]
+            hist[6, s] = m[10, at]
+            hist[7, s] = m[12, at]
+            hist[8, s] = m[15, at]
+            hist[9, s] = m[16, at]
+            hist[10, s] = m[24, at]
+            hist[11, s] = m[25, at]
+            hist[12, s] = m[26, at]
+            hist[13, s] = m[28, at]
+            hist[14, s] = m[31, at]
+            hist[15, s] = zeta[at]
+    for t in range(w):
+        u, at = np.uint64(t), np.uint64(row + t)
+        p0 = rb[0, u]  # {N}
+        p1 = rb[1, u]  # {W}
+        p2 = rb[2, u]  # {N,W}
+        p3 = rb[3, u]  # {I}
+        p4 = rb[4, u]  # {S}
+        p5 = rb[5, u]  # {N,S}
+        p6 = rb[6, u]  # {W,S}
+        p7 = rb[7, u]  # {I,S}
+        p8 = rb[8, u]  # {N,W,I,S}
+        p9 = rb[9, u]  # {M}
+        p10 = rb[10, u]  # {S,M}
+        p11 = rb[11, u]  # {N,S,M}
+        p12 = rb[12, u]  # {W,S,M}
+        p13 = rb[13, u]  # {I,S,M}
+        p14 = rb[14, u]  # Omega
+        z = rb[15, u]
+        sv, gv = sensor[i, u], gis[i, u]
+        # 2. sensor and map
+        ms3 = cs if (sv == 1) else zero  # {N,W}
+        ms28 = cs if (sv == 2) else zero  # {I,S,M}
+        ms31 = one if (sv == 0) else ncs  # Omega
+        mg4 = cm if (gv == 1) else zero  # {I}
+        mg25 = cm if (gv == 2) else zero  # {N,S,M}
+        mg26 = cm if (gv == 3) else zero  # {W,S,M}
+        mg31 = one if (gv == 0) else ncm  # Omega
+        k = ms3 * mg4  # conflict K
+        total = k >= one  # total conflict: m_sm is vacuous, as in rules.dempster
+        norm = zero if total else one / (one - k)
+        w1 = (ms3 * mg25) * norm  # m_sm({N})
+        w2 = (ms3 * mg26) * norm  # m_sm({W})
+        w3 = (ms3 * mg31) * norm  # m_sm({N,W})
+        w4 = (ms28 * mg4 + ms31 * mg4) * norm  # m_sm({I})
+        w24 = (ms28 * mg25 + ms28 * mg26) * norm  # m_sm({S,M})
+        w25 = (ms31 * mg25) * norm  # m_sm({N,S,M})
+        w26 = (ms31 * mg26) * norm  # m_sm({W,S,M})
+        w28 = (ms28 * mg31) * norm  # m_sm({I,S,M})
+        w31 = one if total else (ms31 * mg31) * norm  # m_sm(Omega)
+        # 3. conflicts, 4. accumulator
+        mf = p0 + p1 + p2
+        mo = p3 + p4 + p7 + p9 + p10 + p13
+        sm_free = w1 + w2 + w3
+        sm_occ = w4 + w24 + w28
+        conflict = mf * sm_occ + mo * sm_free
+        z_dec = max(zero, z - ddec)
+        z_inc = min(one, z + dinc)
+        z = z_dec if conflict > g_conf else (z_inc if mo >= g_occ else z)
+        zeta[at] = z
+        # 5. specialisation (A -> A minus {M}), 6. discounting
+        t10 = z * p10
+        p4 = p4 + t10
+        p10 = p10 - t10
+        t11 = z * p11
+        p5 = p5 + t11
+        p11 = p11 - t11
+        t12 = z * p12
+        p6 = p6 + t12
+        p12 = p12 - t12
+        t13 = z * p13
+        p7 = p7 + t13
+        p13 = p13 - t13
+        t14 = z * p14
+        p8 = p8 + t14
+        p14 = p14 - t14
+        p0 = p0 * keep
+        p1 = p1 * keep
+        p2 = p2 * keep
+        p3 = p3 * keep
+        p4 = p4 * keep
+        p5 = p5 * keep
+        p6 = p6 * keep
+        p7 = p7 * keep
+        p8 = p8 * keep
+        p9 = p9 * keep
+        p10 = p10 * keep
+        p11 = p11 * keep
+        p12 = p12 * keep
+        p13 = p13 * keep
+        p14 = p14 * keep
+        p14 = p14 + alpha
+        # 7. modified conjunctive combination
+        o0 = w1 * (p0 + p2 + p5 + p8 + p11 + p14) + w3 * (p0 + p5 + p11) + w25 * (p0 + p2) + w31 * p0
+        o1 = w2 * (p1 + p2 + p6 + p8 + p12 + p14) + w3 * (p1 + p6 + p12) + w26 * (p1 + p2) + w31 * p1
+        o2 = w3 * (p2 + p8 + p14) + w31 * p2
+        o3 = w4 * (p3 + p7 + p8 + p13 + p14) + w28 * p3 + w31 * p3
+        o4 = w24 * (p4 + p5 + p6 + p7 + p8) + w25 * (p4 + p6 + p7) + w26 * (p4 + p5 + p7) + w28 * (p4 + p5 + p6) + w31 * p4
+        o5 = w25 * (p5 + p8) + w31 * p5
+        o6 = w26 * (p6 + p8) + w31 * p6
+        o7 = w28 * (p7 + p8) + w31 * p7
+        o8 = w31 * p8
+        o9 = w4 * (p0 + p1 + p2) + w24 * (p0 + p1 + p2 + p9) + w25 * p9 + w26 * p9 + w28 * (p0 + p1 + p2 + p9) + w31 * p9
+        o10 = w24 * (p10 + p11 + p12 + p13 + p14) + w25 * (p10 + p12 + p13) + w26 * (p10 + p11 + p13) + w28 * (p10 + p11 + p12) + w31 * p10
+        o11 = w25 * (p11 + p14) + w31 * p11
+        o12 = w26 * (p12 + p14) + w31 * p12
+        o13 = w28 * (p13 + p14) + w31 * p13
+        o14 = w1 * (p1 + p3 + p4 + p6 + p7 + p9 + p10 + p12 + p13) + w2 * (p0 + p3 + p4 + p5 + p7 + p9 + p10 + p11 + p13) + w3 * (p3 + p4 + p7 + p9 + p10 + p13) + w4 * (p4 + p5 + p6 + p9 + p10 + p11 + p12) + w24 * p3 + w25 * (p1 + p3) + w26 * (p0 + p3) + w31 * p14
+        m[1, at] = o0
+        m[2, at] = o1
+        m[3, at] = o2
+        m[4, at] = o3
+        m[8, at] = o4
+        m[9, at] = o5
+        m[10, at] = o6
+        m[12, at] = o7
+        m[15, at] = o8
+        m[16, at] = o9
+        m[24, at] = o10
+        m[25, at] = o11
+        m[26, at] = o12
+        m[28, at] = o13
+        m[31, at] = o14
+        # BetP: each set's share 1/|A| once, then the sum per class
+        q2 = o2 * r2
+        q5 = o5 * r2
+        q6 = o6 * r2
+        q7 = o7 * r2
+        q8 = o8 * r4
+        q10 = o10 * r2
+        q11 = o11 * r3
+        q12 = o12 * r3
+        q13 = o13 * r3
+        q14 = o14 * r5
+        betp[0, at] = o0 + q2 + q5 + q8 + q11 + q14
+        betp[1, at] = o1 + q2 + q6 + q8 + q12 + q14
+        betp[2, at] = o3 + q7 + q8 + q13 + q14
+        betp[3, at] = o4 + q5 + q6 + q7 + q8 + q10 + q11 + q12 + q13 + q14
+        betp[4, at] = o9 + q10 + q11 + q12 + q13 + q14
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def inplace_update(m, zeta, sensor, gis, warp_on, geo, prm, betp, hist, k_hist,
+                   desc):  # pragma: no cover - compiled
+    h, w = sensor.shape
+    rb = np.empty((ROW_PLANES, w), np.float32)
+    src = np.empty(w, np.int64)
+    for r in range(h):
+        i = h - 1 - r if desc else r
+        inplace_row(i, m, zeta, sensor, gis, warp_on, geo, prm, betp, rb, src, hist, k_hist,
+                    desc, m, zeta)

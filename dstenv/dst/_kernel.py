@@ -13,12 +13,15 @@ the warp needs no special case.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-from dstenv.dst._fused import PRM, REACHABLE, fused_update
+from dstenv.dst._fused import PRM, REACHABLE, ROW_PLANES, fused_update, inplace_update
 from dstenv.dst.params import DSTParams
 
-__all__ = ["REACHABLE", "kernel_params", "plane_grid", "grid_view", "fused_update"]
+__all__ = ["REACHABLE", "ROW_PLANES", "kernel_params", "plane_grid", "grid_view",
+           "fused_update", "inplace_update", "history_rows"]
 
 
 def kernel_params(params: DSTParams) -> np.ndarray:
@@ -59,3 +62,31 @@ def grid_view(planes: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
     """The ``(C, H, W)`` view of a :func:`plane_grid` array (no copy, not C-contiguous)."""
     h, w = shape
     return planes[:, : h * w].reshape(planes.shape[0], h, w)
+
+
+def history_rows(geo: np.ndarray, shape: tuple[int, int]) -> tuple[int, bool]:
+    """Row order and history ring of :func:`inplace_update` for one motion.
+
+    Cell ``(i, j)`` reads the previous cell ``si = floor(e(i, j) + 0.5)`` with ``e``
+    affine in ``(i, j)`` (``row_sources``), so ``i - si`` is at most
+    ``floor(0.5 - min(e - i))`` over the four corners. Rows are updated in the order
+    whose sources lie mostly ahead (not yet overwritten); the ring keeps the
+    original of as many overwritten rows as a source can lag behind (0 for a pure
+    translation along the rows' order, ~W/2 sin(dyaw) rows for a turn).
+
+    Args:
+        geo: ``(5,) float64`` ``(cos dyaw, sin dyaw, dx [m], dy [m], cell [m])``.
+        shape: ``(H, W)``.
+
+    Returns:
+        ``(k_hist, desc)``: rows in the ring, and whether rows run from H - 1 down to 0.
+    """
+    ct, st, dx, _, cell = (float(v) for v in geo)
+    h, w = shape
+    i0, j0 = h // 2, w // 2
+    lag = [i0 - (ct * (i0 - i) - st * (j0 - j)) - dx / cell - i
+           for i in (0, h - 1) for j in (0, w - 1)]  # e - i at the corners
+    eps = 1e-6  # float64 rounding of row_sources' formula
+    behind = max(0, math.floor(0.5 - min(lag) + eps))  # ascending: max(i - si)
+    ahead = max(0, math.floor(0.5 + max(lag) + eps))  # descending: max(si - i)
+    return (ahead, True) if ahead < behind else (behind, False)

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from dstenv.dst.filter import PerceptionGridFilter
+from dstenv.dst.frame import NUM_CLASSES
 from dstenv.dst.params import DSTParams
 from dstenv.grid import relative_pose
 
@@ -90,8 +91,9 @@ class GridTracker:
         if pose.shape != (3,) or not np.isfinite(pose).all():
             raise ValueError(f"GridTracker.step: pose must be a finite (3,) array, got {pose!r}")
         motion = None if self.prev_pose is None else relative_pose(self.prev_pose, pose)
-        m = self.filter.update(sensor, gis, motion, copy=masses)
-        betp = self.filter.pignistic()
+        # the kernel writes BetP straight into this frame's own array (no copy)
+        betp = np.empty((NUM_CLASSES, *self.filter.shape), np.float32)
+        m = self.filter.update(sensor, gis, motion, copy=masses, betp=betp)
         prev = betp if self.prev_betp is None else self.prev_betp
         self.prev_pose, self.prev_betp = pose.copy(), betp
         self.steps += 1

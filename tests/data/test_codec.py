@@ -112,13 +112,26 @@ def test_stride1_prev_chunk_is_shared_and_reads_back(tmp_path, frames, shard_att
 
 @pytest.mark.parametrize("shape", [(256, 256), (12, 10), (13, 7), (1, 1), (37, 29)])
 def test_quantize_cells_is_the_cell_major_quantisation(shape):
-    # eight cells are packed into five words; grids whose cell count is no multiple of
-    # 8 (or of the 512-cell block) end in single bytes
+    # odd sizes, values outside [0, 1] and exact ties (k + 0.5) / 255 round as numpy does
     rng = np.random.default_rng(3)
     p = (rng.random((5, *shape)) * 1.2 - 0.1).astype(np.float32)
+    ties = ((np.arange(p.size) % 256 + 0.5) / 255).astype(np.float32).reshape(p.shape)
+    p[:, ::2] = ties[:, ::2]
     q = quantize_cells(p, 255)
     assert q.shape == (*shape, 5) and q.dtype == np.uint8 and q.flags.c_contiguous
     np.testing.assert_array_equal(q, quantize(p, 255).transpose(1, 2, 0))
+    np.testing.assert_array_equal(q, np.rint(np.clip(p, 0, 1) * np.float32(255))
+                                  .astype(np.uint8).transpose(1, 2, 0))
+    buf = np.full((*shape, 5), 7, np.uint8)
+    assert quantize_cells(p, 255, out=buf) is buf
+    np.testing.assert_array_equal(buf, q)
+    with pytest.raises(ValueError, match="out must be"):
+        quantize_cells(p, 255, out=np.empty((*shape, 4), np.uint8))
+    for bad in (np.nan, -np.inf):
+        p2 = p.copy()
+        p2[2, 0, -1] = bad
+        with pytest.raises(ValueError, match="NaN/inf"):
+            quantize_cells(p2, 255)
     p[4, -1, -1] = np.inf
     with pytest.raises(ValueError, match="NaN/inf"):
         quantize_cells(p, 255)

@@ -38,3 +38,20 @@ def test_row_kernel_is_vectorised():
     fresh = numba.jit(pipeline_class=_fused.NoAliasCompiler, **kernel.targetoptions)(kernel.py_func)
     fresh(*args)
     assert re.search(r"fadd[^\n]*<\d+ x float>", next(iter(fresh.inspect_llvm().values())))
+
+
+def test_in_place_row_kernel_is_vectorised():
+    h, w = 3, 40
+    masses, zeta = plane_grid(32, (h, w)), plane_grid(1, (h, w))[0]
+    masses[31] = 1.0
+    args = (
+        1, masses, zeta, np.ones((h, w), np.uint8), np.full((h, w), 2, np.uint8),
+        True, np.array([1.0, 0.0, 0.33, 0.0, 0.33]), kernel_params(DSTParams()),
+        plane_grid(5, (h, w)), np.empty((_fused.ROW_PLANES, w), np.float32),
+        np.empty(w, np.int64), np.empty((_fused.ROW_PLANES, w), np.float32), 1, False,
+        masses, zeta,
+    )
+    kernel = _fused.inplace_row
+    fresh = numba.jit(pipeline_class=_fused.NoAliasCompiler, **kernel.targetoptions)(kernel.py_func)
+    fresh(*args)
+    assert re.search(r"fadd[^\n]*<\d+ x float>", next(iter(fresh.inspect_llvm().values())))

@@ -6,7 +6,10 @@ import numpy as np
 import pytest
 
 from dstenv.dst import M, NUM_SETS, OMEGA, DSTParams, PerceptionGridFilter, pignistic, vacuous
-from dstenv.dst._kernel import REACHABLE
+from dstenv.dst import filter as filter_module
+from dstenv.dst._kernel import (
+    REACHABLE, ROW_PLANES, history_rows, inplace_update, kernel_params, plane_grid,
+)
 from dstenv.dst.reference import reference_update
 from dstenv.grid import GridSpec, relative_pose
 
@@ -134,9 +137,13 @@ def test_reset_and_determinism():
         assert np.array_equal(a, b)
 
 
-def test_large_rotation_and_leaving_the_grid():
+@pytest.mark.parametrize("in_place", [False, True])
+def test_large_rotation_and_leaving_the_grid(in_place, monkeypatch):
     # runs of consecutive source cells are short under a large turn, and a long jump
-    # makes every cell come from outside (the vacuous pad); both must match the reference
+    # makes every cell come from outside (the vacuous pad); both must match the reference,
+    # with the double buffer and in place (a turn of 2.5 rad needs a ring of most rows)
+    if in_place:
+        monkeypatch.setattr(filter_module, "IN_PLACE_MIN_CELLS", 0)
     rng = np.random.default_rng(11)
     shape, params = (40, 37), DSTParams.default()
     f = PerceptionGridFilter(shape, params, cell_size=0.5)
@@ -162,6 +169,45 @@ def test_threads_give_identical_results():
         assert np.array_equal(one.update(sensor, gis, motion), two.update(sensor, gis, motion))
         assert np.array_equal(one.zeta, two.zeta)
         assert np.array_equal(one.pignistic(), two.pignistic())
+
+
+@pytest.mark.skipif((os.cpu_count() or 1) < 2, reason="a single CPU")
+@pytest.mark.parametrize("motion, ring, desc", [
+    ((0.0, 0.0, 0.3), True, False),     # a turn: sources behind the current row
+    ((0.0, 0.0, -0.3), True, False),
+    ((0.33, 0.02, 0.004), False, True),  # forward at 10 Hz: rows bottom-up, no ring
+    ((-2.0, 0.5, 0.05), False, False),   # sources ahead of the rows in ascending order
+    ((0.5, 0.0, 0.2), True, True),
+])
+def test_in_place_update_equals_the_double_buffer(motion, ring, desc, monkeypatch):
+    monkeypatch.setattr(filter_module, "IN_PLACE_MIN_CELLS", 0)  # small grids in place too
+    # threads=1 updates in place (rows ordered by the motion, a ring of overwritten
+    # rows); threads=2 reads one buffer and writes the other: same bits
+    rng = np.random.default_rng(9)
+    shape = (64, 48)
+    geo = np.array([np.cos(motion[2]), np.sin(motion[2]), motion[0], motion[1], 0.33])
+    k_hist, down = history_rows(geo, shape)
+    assert (k_hist > 0) == ring and down == desc
+    one, two = PerceptionGridFilter(shape), PerceptionGridFilter(shape, threads=2)
+    for _ in range(3):
+        sensor = rng.integers(0, 3, shape).astype(np.uint8)
+        gis = rng.integers(0, 4, shape).astype(np.uint8)
+        assert np.array_equal(one.update(sensor, gis, motion), two.update(sensor, gis, motion))
+        assert np.array_equal(one.zeta, two.zeta)
+        assert np.array_equal(one.pignistic(), two.pignistic())
+
+
+def test_in_place_update_refuses_a_short_ring():
+    # a turn needs the ring; without it the kernel stops instead of reading new values
+    h, w = 32, 32
+    m = plane_grid(NUM_SETS, (h, w))
+    m[OMEGA] = 1.0
+    geo = np.array([np.cos(0.3), np.sin(0.3), 0.0, 0.0, 0.33])
+    assert history_rows(geo, (h, w))[0] > 0
+    with pytest.raises(RuntimeError, match="history ring too short"):
+        inplace_update(m, plane_grid(1, (h, w))[0], full((h, w), 1), full((h, w), 2), True, geo,
+                       kernel_params(DSTParams.default()), plane_grid(5, (h, w)),
+                       np.empty((ROW_PLANES, w), np.float32), 0, False)
 
 
 @pytest.mark.parametrize("threads", [0, 10_000, 1.5])
@@ -218,3 +264,48 @@ def test_params_validation_and_presets():
     with pytest.raises(ValueError, match="unknown DST parameter 'alfa'"):
         DSTParams.from_dict({"alfa": 0.2})
     assert DSTParams.from_dict(DSTParams.paper().to_dict()) == DSTParams.paper()
+
+
+def test_betp_written_into_the_callers_array():
+    rng = np.random.default_rng(4)
+    shape = (12, 9)
+    f, g = PerceptionGridFilter(shape), PerceptionGridFilter(shape)
+    for _ in range(3):
+        sensor = rng.integers(0, 3, shape).astype(np.uint8)
+        gis = rng.integers(0, 4, shape).astype(np.uint8)
+        out = np.full((5, *shape), np.nan, np.float32)
+        f.update(sensor, gis, (0.4, 0.1, 0.05), betp=out)
+        g.update(sensor, gis, (0.4, 0.1, 0.05))
+        np.testing.assert_array_equal(out, g.pignistic())
+        np.testing.assert_array_equal(f.pignistic(), out)
+        np.testing.assert_allclose(out, pignistic(g.masses), atol=2e-6)
+    f.reset()
+    np.testing.assert_allclose(f.pignistic(), 0.2)
+    for bad in (np.empty((5, *shape), np.float64), np.empty((5, 12, 10), np.float32),
+                np.empty((5, 9, 12), np.float32).transpose(0, 2, 1)):
+        with pytest.raises(ValueError, match="betp must be a writeable C-contiguous float32"):
+            f.update(sensor, gis, betp=bad)
+
+
+@pytest.mark.skipif((os.cpu_count() or 1) < 2, reason="a single CPU")
+@pytest.mark.parametrize("shape", [(2, 2), (3, 3), (5, 2), (1, 7)])
+def test_in_place_update_on_tiny_grids(shape, monkeypatch):
+    monkeypatch.setattr(filter_module, "IN_PLACE_MIN_CELLS", 0)
+    # on 2-3 columns a turn can make a run of consecutive sources cross into the next
+    # row; the in-place kernel splits it (ring rows are not adjacent in memory)
+    rng = np.random.default_rng(2)
+    one, two = PerceptionGridFilter(shape, cell_size=1.0), PerceptionGridFilter(shape, threads=2,
+                                                                                cell_size=1.0)
+    for motion in [(0.0, 0.0, np.pi), (0.4, 1.2, 2.0), (-1.0, 0.0, -1.7), (0.0, 1.0, 0.0)] * 2:
+        sensor = rng.integers(0, 3, shape).astype(np.uint8)
+        gis = rng.integers(0, 4, shape).astype(np.uint8)
+        assert np.array_equal(one.update(sensor, gis, motion), two.update(sensor, gis, motion))
+        assert np.array_equal(one.zeta, two.zeta)
+
+
+def test_in_place_only_for_large_single_thread_grids(monkeypatch):
+    big = int(np.ceil(np.sqrt(filter_module.IN_PLACE_MIN_CELLS)))
+    assert len(PerceptionGridFilter((big, big))._buf) == 1
+    assert len(PerceptionGridFilter((big - 1, big - 1))._buf) == 2
+    monkeypatch.setattr(filter_module, "IN_PLACE_MIN_CELLS", 0)
+    assert len(PerceptionGridFilter((4, 4))._buf) == 1

@@ -252,7 +252,7 @@ def prepare_points(points: np.ndarray, offset: tuple[float, float] = (0.0, 0.0)
     Returns:
         ``(xyz, (r, angle))``: ``(P, 3) float32`` column-major (each coordinate
         contiguous) and its polar coordinates, ``(P,) float32`` each
-        (:func:`polar_coordinates` in float32: range within an ulp, azimuth within
+        (:func:`polar_coordinates` in float32: range within two ulps, azimuth within
         ~2e-7 rad); one pass over ``points``.
     """
     pts = np.asarray(points)

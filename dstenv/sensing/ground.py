@@ -241,8 +241,9 @@ def prepare_points(points: np.ndarray, offset: tuple[float, float] = (0.0, 0.0)
 
     float32, as the scan itself (the KITTI ``.bin`` layout, the simulated cloud): the
     copy of a float32 scan is exact (the stages widen its values to float64 where they
-    compute, so planes and heights are those of a float64 copy), the polar pass runs 8
-    lanes wide instead of 4 and every pass after it reads half the bytes.
+    compute, so planes and heights are those of a float64 copy; a float64 scan, or an
+    ``offset``, is rounded to float32), the polar pass runs 8 lanes wide instead of 4
+    and every pass after it reads half the bytes.
 
     Args:
         points: ``(P, 3+) float32 or float64`` Velodyne points (KITTI ``.bin`` rows).
@@ -253,7 +254,7 @@ def prepare_points(points: np.ndarray, offset: tuple[float, float] = (0.0, 0.0)
         ``(xyz, (r, angle))``: ``(P, 3) float32`` column-major (each coordinate
         contiguous) and its polar coordinates, ``(P,) float32`` each
         (:func:`polar_coordinates` in float32: range within two ulps, azimuth within
-        ~2e-7 rad); one pass over ``points``.
+        3e-7 rad); one pass over ``points``.
     """
     pts = np.asarray(points)
     if pts.ndim != 2 or pts.shape[1] < 3:

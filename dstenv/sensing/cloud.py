@@ -87,7 +87,7 @@ def scan_sensor_grid(
     cells as one ray per point.
 
     Args:
-        points: ``(P, 3+) float`` Velodyne points.
+        points: ``(P, 3+) float32 or float64`` Velodyne points.
         ground, obstacle: ``(P,) bool`` masks from :func:`~dstenv.sensing.ground.classify_points`.
         spec: grid geometry (the sensor at the ego cell).
         max_range: rays are clipped to this horizontal range [m].
@@ -101,7 +101,8 @@ def scan_sensor_grid(
     Returns:
         ``(H, W) uint8``: 0 unknown, 1 free, 2 occupied.
     """
-    xyz = np.asarray(points, dtype=np.float64)
+    xyz = np.asarray(points)  # float32 rows as they are (the road's copy is float32)
+    xyz = xyz if xyz.dtype in (np.float32, np.float64) else xyz.astype(np.float64)
     ground = np.asarray(ground, dtype=bool)
     obstacle = np.asarray(obstacle, dtype=bool)
     block = obstacle if blocking is None else np.asarray(blocking, dtype=bool) & obstacle

@@ -9,6 +9,7 @@ refit. Split from :mod:`dstenv.sensing.ground` to keep both modules small.
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numba
@@ -52,9 +53,10 @@ def sample_candidates(pick: np.ndarray, size: int, iterations: int, seed: int
         ``(iterations, 3) int64`` positions in them."""
     k = len(pick)
     if 10000 < k and k // 50 < size < k:
-        rng = np.random.default_rng(seed)
         # each pick and each triplet index takes one 32-bit half (rejections are ~1e-5)
-        words = rng.bit_generator.random_raw((size + 3 * iterations) // 2 + 64)
+        count = (size + 3 * iterations) // 2 + 64
+        words = (_raw_words(int(seed), count) if isinstance(seed, int | np.integer) else
+                 np.random.default_rng(seed).bit_generator.random_raw(count))
         sub, tri, ok = _tail_sample(words, k, size, 3 * iterations)
         if ok:
             return pick[sub], tri.reshape(iterations, 3)
@@ -62,6 +64,16 @@ def sample_candidates(pick: np.ndarray, size: int, iterations: int, seed: int
     if k > size:
         pick = pick[rng.choice(k, size, replace=False)]
     return pick, rng.integers(0, len(pick), size=(iterations, 3))
+
+
+@functools.lru_cache(maxsize=8)
+def _raw_words(seed: int, count: int) -> np.ndarray:
+    """``(count,) uint64``: the first raw words of ``default_rng(seed)``, a function of the
+    seed alone, so made once and not for every scan (a generator's construction is
+    ~30 us, the road's longest NumPy call); read-only."""
+    words = np.random.default_rng(seed).bit_generator.random_raw(count)
+    words.flags.writeable = False
+    return words
 
 
 @numba.njit(cache=True)

@@ -100,21 +100,22 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             classify_points,
             fit_ground_plane,
             ground_config,
-            polar_coordinates,
+            prepare_points,
         )
 
         cloud = sweep3d()
         # the stages of the point-cloud road on this cloud, as cloud_sensor_grid runs them
+        # (its float32 copy of the points and their polar coordinates first)
         gcfg = ground_config(hdl.config["ground"])
-        xyz = np.asfortranarray(cloud.points[:, :3], dtype=np.float64)
-        polar = polar_coordinates(xyz)
+        offset = (float(cloud.mount[0]), float(cloud.mount[1]))
+        xyz, polar = prepare_points(cloud.points, offset)
         plane = fit_ground_plane(xyz, gcfg, polar=polar)
         ground, obstacle, height = classify_points(xyz, plane, gcfg, polar=polar)
         rays = hdl.config["rays"]
 
         def removal():
-            pol = polar_coordinates(xyz)
-            classify_points(xyz, fit_ground_plane(xyz, gcfg, polar=pol), gcfg, polar=pol)
+            pts, pol = prepare_points(cloud.points, offset)
+            classify_points(pts, fit_ground_plane(pts, gcfg, polar=pol), gcfg, polar=pol)
 
         cases.update({
             "hdl64 sweep (64 x 2048 beams)": sweep3d,

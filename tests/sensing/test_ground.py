@@ -13,6 +13,8 @@ from dstenv.sensing.ground import (
     fit_ground_plane,
     ground_heights,
     ground_walk,
+    polar_coordinates,
+    prepare_points,
 )
 
 
@@ -80,6 +82,29 @@ def test_local_walk_follows_a_rising_verge():
     far_verge = pts[:, 1] > 16  # > 1.1 m above the road plane
     assert (h_plane[far_verge] > 1.0).all()
     assert np.abs(h_local[far_verge]).max() < 0.2
+
+
+def test_prepare_points_float32_copy_and_polar():
+    """The road's float32 copy is exact for float32 rows, the offset shifts x and y, and
+    the float32 polar pass is within two ulps of the range and 3e-7 rad of atan2 (the
+    azimuth of a point on an axis, signed zeros included, is atan2's)."""
+    rng = np.random.default_rng(3)
+    pts = rng.uniform(-80, 80, (20000, 4)).astype(np.float32)
+    pts[:8, :2] = [[0, 0], [3, 0], [-3, 0], [0, 3], [0, -3], [-3, -0.0], [-0.0, -0.0], [1e-30, 5]]
+    xyz, (r, a) = prepare_points(pts)
+    assert xyz.dtype == r.dtype == a.dtype == np.float32 and xyz.flags.f_contiguous
+    assert np.array_equal(xyz, pts[:, :3])
+    x, y = pts[:, 0].astype(np.float64), pts[:, 1].astype(np.float64)
+    assert np.all(np.abs(r - np.hypot(x, y)) <= 2 * np.spacing(r))  # float32 arithmetic
+    assert np.abs(a - np.arctan2(y, x)).max() < 3e-7
+    assert np.array_equal(a[:7], np.arctan2(y[:7], x[:7]).astype(np.float32))
+    assert np.all(np.abs(a) <= np.float32(np.pi))
+    shifted, (r2, _) = prepare_points(pts, offset=(1.5, -2.0))
+    assert np.array_equal(shifted[:, 0], (x + 1.5).astype(np.float32))
+    assert np.array_equal(shifted[:, 1], (y - 2.0).astype(np.float32))
+    # the float64 polar of the public function agrees with the float32 one
+    r64, a64 = polar_coordinates(pts[:, :3].astype(np.float64))
+    assert np.abs(r64 - r).max() < 1e-4 and np.abs(a64 - a).max() < 3e-7
 
 
 def test_no_ground_and_unknown_key():

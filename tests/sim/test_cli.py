@@ -27,3 +27,4 @@ def test_world_benchmark_reports_each_stage():
     assert 30 <= res["agents"] <= 50
     for key in ("world step", "reference np.sin(256x256)"):
         assert res[key]["ms"] > 0 and np.isfinite(res[key]["x_ref"])
+        assert 0 < res[key]["min_ms"] <= res[key]["ms"]

@@ -21,6 +21,7 @@ Roads win over buildings where both are drawn, as in the OSM loader.
 from __future__ import annotations
 
 import math
+import weakref
 from collections.abc import Mapping
 from typing import Any
 
@@ -47,21 +48,30 @@ def draw_known_map(world_map: WorldMap, cfg: Mapping[str, Any], rng: np.random.G
     Returns:
         ``(Hm, Wm) uint8`` :class:`MapClass` raster on the grid of ``world_map.raster``.
 
-    The whole raster is touched twice at most (the class remap, and the true roads
-    again for ``road_width = "true"``); buildings and street bands are painted by one
-    numba call each, over flat vertex arrays.
+    The first draw of a map paints in that order (class remap, buildings, roads);
+    later draws of the same map (a map pool, ``keep_map``) copy a cached base that
+    holds the remap and the roads, paint the buildings and then the roads again from
+    the base's road runs: the same raster, without the two passes over it.
     """
     truth = np.ascontiguousarray(world_map.raster, dtype=np.uint8)
     res, org = float(world_map.resolution), world_map.origin
     by_lanes = cfg["road_width"] == "lanes" and len(world_map.streets) > 0
-    # what the map knows before anything is drawn: buildings (and, drawn by lanes,
-    # roads) become the background, as do the unknown open spaces
-    bg = MapClass.NONE if cfg["background"] == "none" else MapClass.INTERMEDIATE
-    lut = np.arange(4, dtype=np.uint8)
-    lut[[MapClass.BUILDING, MapClass.INTERMEDIATE]] = bg
-    if by_lanes:
-        lut[MapClass.ROAD] = bg
-    out = _remap(truth, lut)
+    key = (id(world_map.raster), by_lanes, cfg["background"], cfg["nominal_lane_width"])
+    seen = _BASES.get(id(world_map))
+    if seen is None:
+        weakref.finalize(world_map, _BASES.pop, id(world_map), None)
+    if seen is None or seen[0] != key:  # first draw: no base (a fresh map is drawn once)
+        _BASES[id(world_map)] = (key, None)
+        out = _remap_classes(truth, cfg, by_lanes)
+        runs = None
+    else:
+        if seen[1] is None:
+            base = _remap_classes(truth, cfg, by_lanes)
+            _paint_roads(base, world_map, truth, cfg, by_lanes)
+            base.flags.writeable = False
+            _BASES[id(world_map)] = (key, (base, _runs(base, np.uint8(MapClass.ROAD))))
+        base, runs = _BASES[id(world_map)][1]
+        out = base.copy()
     kept = np.ones(len(world_map.buildings), bool)
     kept[np.asarray(drop, np.int64)] = False
     xy, ptr = _moved_outlines([world_map.buildings[b] for b in np.flatnonzero(kept)], cfg, rng)
@@ -69,7 +79,37 @@ def draw_known_map(world_map: WorldMap, cfg: Mapping[str, Any], rng: np.random.G
     n_extra = rng.poisson(cfg["extra_building_rate"] * len(world_map.buildings)) \
         if cfg["extra_building_rate"] > 0 else 0
     _extra_buildings(out, truth, res, rng, int(n_extra))
+    if runs is None:
+        _paint_roads(out, world_map, truth, cfg, by_lanes)
+    else:
+        _paint_runs(out, runs, np.uint8(MapClass.ROAD))
+    return out
+
+
+#: per live map (by ``id``): ``(key, None)`` after its first draw, ``(key, (base,
+#: road runs))`` from its second (see :func:`draw_known_map`); ``key`` holds the
+#: raster object and the ``gis`` keys the base depends on (a map's raster and
+#: streets do not change after it is built)
+_BASES: dict[int, tuple[tuple[Any, ...], tuple[np.ndarray, np.ndarray] | None]] = {}
+
+
+def _remap_classes(truth: np.ndarray, cfg: Mapping[str, Any], by_lanes: bool) -> np.ndarray:
+    """What the map knows before anything is drawn: ``(Hm, Wm) uint8``. Buildings (and,
+    drawn by lanes, roads) become the background, as do the unknown open spaces."""
+    bg = MapClass.NONE if cfg["background"] == "none" else MapClass.INTERMEDIATE
+    lut = np.arange(4, dtype=np.uint8)
+    lut[[MapClass.BUILDING, MapClass.INTERMEDIATE]] = bg
     if by_lanes:
+        lut[MapClass.ROAD] = bg
+    return _remap(truth, lut)
+
+
+def _paint_roads(out: np.ndarray, world_map: WorldMap, truth: np.ndarray,
+                 cfg: Mapping[str, Any], by_lanes: bool) -> None:
+    """Roads over ``out``, in place: street bands of ``lanes x nominal_lane_width``
+    (``by_lanes``), else the true road cells."""
+    if by_lanes:
+        res, org = float(world_map.resolution), world_map.origin
         lines = [np.asarray(line, np.float64) for line in world_map.streets]
         half = np.array([0.5 * max(int(n), 1) * cfg["nominal_lane_width"]
                          for n in world_map.street_lanes], np.float64)
@@ -78,7 +118,39 @@ def draw_known_map(world_map: WorldMap, cfg: Mapping[str, Any], rng: np.random.G
                      res, np.uint8(MapClass.ROAD))
     else:
         paint_where(out, truth, MapClass.ROAD, MapClass.ROAD)
-    return out
+
+
+@numba.njit(cache=True)
+def _runs(a, value):  # pragma: no cover - numba
+    """``(N, 3) int64`` rows ``row, c0, c1``: the runs ``a[row, c0:c1] == value``."""
+    h, w = a.shape
+    n = 0
+    out = np.empty((1024, 3), np.int64)
+    for r in range(h):
+        row = a[r]
+        c0 = -1  # start of the open run (-1: none)
+        for c in range(w + 1):
+            on = c < w and row[c] == value
+            if on == (c0 >= 0):
+                continue
+            if on:
+                c0 = c
+                continue
+            if n == out.shape[0]:
+                grown = np.empty((2 * n, 3), np.int64)
+                grown[:n] = out
+                out = grown
+            out[n, 0], out[n, 1], out[n, 2] = r, c0, c
+            n += 1
+            c0 = -1
+    return out[:n].copy()
+
+
+@numba.njit(cache=True)
+def _paint_runs(out, runs, value):  # pragma: no cover - numba
+    """``out[row, c0:c1] = value`` for every row of ``runs``."""
+    for k in range(runs.shape[0]):
+        out[runs[k, 0], runs[k, 1]:runs[k, 2]] = value
 
 
 def _moved_outlines(polys: list[np.ndarray], cfg: Mapping[str, Any], rng: np.random.Generator

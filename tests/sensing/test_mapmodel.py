@@ -99,3 +99,39 @@ def test_street_bands_are_the_cells_within_half_a_width_of_the_line():
             ref |= (ax + t * ex - xc) ** 2 + (ay + t * ey - yc) ** 2 <= half * half
     assert ref.sum() > 1000
     assert np.array_equal(out == 2, ref)
+
+
+def test_cached_base_gives_the_raster_drawn_in_order():
+    """Every draw of a map equals drawing everything in order on a fresh raster: remap,
+    shifted outlines, extra buildings, roads last. The first draw does exactly that,
+    the second builds the map's cached base (remap + roads) and later ones reuse it
+    (buildings, then the road runs again); for both road modes, the cache following
+    a change of the gis keys."""
+    from dstenv.sensing.mapmodel import _extra_buildings, _moved_outlines, _paint_bands
+    from dstenv.sim.raster import fill_polygons_flat
+
+    m = _street_map()
+    m.buildings.append(np.array([[-12.0, -3.0], [-4.0, -3.0], [-4.0, 6.0], [-12.0, 6.0]]))
+    for road_width in ("lanes", "true", "lanes"):
+        cfg = gis_config({**EXACT, "road_width": road_width, "outline_shift_std": 1.5,
+                          "extra_building_rate": 1.0, "nominal_lane_width": 2.5})
+        for seed in (1, 2, 3):
+            known = draw_known_map(m, cfg, np.random.default_rng(seed), np.zeros(0, np.int64))
+            rng = np.random.default_rng(seed)
+            ref = m.raster.copy()
+            ref[(ref == MapClass.BUILDING) | (ref == MapClass.INTERMEDIATE)] = \
+                MapClass.INTERMEDIATE
+            if road_width == "lanes":
+                ref[ref == MapClass.ROAD] = MapClass.INTERMEDIATE
+            xy, ptr = _moved_outlines(m.buildings, cfg, rng)
+            fill_polygons_flat(ref, xy, ptr, m.origin, m.resolution, MapClass.BUILDING)
+            _extra_buildings(ref, m.raster, m.resolution, rng,
+                             int(rng.poisson(1.0 * len(m.buildings))))
+            if road_width == "lanes":
+                _paint_bands(ref, m.streets[0], np.array([0, 2]), np.array([2.5]),
+                             m.origin[0], m.origin[1], m.resolution, np.uint8(MapClass.ROAD))
+            else:
+                ref[m.raster == MapClass.ROAD] = MapClass.ROAD
+            # the extra outline crosses the road: roads must win over it
+            assert (ref == MapClass.BUILDING).sum() > 300
+            assert np.array_equal(known, ref)

@@ -22,8 +22,7 @@ import numpy as np
 
 from dstenv.sim.lanes import Control, NetworkBuilder
 from dstenv.sim.medians import draw_medians, median_box
-from dstenv.sim.raster import (Surface, fill_polygons, fill_rect, fill_rects, fillet_corners,
-                               paint_where)
+from dstenv.sim.raster import Surface, fill_polygons, fill_rect, fill_rects, fillet_corners
 from dstenv.sim.roads import RoadEdge, add_road_lanes
 from dstenv.sim.roundabout import (island_clutter, paint_roundabout, pick_roundabouts,
                                    ring_nodes)
@@ -46,7 +45,8 @@ def generate_city(cfg: dict[str, Any], traffic: dict[str, Any], rng: np.random.G
 
     Returns:
         A :class:`WorldMap` with ``lanes`` a :class:`~dstenv.sim.lanes.LaneNetwork`
-        and ``meta`` keys ``surface`` (``(Hm, Wm) uint8`` :class:`Surface` codes),
+        and ``meta`` keys ``surface`` (``(Hm, Wm) uint8`` :class:`Surface` codes; of
+        a warped city read it with :func:`~dstenv.sim.raster.surface_raster`),
         ``parking_slots`` (``(S, 6) float64`` x, y, yaw, length, width, height; see
         :mod:`dstenv.sim.parking`), ``kind``, ``warp`` (the :class:`Warp` applied,
         or None), ``roundabouts`` (``(R, 4) float64`` centre x, y, outer and island
@@ -251,25 +251,24 @@ def generate_city(cfg: dict[str, Any], traffic: dict[str, Any], rng: np.random.G
                                                      clutter, geo)])
     streets = [e.poly for e in edges]
     meta = {"kind": "procedural", "parking_slots": slots, "faces": faces, "warp": None,
+            "surface": surface,
             "roundabouts": np.array([[*r.centre, r.r_out, r.r_island] for r in rounds]
                                     ).reshape(-1, 4)}
     if drawn is not None:  # curved and diagonal streets: everything through one warp
         warp, (width, height) = drawn
         shape = (int(np.ceil(height / res)), int(np.ceil(width / res)))
-        raster, surface = warp.rasters((raster, surface), shape, res,
-                                       (MapClass.INTERMEDIATE, Surface.YARD))
+        # the drawing-only surface is warped when first read (raster.surface_raster)
+        raster = warp.raster(raster, shape, res, MapClass.INTERMEDIATE)
         warp_lanes(builder, warp)
         node_xy = warp.points(node_xy)
         buildings = [b[:-1] for b in warp.polylines([np.vstack([b, b[:1]]) for b in buildings],
                                                     BUILDING_STEP)]
         fill_polygons(raster, buildings, org, res, MapClass.BUILDING)
-        paint_where(surface, raster, MapClass.BUILDING, Surface.BUILDING)
         slots = warp_boxes(warp, slots)
         obstacles = warp_obstacles(warp, obstacles)
         streets = warp.polylines(streets)
         meta["roundabouts"][:, :2] = warp.points(meta["roundabouts"][:, :2])
-        meta.update(parking_slots=slots, warp=warp)
-    meta["surface"] = surface
+        meta.update(parking_slots=slots, warp=warp, surface_source=meta.pop("surface"))
     network = builder.build(node_xy, control, phase, lw)
     street_lanes = np.array([e.n_fwd + e.n_bwd for e in edges], np.int64)
     return WorldMap(raster=raster, origin=org, resolution=res, buildings=buildings,

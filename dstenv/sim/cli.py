@@ -27,9 +27,11 @@ def draw_world(ax: Any, world: Any, sweep: Any = None, extent: float | None = No
     """
     from matplotlib.collections import LineCollection, PolyCollection
 
+    from dstenv.sim.raster import surface_raster
+
     wm = world.map
     x0, x1, y0, y1 = wm.bounds
-    surface = wm.meta.get("surface")
+    surface = surface_raster(wm)
     rgb = SURFACE_RGB[surface] if surface is not None else MAPCLASS_RGB[wm.raster]
     ax.imshow(rgb, origin="lower", extent=(x0, x1, y0, y1), interpolation="nearest")
     if lanes and wm.lanes is not None:

@@ -8,11 +8,11 @@ import numpy as np
 from dstenv.sim.types import MapClass, WorldMap
 
 __all__ = ["fill_polygon", "fill_polygons", "fill_polygons_flat", "fill_rect", "fill_rects",
-           "fillet_corners", "lookup", "paint_where", "Surface"]
+           "fillet_corners", "lookup", "paint_where", "Surface", "surface_raster"]
 
 
 class Surface:
-    """Finer surface codes kept in ``WorldMap.meta["surface"]`` (drawing only)."""
+    """Finer surface codes of :func:`surface_raster` (drawing only)."""
 
     YARD = 0
     BUILDING = 1
@@ -218,3 +218,22 @@ def _fillet_corners(raster, surface, x0, x1, y0, y1, r, res, road, s_road):  # p
                         and (xc - ox) ** 2 + (yc - oy) ** 2 > r * r):
                     raster[row, col] = road
                     surface[row, col] = s_road
+
+
+def surface_raster(world_map: WorldMap) -> np.ndarray | None:
+    """The drawing-only :class:`Surface` raster of a map, on the grid of its raster:
+    ``(Hm, Wm) uint8``, or None when the map has none.
+
+    A warped city keeps its unwarped surface (``meta["surface_source"]``): nothing in
+    an episode reads it, and re-sampling it would cost a third of the warp. It is
+    warped here at the first call, with the buildings of ``world_map.raster`` painted
+    in, and kept as ``meta["surface"]``.
+    """
+    meta = world_map.meta
+    if "surface" not in meta and "surface_source" in meta:
+        src = meta.pop("surface_source")
+        out = meta["warp"].raster(src, world_map.raster.shape, world_map.resolution,
+                                  Surface.YARD)
+        paint_where(out, world_map.raster, MapClass.BUILDING, Surface.BUILDING)
+        meta["surface"] = out
+    return meta.get("surface")

@@ -9,7 +9,7 @@ import pytest
 
 from dstenv.sim import World, default_config, generate_city
 from dstenv.sim.lanes import Control, LaneKind
-from dstenv.sim.raster import Surface, lookup
+from dstenv.sim.raster import Surface, lookup, surface_raster
 from dstenv.sim.types import MapClass, ObstacleKind
 from dstenv.sim.warp import draw_warp
 
@@ -70,7 +70,7 @@ def test_junction_angles_vary_with_the_seed_and_are_right_angles_in_clean():
     clean = _city(0, clean_world())
     assert clean.meta["warp"] is None and len(clean.meta["roundabouts"]) == 0
     assert np.abs(_node_angles(clean)).max() < 1e-9
-    assert not (clean.meta["surface"] == Surface.VERGE).any()
+    assert not (surface_raster(clean) == Surface.VERGE).any()
 
 
 def test_warp_inverse_headings_and_size():
@@ -139,7 +139,7 @@ def test_roundabout_is_a_one_way_ring_that_routes_reach_the_far_exit():
 
 def test_medians_are_raised_between_opposite_lanes_and_broken_at_junctions():
     wm = _city(2, None, median_prob=1.0, lanes_min=2, lanes_max=2, roundabout_prob=0.0)
-    cells = np.argwhere(wm.meta["surface"] == Surface.VERGE)
+    cells = np.argwhere(surface_raster(wm) == Surface.VERGE)
     assert len(cells) > 1000
     assert (wm.raster[cells[:, 0], cells[:, 1]] == MapClass.INTERMEDIATE).all()
     xy = (cells[:, ::-1][:: max(len(cells) // 150, 1)] + 0.5) * wm.resolution

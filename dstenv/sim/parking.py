@@ -19,6 +19,7 @@ from __future__ import annotations
 
 from typing import Any
 
+import numba as nb
 import numpy as np
 
 __all__ = ["SLOT_LENGTH", "VEHICLE_CLASSES", "CLASS_LO", "CLASS_HI", "side_slots", "draw_vehicles"]
@@ -86,27 +87,16 @@ def side_slots(start: np.ndarray, along: np.ndarray, inward: np.ndarray, length:
         size = np.zeros((n, 3))
         clear = np.full(n, SLOT_LENGTH / 2)
     else:
-        room = length - keep_clear
-        # enough vehicles and gaps for the side, drawn at once; the ones that fit are kept
-        m = max(int((room - keep_clear) / 4.0) + 1, 1)
-        _, size = draw_vehicles(cfg["parking_mix"], m, rng)
-        gap = rng.uniform(cfg["parking_gap_min"], cfg["parking_gap_max"], m)
-        first = keep_clear + rng.uniform(0.0, cfg["parking_gap_max"])
-        ends = first + np.cumsum(size[:, 0] + gap) - gap  # rear end of vehicle k + its length
-        n = int(np.searchsorted(ends, room, side="right"))
-        if n == 0:
-            return np.zeros((0, 6))
-        size = size[:n]
-        s = ends[:n] - size[:, 0] / 2
-        jit = cfg["parking_lateral_jitter"]
-        lat = curb / 2 + rng.uniform(-jit, jit) + rng.normal(0.0, jit / 2, n)
-        # the wheels stay in the strip: a wide vehicle is not pushed off the kerb line
-        lat = np.clip(lat, size[:, 1] / 2 - 0.1, np.maximum(curb - size[:, 1] / 2 + 0.1,
-                                                           size[:, 1] / 2 - 0.1))
-        half_on = (rng.random(n) < cfg["half_on_sidewalk_prob"]) & (size[:, 0] < 5.0) & (sw > 1.8)
-        lat[half_on] = curb + rng.uniform(-0.2, 0.1, int(half_on.sum()))
-        heading = yaw + np.deg2rad(cfg["parking_heading_jitter"]) * rng.standard_normal(n)
-        clear = size[:, 0] / 2
+        mix = np.asarray(cfg["parking_mix"], np.float64)
+        cdf = np.cumsum(mix / mix.sum())  # as Generator.choice(4, p=...) builds it
+        cdf /= cdf[-1]
+        params = np.array([length, keep_clear, curb, sw, cfg["parking_gap_min"],
+                           cfg["parking_gap_max"], cfg["parking_lateral_jitter"],
+                           cfg["half_on_sidewalk_prob"], np.deg2rad(cfg["parking_heading_jitter"]),
+                           yaw, *np.asarray(start, np.float64), *np.asarray(along, np.float64),
+                           *np.asarray(inward, np.float64)], np.float64)
+        return _irregular(rng, params, cdf, CLASS_LO, CLASS_HI,
+                          np.ascontiguousarray(avoid, np.float64).reshape(-1, 2))
     centres = start + along * s[:, None] + inward * lat[:, None]
     if len(avoid):
         need = clear + curb + sw  # [m] least distance of each vehicle to a crosswalk end
@@ -120,3 +110,86 @@ def side_slots(start: np.ndarray, along: np.ndarray, inward: np.ndarray, length:
         ok = near >= need
         centres, heading, size = centres[ok], heading[ok], size[ok]
     return np.column_stack([centres, heading, size]).reshape(-1, 6)
+
+
+@nb.njit(cache=True)
+def _irregular(rng, params, cdf, lo, hi, avoid):  # pragma: no cover - numba
+    """``(S, 6)`` rows of the irregular layout along one side (see :func:`side_slots`;
+    ``params``: length, keep_clear, curb, sidewalk, gap min / max, lateral jitter,
+    half-on-sidewalk probability, heading jitter [rad], yaw, start, along, inward).
+
+    Draws from ``rng`` exactly what the numpy expressions drew, in their order:
+    ``draw_vehicles`` (``choice`` with ``p`` = uniforms against the cdf, then the
+    sizes), the gaps, the first gap, the side's and the vehicles' lateral offsets,
+    the half-on-sidewalk uniforms and their offsets, the heading errors; and the
+    same arithmetic element by element (cumulative sums in order)."""
+    length, keep_clear, curb, sw = params[0], params[1], params[2], params[3]
+    gap_min, gap_max, jit, p_half, h_jit, yaw = (params[4], params[5], params[6], params[7],
+                                                params[8], params[9])
+    sx, sy, ax, ay, ix, iy = params[10], params[11], params[12], params[13], params[14], \
+        params[15]
+    room = length - keep_clear
+    m = max(int((room - keep_clear) / 4.0) + 1, 1)
+    u = rng.random(m)
+    size = np.empty((m, 3))
+    r3 = rng.random((m, 3))
+    for k in range(m):
+        c = np.searchsorted(cdf, u[k], side="right")
+        for d in range(3):
+            size[k, d] = lo[c, d] + r3[k, d] * (hi[c, d] - lo[c, d])
+    gap = rng.uniform(gap_min, gap_max, m)
+    first = keep_clear + rng.uniform(0.0, gap_max)
+    ends = np.empty(m)
+    acc = 0.0
+    for k in range(m):
+        acc += size[k, 0] + gap[k]
+        ends[k] = first + acc - gap[k]
+    n = np.searchsorted(ends, room, side="right")
+    if n == 0:
+        return np.zeros((0, 6))
+    side_off = rng.uniform(-jit, jit)
+    z = rng.normal(0.0, jit / 2, n)
+    lat = np.empty(n)
+    for k in range(n):
+        half_w = size[k, 1] / 2
+        lat[k] = min(max(curb / 2 + side_off + z[k], half_w - 0.1),
+                     max(curb - half_w + 0.1, half_w - 0.1))
+    uh = rng.random(n)
+    n_on = 0
+    for k in range(n):
+        if uh[k] < p_half and size[k, 0] < 5.0 and sw > 1.8:
+            n_on += 1
+    on = rng.uniform(-0.2, 0.1, n_on)
+    j = 0
+    for k in range(n):
+        if uh[k] < p_half and size[k, 0] < 5.0 and sw > 1.8:
+            lat[k] = curb + on[j]
+            j += 1
+    g = rng.standard_normal(n)
+    out = np.empty((n, 6))
+    need = np.empty(n)  # least distance of each vehicle to a crosswalk end [m]
+    for k in range(n):
+        s = ends[k] - size[k, 0] / 2
+        out[k, 0] = sx + ax * s + ix * lat[k]
+        out[k, 1] = sy + ay * s + iy * lat[k]
+        out[k, 2] = yaw + h_jit * g[k]
+        out[k, 3], out[k, 4], out[k, 5] = size[k, 0], size[k, 1], size[k, 2]
+        need[k] = size[k, 0] / 2 + curb + sw
+    # only the ends within reach of the side matter (a city has thousands)
+    reach = need.max()
+    x_lo, x_hi = out[:, 0].min() - reach, out[:, 0].max() + reach
+    y_lo, y_hi = out[:, 1].min() - reach, out[:, 1].max() + reach
+    near = np.empty(avoid.shape[0], np.int64)
+    n_near = 0
+    for q in range(avoid.shape[0]):
+        if x_lo <= avoid[q, 0] <= x_hi and y_lo <= avoid[q, 1] <= y_hi:
+            near[n_near] = q
+            n_near += 1
+    keep = np.ones(n, np.bool_)
+    for k in range(n):
+        for i in range(n_near):
+            q = near[i]
+            if np.hypot(avoid[q, 0] - out[k, 0], avoid[q, 1] - out[k, 1]) < need[k]:
+                keep[k] = False
+                break
+    return out[keep]

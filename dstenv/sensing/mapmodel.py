@@ -74,7 +74,7 @@ def draw_known_map(world_map: WorldMap, cfg: Mapping[str, Any], rng: np.random.G
         out = base.copy()
     kept = np.ones(len(world_map.buildings), bool)
     kept[np.asarray(drop, np.int64)] = False
-    xy, ptr = _moved_outlines([world_map.buildings[b] for b in np.flatnonzero(kept)], cfg, rng)
+    xy, ptr = _moved_outlines(_outline_table(world_map), np.flatnonzero(kept), cfg, rng)
     fill_polygons_flat(out, xy, ptr, org, res, MapClass.BUILDING)
     n_extra = rng.poisson(cfg["extra_building_rate"] * len(world_map.buildings)) \
         if cfg["extra_building_rate"] > 0 else 0
@@ -153,34 +153,68 @@ def _paint_runs(out, runs, value):  # pragma: no cover - numba
         out[runs[k, 0], runs[k, 1]:runs[k, 2]] = value
 
 
-def _moved_outlines(polys: list[np.ndarray], cfg: Mapping[str, Any], rng: np.random.Generator
-                    ) -> tuple[np.ndarray, np.ndarray]:
+#: per live map (by ``id``): ``(buildings list, table)`` of :func:`_outline_table`
+_OUTLINES: dict[int, tuple[list[np.ndarray], tuple[np.ndarray, ...]]] = {}
+
+
+def _outline_table(world_map: WorldMap) -> tuple[np.ndarray, ...]:
+    """All building outlines of a map, flat, with their vertex means (kept per map).
+
+    Returns:
+        ``xy (V, 2) float64`` vertices, ``ptr (P + 1,) int64`` offsets (outline ``k``
+        is ``xy[ptr[k]:ptr[k + 1]]``), ``cnt (P,) int64`` vertex counts and ``centre
+        (P, 2) float64`` vertex means, summed vertex by vertex as ``poly.mean(0)``
+        sums (bit-identical; 0 for outlines of < 3 vertices, which are not drawn).
+    """
+    hit = _OUTLINES.get(id(world_map))
+    if hit is not None and hit[0] is world_map.buildings:
+        return hit[1]
+    polys = [np.asarray(p, np.float64).reshape(-1, 2) for p in world_map.buildings]
+    cnt = np.array([len(p) for p in polys], np.int64)
+    ptr = np.concatenate([[0], np.cumsum(cnt)]).astype(np.int64)
+    xy = np.concatenate(polys) if polys else np.zeros((0, 2))
+    centre = np.zeros((len(polys), 2))
+    ok = cnt >= 3
+    for j in range(int(cnt.max()) if len(cnt) else 0):
+        take = ok & (j < cnt)
+        centre += np.where(take[:, None], xy[np.minimum(ptr[:-1] + j, max(len(xy) - 1, 0))],
+                           0.0)
+    centre[ok] /= cnt[ok, None]
+    if hit is None:
+        weakref.finalize(world_map, _OUTLINES.pop, id(world_map), None)
+    _OUTLINES[id(world_map)] = (world_map.buildings, (xy, ptr, cnt, centre))
+    return _OUTLINES[id(world_map)][1]
+
+
+def _moved_outlines(table: tuple[np.ndarray, ...], kept: np.ndarray, cfg: Mapping[str, Any],
+                    rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """Building outlines shifted and scaled about their vertex mean, as traced.
 
-    Draws per outline (in order) 2 normals of the shift, then 1 of the scale (each
-    only when its std > 0). Returns ``xy (V, 2) float64`` and ``ptr (P + 1,) int64``:
-    outline ``k`` is ``xy[ptr[k]:ptr[k + 1]]``; outlines of < 3 vertices are left out.
+    Args:
+        table: the map's :func:`_outline_table`.
+        kept: ``(n,) int64`` indices of the buildings in the map, in order.
+
+    Draws per kept outline (in order) 2 normals of the shift, then 1 of the scale
+    (each only when its std > 0). Returns ``xy (V, 2) float64`` and ``ptr (P + 1,)
+    int64``: outline ``k`` is ``xy[ptr[k]:ptr[k + 1]]``; outlines of < 3 vertices are
+    left out.
     """
+    xy_all, ptr_all, cnt_all, centre = table
     shift_std, scale_std = cfg["outline_shift_std"], cfg["outline_scale_std"]
-    n = len(polys)
+    n = len(kept)
     z = rng.standard_normal((n, int(shift_std > 0) * 2 + int(scale_std > 0)))
     # == rng.normal(0, std) per building: loc + scale * standard normal
     shift = shift_std * z[:, :2] if shift_std > 0 else np.zeros((n, 2))
     scale = 1.0 + (scale_std * z[:, -1] if scale_std > 0 else np.zeros(n))
-    keep = [k for k in range(n) if len(polys[k]) >= 3]
-    if not keep:
+    valid = cnt_all[kept] >= 3
+    sel = kept[valid]
+    if not len(sel):
         return np.zeros((0, 2)), np.zeros(1, np.int64)
-    polys = [np.asarray(polys[k], np.float64) for k in keep]
-    shift, scale = shift[keep], np.maximum(scale[keep], 0.5)
-    cnt = np.array([len(p) for p in polys], np.int64)
+    shift, scale = shift[valid], np.maximum(scale[valid], 0.5)
+    cnt = cnt_all[sel]
     ptr = np.concatenate([[0], np.cumsum(cnt)]).astype(np.int64)
-    xy = np.concatenate(polys)
-    # vertex means summed vertex by vertex, as ``poly.mean(0)`` sums (bit-identical)
-    c = np.zeros((len(polys), 2))
-    for j in range(int(cnt.max())):
-        c += np.where((j < cnt)[:, None], xy[np.minimum(ptr[:-1] + j, len(xy) - 1)], 0.0)
-    c /= cnt[:, None]
-    c_v = np.repeat(c, cnt, 0)
+    xy = xy_all[np.repeat(ptr_all[sel] - ptr[:-1], cnt) + np.arange(ptr[-1])]
+    c_v = np.repeat(centre[sel], cnt, 0)
     xy = c_v + (xy - c_v) * np.repeat(scale, cnt)[:, None] + np.repeat(shift, cnt, 0)
     return xy, ptr
 

@@ -101,13 +101,46 @@ def test_street_bands_are_the_cells_within_half_a_width_of_the_line():
     assert np.array_equal(out == 2, ref)
 
 
+def _moved_reference(polys, cfg, rng):
+    """Shifted and scaled outlines as numpy expressions on the list of outlines (the
+    former implementation; the vertex means summed as ``poly.mean(0)`` sums)."""
+    shift_std, scale_std = cfg["outline_shift_std"], cfg["outline_scale_std"]
+    z = rng.standard_normal((len(polys), int(shift_std > 0) * 2 + int(scale_std > 0)))
+    shift = shift_std * z[:, :2] if shift_std > 0 else np.zeros((len(polys), 2))
+    scale = 1.0 + (scale_std * z[:, -1] if scale_std > 0 else np.zeros(len(polys)))
+    keep = [k for k in range(len(polys)) if len(polys[k]) >= 3]
+    moved = [polys[k].mean(0) + (polys[k] - polys[k].mean(0)) * max(scale[k], 0.5) + shift[k]
+             for k in keep]
+    ptr = np.cumsum([0] + [len(p) for p in moved]).astype(np.int64)
+    return np.concatenate(moved), ptr
+
+
+def test_moved_outlines_of_the_flat_table_equal_the_per_outline_expressions():
+    from dstenv.sensing.mapmodel import _moved_outlines, _outline_table
+
+    m = _street_map()
+    rng = np.random.default_rng(2)
+    m.buildings = [rng.uniform(-15, 15, (int(rng.integers(2, 9)), 2)) for _ in range(40)]
+    table = _outline_table(m)
+    assert _outline_table(m) is table  # kept per map
+    kept = np.flatnonzero(rng.random(40) < 0.8)
+    for std in ((0.7, 0.08), (0.0, 0.1), (0.5, 0.0)):
+        cfg = gis_config({**EXACT, "outline_shift_std": std[0], "outline_scale_std": std[1]})
+        xy, ptr = _moved_outlines(table, kept, cfg, r1 := np.random.default_rng(9))
+        ref_xy, ref_ptr = _moved_reference([m.buildings[k] for k in kept], cfg,
+                                           r2 := np.random.default_rng(9))
+        assert np.array_equal(ptr, ref_ptr) and np.array_equal(xy, ref_xy)
+        assert r1.random() == r2.random()
+    assert len(ptr) - 1 < len(kept)  # outlines of 2 vertices are left out
+
+
 def test_cached_base_gives_the_raster_drawn_in_order():
     """Every draw of a map equals drawing everything in order on a fresh raster: remap,
     shifted outlines, extra buildings, roads last. The first draw does exactly that,
     the second builds the map's cached base (remap + roads) and later ones reuse it
     (buildings, then the road runs again); for both road modes, the cache following
     a change of the gis keys."""
-    from dstenv.sensing.mapmodel import _extra_buildings, _moved_outlines, _paint_bands
+    from dstenv.sensing.mapmodel import _extra_buildings, _paint_bands
     from dstenv.sim.raster import fill_polygons_flat
 
     m = _street_map()
@@ -123,7 +156,7 @@ def test_cached_base_gives_the_raster_drawn_in_order():
                 MapClass.INTERMEDIATE
             if road_width == "lanes":
                 ref[ref == MapClass.ROAD] = MapClass.INTERMEDIATE
-            xy, ptr = _moved_outlines(m.buildings, cfg, rng)
+            xy, ptr = _moved_reference(m.buildings, cfg, rng)
             fill_polygons_flat(ref, xy, ptr, m.origin, m.resolution, MapClass.BUILDING)
             _extra_buildings(ref, m.raster, m.resolution, rng,
                              int(rng.poisson(1.0 * len(m.buildings))))

@@ -51,11 +51,12 @@ def _fill_rings(raster, xs, ys, ring_ptr, x0, y0, res, value):
                 cross[q + 1] = cross[q]
                 q -= 1
             cross[q + 1] = v
+        row = raster[r]
         for p in range(0, n - 1, 2):
             c_lo = max(int(np.ceil((cross[p] - x0) / res - 0.5)), 0)
             c_hi = min(int(np.floor((cross[p + 1] - x0) / res - 0.5)), w - 1)
-            for cc in range(c_lo, c_hi + 1):
-                raster[r, cc] = value
+            if c_hi >= c_lo:
+                row[c_lo:c_hi + 1] = value  # a run: one memset
 
 
 def fill_polygon(raster: np.ndarray, rings: list[np.ndarray], origin: tuple[float, float],

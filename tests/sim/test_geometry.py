@@ -73,6 +73,19 @@ def test_junction_angles_vary_with_the_seed_and_are_right_angles_in_clean():
     assert not (surface_raster(clean) == Surface.VERGE).any()
 
 
+def test_surface_of_a_warped_city_is_warped_at_first_read():
+    """The drawing-only surface is re-sampled through the map's warp when first read:
+    on the raster's grid, buildings where the raster has them, roads only on road."""
+    wm = _city(1)
+    assert wm.meta["warp"] is not None and "surface" not in wm.meta
+    surface = surface_raster(wm)
+    assert surface.shape == wm.raster.shape and surface_raster(wm) is surface
+    assert np.array_equal(surface == Surface.BUILDING, wm.raster == MapClass.BUILDING)
+    road = surface == Surface.ROAD
+    assert road.sum() > 10_000 and (wm.raster[road] == MapClass.ROAD).all()
+    assert "surface_source" not in wm.meta
+
+
 def test_warp_inverse_headings_and_size():
     cfg = default_config()["map"]
     warp, size = draw_warp(cfg, (300.0, 200.0), np.random.default_rng(3))

@@ -151,7 +151,7 @@ def place_clutter(sides: list[Side], buildings: list[np.ndarray], slots: np.ndar
     dens = float(cfg["density"])
     if dens <= 0 or not sides:
         return Obstacles.empty()
-    bbox = np.array([[*np.min(b, 0), *np.max(b, 0)] for b in buildings]).reshape(-1, 4)
+    bbox = _bboxes(buildings)
     geo = np.array([[*start, *along, *inward, length] for start, along, inward, length, _ in sides],
                    np.float64).reshape(-1, 7)
     yaws = np.arctan2(geo[:, 3], geo[:, 2])
@@ -169,6 +169,18 @@ def place_clutter(sides: list[Side], buildings: list[np.ndarray], slots: np.ndar
         return Obstacles.empty()
     return Obstacles(rows[:, :2].copy(), rows[:, 2].copy(), rows[:, 3].copy(), rows[:, 4].copy(),
                      rows[:, 5].copy(), rows[:, 6].copy(), rows[:, 7].astype(np.uint8))
+
+
+def _bboxes(polys: list[np.ndarray]) -> np.ndarray:
+    """``(P, 4) float64`` rows ``x_min, y_min, x_max, y_max`` of polygons ``(K_i, 2)``,
+    all in one reduction (a city has hundreds of buildings)."""
+    cnt = np.array([len(p) for p in polys], np.int64)
+    if not len(polys) or (cnt == 0).any():
+        return np.array([[*np.min(b, 0), *np.max(b, 0)] for b in polys]).reshape(-1, 4)
+    flat = np.concatenate(polys).astype(np.float64, copy=False)
+    starts = np.concatenate([[0], np.cumsum(cnt)[:-1]])
+    return np.concatenate([np.minimum.reduceat(flat, starts), np.maximum.reduceat(flat, starts)],
+                          1)
 
 
 def street_clutter(world_map: Any, cfg: dict[str, Any], rng: np.random.Generator) -> Obstacles:

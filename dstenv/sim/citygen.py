@@ -30,7 +30,7 @@ from dstenv.sim.roundabout import (island_clutter, paint_roundabout, pick_rounda
 from dstenv.sim.sidewalks import LANE_OFFSET, add_block_rings
 from dstenv.sim.clutter import concat_obstacles, median_clutter, place_clutter
 from dstenv.sim.warp import Warp, draw_warp, warp_boxes, warp_lanes, warp_obstacles
-from dstenv.sim.parking import SLOT_LENGTH, side_slots
+from dstenv.sim.parking import SLOT_LENGTH, city_slots
 from dstenv.sim.types import MapClass, WorldMap
 
 __all__ = ["generate_city", "SLOT_LENGTH", "Warp"]
@@ -216,17 +216,13 @@ def generate_city(cfg: dict[str, Any], traffic: dict[str, Any], rng: np.random.G
             fill_rect(r, a[0], b[0], a[1], b[1], org, res, v)
     for r in rounds:
         paint_roundabout(raster, surface, r, res)
-    slots, parked = [], []
     walk_ends = np.array([p for c in crossings for p in c[2:]]).reshape(-1, 2)
-    for f, face in enumerate(faces):
-        rows, ks = _parking(surface, face, cfg, rng, res, walk_ends)
-        slots += rows
-        parked += [(f, k) for k in ks]
-    for b, (box, side) in enumerate(strips):
-        rows, ks = _parking(surface, box, cfg, rng, res, walk_ends, (side,))
-        slots += rows
-        parked += [(len(faces) + b, k) for k in ks]
-    slots = np.concatenate(slots) if slots else np.zeros((0, 6))
+    # parking strips (no vehicle across a crosswalk): every side of every block, then
+    # the street side of each frontage strip
+    slots, parked, spots = city_slots(list(faces) + [box for box, _ in strips],
+                                      [(0, 1, 2, 3)] * len(faces) + [(s,) for _, s in strips],
+                                      cfg, rng, walk_ends)
+    fill_rects(surface, spots, org, res, Surface.PARKING)
     buildings = []
     for face in faces:
         buildings += block_buildings(face, cfg, rng)
@@ -334,30 +330,3 @@ def _sides(face):
             (np.array([x1, y0]), np.array([0, 1.0]), np.array([-1.0, 0]), y1 - y0),
             (np.array([x1, y1]), np.array([-1.0, 0]), np.array([0, -1.0]), x1 - x0),
             (np.array([x0, y1]), np.array([0, -1.0]), np.array([1.0, 0]), y1 - y0)]
-
-
-def _parking(surface, face, cfg, rng, res, avoid: np.ndarray,
-             sides=(0, 1, 2, 3)) -> tuple[list[np.ndarray], list[int]]:
-    """Parking strips along some block sides, with no vehicle across a crosswalk
-    (``avoid``: ``(K, 2)`` crosswalk ends); paints them and returns the slots
-    (``(S, 6)`` arrays, see :mod:`dstenv.sim.parking`) and the sides that got a strip."""
-    curb, sw = cfg["curb_strip_width"], cfg["sidewalk_width"]
-    keep_clear = curb + sw + 10.0  # [m] no parking near junctions (crosswalks, turns)
-    slots, parked_sides = [], []
-    face_sides = _sides(face)
-    for k in sides:
-        start, along, inward, length = face_sides[k]
-        if int((length - 2 * keep_clear) // SLOT_LENGTH) < 1 or rng.random() >= cfg["parking_prob"]:
-            continue
-        rows = side_slots(start, along, inward, length, cfg, rng, avoid)
-        parked_sides.append(k)
-        c = rows[:, :2]
-        half = (np.where(rows[:, 3] != 0, rows[:, 3], SLOT_LENGTH) / 2)[:, None]
-        a = c - along * half - inward * curb / 2
-        b = c + along * half + inward * curb / 2
-        fill_rects(surface, np.stack([np.minimum(a[:, 0], b[:, 0]), np.maximum(a[:, 0], b[:, 0]),
-                                      np.minimum(a[:, 1], b[:, 1]),
-                                      np.maximum(a[:, 1], b[:, 1])], -1),
-                   (0.0, 0.0), res, Surface.PARKING)
-        slots.append(rows)
-    return slots, parked_sides

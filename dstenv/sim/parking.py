@@ -22,7 +22,8 @@ from typing import Any
 import numba as nb
 import numpy as np
 
-__all__ = ["SLOT_LENGTH", "VEHICLE_CLASSES", "CLASS_LO", "CLASS_HI", "side_slots", "draw_vehicles"]
+__all__ = ["SLOT_LENGTH", "VEHICLE_CLASSES", "CLASS_LO", "CLASS_HI", "side_slots", "draw_vehicles",
+           "city_slots"]
 
 SLOT_LENGTH = 6.0  # [m] length of one kerbside parking slot (lattice layout)
 
@@ -76,47 +77,26 @@ def side_slots(start: np.ndarray, along: np.ndarray, inward: np.ndarray, length:
     curb, sw = cfg["curb_strip_width"], cfg["sidewalk_width"]
     keep_clear = curb + sw + 10.0  # [m] no parking near junctions (crosswalks, turns)
     yaw = float(np.arctan2(-along[1], -along[0]))  # with the adjacent traffic (right-hand)
+    params = np.array([length, keep_clear, curb, sw, cfg["parking_gap_min"],
+                       cfg["parking_gap_max"], cfg["parking_lateral_jitter"],
+                       cfg["half_on_sidewalk_prob"], np.deg2rad(cfg["parking_heading_jitter"]),
+                       yaw, *np.asarray(start, np.float64), *np.asarray(along, np.float64),
+                       *np.asarray(inward, np.float64)], np.float64)
+    avoid = np.ascontiguousarray(avoid, np.float64).reshape(-1, 2)
     if cfg["parking_layout"] == "lattice":
-        n = int((length - 2 * keep_clear) // SLOT_LENGTH)
-        if n < 1:
-            return np.zeros((0, 6))
-        s0 = (length - n * SLOT_LENGTH) / 2
-        s = s0 + (np.arange(n) + 0.5) * SLOT_LENGTH
-        lat = np.full(n, curb / 2)
-        heading = np.full(n, yaw)
-        size = np.zeros((n, 3))
-        clear = np.full(n, SLOT_LENGTH / 2)
-    else:
-        mix = np.asarray(cfg["parking_mix"], np.float64)
-        cdf = np.cumsum(mix / mix.sum())  # as Generator.choice(4, p=...) builds it
-        cdf /= cdf[-1]
-        params = np.array([length, keep_clear, curb, sw, cfg["parking_gap_min"],
-                           cfg["parking_gap_max"], cfg["parking_lateral_jitter"],
-                           cfg["half_on_sidewalk_prob"], np.deg2rad(cfg["parking_heading_jitter"]),
-                           yaw, *np.asarray(start, np.float64), *np.asarray(along, np.float64),
-                           *np.asarray(inward, np.float64)], np.float64)
-        return _irregular(rng, params, cdf, CLASS_LO, CLASS_HI,
-                          np.ascontiguousarray(avoid, np.float64).reshape(-1, 2))
-    centres = start + along * s[:, None] + inward * lat[:, None]
-    if len(avoid):
-        need = clear + curb + sw  # [m] least distance of each vehicle to a crosswalk end
-        # only the ends within reach of the side matter (a city has thousands)
-        lo, hi = centres.min(0) - need.max(), centres.max(0) + need.max()
-        avoid = avoid[(avoid[:, 0] >= lo[0]) & (avoid[:, 0] <= hi[0]) &
-                      (avoid[:, 1] >= lo[1]) & (avoid[:, 1] <= hi[1])]
-    if len(avoid):
-        near = np.hypot(avoid[None, :, 0] - centres[:, None, 0],
-                        avoid[None, :, 1] - centres[:, None, 1]).min(1)
-        ok = near >= need
-        centres, heading, size = centres[ok], heading[ok], size[ok]
-    return np.column_stack([centres, heading, size]).reshape(-1, 6)
+        return _lattice(params, avoid)
+    mix = np.asarray(cfg["parking_mix"], np.float64)
+    cdf = np.cumsum(mix / mix.sum())  # as Generator.choice(4, p=...) builds it
+    cdf /= cdf[-1]
+    return _irregular(rng, params, cdf, CLASS_LO, CLASS_HI, avoid)
 
 
 @nb.njit(cache=True)
 def _irregular(rng, params, cdf, lo, hi, avoid):  # pragma: no cover - numba
     """``(S, 6)`` rows of the irregular layout along one side (see :func:`side_slots`;
     ``params``: length, keep_clear, curb, sidewalk, gap min / max, lateral jitter,
-    half-on-sidewalk probability, heading jitter [rad], yaw, start, along, inward).
+    half-on-sidewalk probability, heading jitter [rad], yaw, start, along, inward;
+    the centres and the crosswalk test by :func:`_place`).
 
     Draws from ``rng`` exactly what the numpy expressions drew, in their order:
     ``draw_vehicles`` (``choice`` with ``p`` = uniforms against the cdf, then the
@@ -126,8 +106,6 @@ def _irregular(rng, params, cdf, lo, hi, avoid):  # pragma: no cover - numba
     length, keep_clear, curb, sw = params[0], params[1], params[2], params[3]
     gap_min, gap_max, jit, p_half, h_jit, yaw = (params[4], params[5], params[6], params[7],
                                                 params[8], params[9])
-    sx, sy, ax, ay, ix, iy = params[10], params[11], params[12], params[13], params[14], \
-        params[15]
     room = length - keep_clear
     m = max(int((room - keep_clear) / 4.0) + 1, 1)
     u = rng.random(m)
@@ -167,14 +145,133 @@ def _irregular(rng, params, cdf, lo, hi, avoid):  # pragma: no cover - numba
             j += 1
     g = rng.standard_normal(n)
     out = np.empty((n, 6))
-    need = np.empty(n)  # least distance of each vehicle to a crosswalk end [m]
+    s = np.empty(n)
+    clear = np.empty(n)
     for k in range(n):
-        s = ends[k] - size[k, 0] / 2
-        out[k, 0] = sx + ax * s + ix * lat[k]
-        out[k, 1] = sy + ay * s + iy * lat[k]
+        s[k] = ends[k] - size[k, 0] / 2
+        clear[k] = size[k, 0] / 2
         out[k, 2] = yaw + h_jit * g[k]
         out[k, 3], out[k, 4], out[k, 5] = size[k, 0], size[k, 1], size[k, 2]
-        need[k] = size[k, 0] / 2 + curb + sw
+    return _place(params, out, s, lat, clear, avoid)
+
+
+def city_slots(boxes: list[tuple[float, float, float, float]], sides: list[tuple[int, ...]],
+               cfg: dict[str, Any], rng: np.random.Generator, avoid: np.ndarray
+               ) -> tuple[np.ndarray, list[tuple[int, int]], np.ndarray]:
+    """Parking along the sides of all blocks of a city, in one call.
+
+    For each box (block ``x0, x1, y0, y1`` [m] at the kerb) and each of its ``sides``
+    (0..3: bottom, right, top, left, as ``citygen._sides``) long enough for a slot
+    clear of the junctions, one uniform decides (``map.parking_prob``) whether the
+    side has a parking strip, then :func:`side_slots` places its vehicles: the draws
+    and results of calling them one side after the other.
+
+    Returns:
+        ``slots (S, 6) float64`` (see module doc), the ``(box index, side)`` of each
+        side with a strip, and ``strips (S, 4) float64`` the rectangles ``x_lo, x_hi,
+        y_lo, y_hi`` [m] each slot covers across the kerb strip (painted as parking).
+    """
+    ptr = np.cumsum([0] + [len(k) for k in sides]).astype(np.int64)
+    side_k = np.array([k for ks in sides for k in ks], np.int64)
+    mix = np.asarray(cfg["parking_mix"], np.float64)
+    cdf = np.cumsum(mix / mix.sum())  # as Generator.choice(4, p=...) builds it
+    cdf /= cdf[-1]
+    params = np.array([cfg["curb_strip_width"], cfg["sidewalk_width"], cfg["parking_gap_min"],
+                       cfg["parking_gap_max"], cfg["parking_lateral_jitter"],
+                       cfg["half_on_sidewalk_prob"], np.deg2rad(cfg["parking_heading_jitter"]),
+                       cfg["parking_prob"], float(cfg["parking_layout"] == "lattice")],
+                      np.float64)
+    slots, side_of, strips = _city(rng, np.asarray(boxes, np.float64).reshape(-1, 4), ptr, side_k,
+                                   params, cdf, CLASS_LO, CLASS_HI,
+                                   np.ascontiguousarray(avoid, np.float64).reshape(-1, 2))
+    parked = [(int(b), int(k)) for b, k in side_of]
+    return slots, parked, strips
+
+
+@nb.njit(cache=True)
+def _city(rng, boxes, ptr, side_k, params, cdf, lo, hi, avoid):  # pragma: no cover - numba
+    """:func:`city_slots`: rows of all sides, ``(box, side)`` of the sides with a strip,
+    and the painted rectangle of every row."""
+    curb, sw, p_park, lattice = params[0], params[1], params[7], params[8] > 0
+    keep_clear = curb + sw + 10.0
+    rows = np.empty((256, 6))
+    strips = np.empty((256, 4))
+    side_of = np.empty((64, 2), np.int64)
+    n_rows, n_sides = 0, 0
+    one = np.empty(16)
+    for b in range(boxes.shape[0]):
+        x0, x1, y0, y1 = boxes[b, 0], boxes[b, 1], boxes[b, 2], boxes[b, 3]
+        for i in range(ptr[b], ptr[b + 1]):
+            k = side_k[i]
+            if k == 0:
+                sx, sy, ax, ay, ix, iy, length = x0, y0, 1.0, 0.0, 0.0, 1.0, x1 - x0
+            elif k == 1:
+                sx, sy, ax, ay, ix, iy, length = x1, y0, 0.0, 1.0, -1.0, 0.0, y1 - y0
+            elif k == 2:
+                sx, sy, ax, ay, ix, iy, length = x1, y1, -1.0, 0.0, 0.0, -1.0, x1 - x0
+            else:
+                sx, sy, ax, ay, ix, iy, length = x0, y1, 0.0, -1.0, 1.0, 0.0, y1 - y0
+            if int((length - 2 * keep_clear) // SLOT_LENGTH) < 1 or rng.random() >= p_park:
+                continue
+            one[0], one[1], one[2], one[3] = length, keep_clear, curb, sw
+            one[4:9] = params[2:7]
+            one[9] = np.arctan2(-ay, -ax)  # with the adjacent traffic (right-hand)
+            one[10], one[11], one[12], one[13], one[14], one[15] = sx, sy, ax, ay, ix, iy
+            got = _lattice(one, avoid) if lattice else _irregular(rng, one, cdf, lo, hi, avoid)
+            if n_sides == side_of.shape[0]:
+                grown = np.empty((2 * n_sides, 2), np.int64)
+                grown[:n_sides] = side_of
+                side_of = grown
+            side_of[n_sides, 0], side_of[n_sides, 1] = b, k
+            n_sides += 1
+            while n_rows + got.shape[0] > rows.shape[0]:
+                rows2, strips2 = np.empty((2 * rows.shape[0], 6)), np.empty((2 * rows.shape[0], 4))
+                rows2[:n_rows], strips2[:n_rows] = rows[:n_rows], strips[:n_rows]
+                rows, strips = rows2, strips2
+            for j in range(got.shape[0]):
+                rows[n_rows] = got[j]
+                # across the kerb strip: c -/+ along * half -/+ inward * curb / 2
+                half = (got[j, 3] if got[j, 3] != 0 else SLOT_LENGTH) / 2
+                a0 = got[j, 0] - ax * half - ix * curb / 2
+                a1 = got[j, 1] - ay * half - iy * curb / 2
+                b0 = got[j, 0] + ax * half + ix * curb / 2
+                b1 = got[j, 1] + ay * half + iy * curb / 2
+                strips[n_rows, 0], strips[n_rows, 1] = min(a0, b0), max(a0, b0)
+                strips[n_rows, 2], strips[n_rows, 3] = min(a1, b1), max(a1, b1)
+                n_rows += 1
+    return rows[:n_rows].copy(), side_of[:n_sides].copy(), strips[:n_rows].copy()
+
+
+@nb.njit(cache=True)
+def _lattice(params, avoid):  # pragma: no cover - numba
+    """``(S, 6)`` rows of the lattice layout along one side (``params`` as for
+    :func:`_irregular`): slots :data:`SLOT_LENGTH` apart, centred in the kerb strip."""
+    length, keep_clear, curb, yaw = params[0], params[1], params[2], params[9]
+    n = int((length - 2 * keep_clear) // SLOT_LENGTH)
+    if n < 1:
+        return np.zeros((0, 6))
+    s0 = (length - n * SLOT_LENGTH) / 2
+    s = np.empty(n)
+    for k in range(n):
+        s[k] = s0 + (k + 0.5) * SLOT_LENGTH
+    out = np.zeros((n, 6))
+    out[:, 2] = yaw
+    return _place(params, out, s, np.full(n, curb / 2), np.full(n, SLOT_LENGTH / 2), avoid)
+
+
+@nb.njit(cache=True)
+def _place(params, out, s, lat, clear, avoid):  # pragma: no cover - numba
+    """Centres ``start + along * s + inward * lat`` into ``out[:, :2]``; the rows of
+    vehicles at least ``clear + curb + sidewalk`` from every crosswalk end."""
+    curb, sw = params[2], params[3]
+    sx, sy, ax, ay, ix, iy = params[10], params[11], params[12], params[13], params[14], \
+        params[15]
+    n = out.shape[0]
+    need = np.empty(n)  # least distance of each vehicle to a crosswalk end [m]
+    for k in range(n):
+        out[k, 0] = sx + ax * s[k] + ix * lat[k]
+        out[k, 1] = sy + ay * s[k] + iy * lat[k]
+        need[k] = clear[k] + curb + sw
     # only the ends within reach of the side matter (a city has thousands)
     reach = need.max()
     x_lo, x_hi = out[:, 0].min() - reach, out[:, 0].max() + reach

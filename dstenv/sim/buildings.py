@@ -15,47 +15,82 @@ from typing import Any
 import numba as nb
 import numpy as np
 
-__all__ = ["block_buildings"]
+__all__ = ["block_buildings", "city_buildings"]
 
 
 def block_buildings(face: tuple[float, float, float, float], cfg: dict[str, Any],
                     rng: np.random.Generator, side: int | None = None) -> list[np.ndarray]:
     """Rows of buildings along the four sides of a block (or only along ``side`` of a
-    one-sided frontage strip), without overlaps.
+    one-sided frontage strip), without overlaps: :func:`city_buildings` of one box."""
+    return city_buildings([face], [-1 if side is None else side], cfg, rng)
+
+
+def city_buildings(boxes: list[tuple[float, float, float, float]], sides: list[int],
+                   cfg: dict[str, Any], rng: np.random.Generator) -> list[np.ndarray]:
+    """Rows of buildings of a city's blocks and frontage strips, in one call.
 
     Args:
-        face: the block ``(x0, x1, y0, y1)`` [m] at the kerb.
+        boxes: blocks ``(x0, x1, y0, y1)`` [m] at the kerb.
+        sides: per box, ``-1`` for a block (buildings along its four sides, in a
+            drawn order) or ``0..3`` (bottom, right, top, left) for the street side of
+            a one-sided frontage strip.
         cfg: the ``world.map`` section (kerb strip, sidewalk, setback, building and
             gap keys).
-        rng: the city's generator. Draws: for a block, a permutation of its 4 sides;
-            per side a setback, then per building slot its width, depth, setback
-            offset, a coverage uniform and a gap uniform (and the gap when there is
-            one).
-        side: ``0..3`` (bottom, right, top, left street side) of a frontage strip,
-            or None for a block.
+        rng: the city's generator. Draws, box after box (none for a box too small
+            for buildings): for a block a permutation of its 4 sides; per side a
+            setback, then per building slot its width, depth, setback offset, a
+            coverage uniform and a gap uniform (and the gap when there is one).
 
     Returns:
         One ``(4, 2) float64`` rectangle [m] per building, counter-clockwise from
-        its lowest x / lowest y corner.
+        its lowest x / lowest y corner, box after box.
     """
     front = cfg["curb_strip_width"] + cfg["sidewalk_width"] + 0.3  # clear of the walkers
-    x0, x1, y0, y1 = face
-    inner = (x0 + front, x1 - front, y0 + front, y1 - front)
-    if side is not None:  # only the street side has a sidewalk
-        inner = tuple(face[k] + (front if k == (2, 1, 3, 0)[side] else 0) *
-                      (1 if k in (0, 2) else -1) for k in range(4))
-    if inner[1] - inner[0] < 4 or inner[3] - inner[2] < 4:
-        return []
-    order = rng.permutation(4) if side is None else np.array([side])
     params = np.array([cfg[k] for k in ("building_width_min", "building_width_max",
                                         "building_depth_min", "building_depth_max",
                                         "building_coverage", "gap_prob", "gap_min", "gap_max",
-                                        "setback_min", "setback_max")], np.float64)
-    boxes = _rows(rng, np.array(inner, np.float64), np.asarray(order, np.int64), params,
-                  side is None)
+                                        "setback_min", "setback_max")] + [front], np.float64)
+    boxes = _city(rng, np.asarray(boxes, np.float64).reshape(-1, 4),
+                  np.asarray(sides, np.int64), params)
     corners = np.stack([boxes[:, [0, 2]], boxes[:, [1, 2]], boxes[:, [1, 3]], boxes[:, [0, 3]]],
                        1)
     return list(corners)
+
+
+@nb.njit(cache=True)
+def _city(rng, faces, sides, params):  # pragma: no cover - numba
+    """:func:`city_buildings`: ``(B, 4)`` boxes ``x_lo, x_hi, y_lo, y_hi`` of all boxes."""
+    front = params[10]
+    out = np.empty((1024, 4))
+    n = 0
+    inner = np.empty(4)
+    one = np.empty(1, np.int64)
+    for b in range(faces.shape[0]):
+        side = sides[b]
+        if side < 0:
+            inner[0], inner[1] = faces[b, 0] + front, faces[b, 1] - front
+            inner[2], inner[3] = faces[b, 2] + front, faces[b, 3] - front
+        else:  # only the street side has a sidewalk
+            near = (2, 1, 3, 0)[side]
+            for k in range(4):
+                inner[k] = faces[b, k]
+                if k == near:
+                    inner[k] = faces[b, k] + (front if k in (0, 2) else -front)
+        if inner[1] - inner[0] < 4 or inner[3] - inner[2] < 4:
+            continue
+        if side < 0:
+            order = rng.permutation(4)
+        else:
+            one[0] = side
+            order = one
+        got = _rows(rng, inner, order, params, side < 0)
+        while n + got.shape[0] > out.shape[0]:
+            grown = np.empty((2 * out.shape[0], 4))
+            grown[:n] = out[:n]
+            out = grown
+        out[n:n + got.shape[0]] = got
+        n += got.shape[0]
+    return out[:n].copy()
 
 
 @nb.njit(cache=True)

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from dstenv.sim.buildings import block_buildings
+from dstenv.sim.buildings import city_buildings
 from dstenv.sim.lanes import Control, NetworkBuilder
 from dstenv.sim.medians import draw_medians, median_box
 from dstenv.sim.raster import Surface, fill_polygons, fill_rect, fill_rects, fillet_corners
@@ -223,11 +223,8 @@ def generate_city(cfg: dict[str, Any], traffic: dict[str, Any], rng: np.random.G
                                       [(0, 1, 2, 3)] * len(faces) + [(s,) for _, s in strips],
                                       cfg, rng, walk_ends)
     fill_rects(surface, spots, org, res, Surface.PARKING)
-    buildings = []
-    for face in faces:
-        buildings += block_buildings(face, cfg, rng)
-    for box, side in strips:
-        buildings += block_buildings(box, cfg, rng, side)
+    buildings = city_buildings(list(faces) + [box for box, _ in strips],
+                               [-1] * len(faces) + [side for _, side in strips], cfg, rng)
     drawn = draw_warp(cfg, (width, height), geo) if geo is not None else None
     if drawn is None:
         for b in buildings:

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from dstenv.sim import default_config
-from dstenv.sim.buildings import block_buildings
+from dstenv.sim.buildings import block_buildings, city_buildings
 
 
 def _sides(face):
@@ -73,3 +73,18 @@ def test_rows_equal_the_plain_loop_bit_for_bit(side):
     over = np.minimum(hi[:, None], hi[None]) - np.maximum(lo[:, None], lo[None])
     both = (over > 0.3).all(-1)
     assert not both[~np.eye(len(boxes), dtype=bool)].any()
+
+
+def test_city_buildings_equal_the_blocks_one_after_the_other():
+    cfg = default_config()["map"]
+    layout = np.random.default_rng(2)
+    boxes = [(x, x + layout.uniform(3, 150), y, y + layout.uniform(3, 150))
+             for x, y in layout.uniform(0, 500, (40, 2))]
+    sides = [-1] * 30 + [0, 1, 2, 3, 0, 1, 2, 3, 2, 1]
+    got = city_buildings(boxes, sides, cfg, r1 := np.random.default_rng(11))
+    r2 = np.random.default_rng(11)
+    ref = [b for box, side in zip(boxes, sides)
+           for b in _reference(box, cfg, r2, None if side < 0 else side)]
+    assert len(got) == len(ref) > 100
+    assert all(np.array_equal(a, b) for a, b in zip(got, ref))
+    assert r1.random() == r2.random()

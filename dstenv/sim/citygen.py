@@ -197,14 +197,14 @@ def generate_city(cfg: dict[str, Any], traffic: dict[str, Any], rng: np.random.G
     # cell more on each side first, so that no lane loses kerb clearance to rounding
     pad = 0.5 * res if geo is not None and (cfg["shear_deg"] > 0 or cfg["bend_amplitude"] > 0) \
         else 0.0
-    for i, j in zip(*np.nonzero(vseg)):
-        for r, v in ((raster, MapClass.ROAD), (surface, Surface.ROAD)):
-            fill_rect(r, xs[i] - hwx[i] - pad, xs[i] + hwx[i] + pad, ys[j] - hwy[j],
-                      ys[j + 1] + hwy[j + 1], org, res, v)
-    for i, j in zip(*np.nonzero(hseg)):
-        for r, v in ((raster, MapClass.ROAD), (surface, Surface.ROAD)):
-            fill_rect(r, xs[i] - hwx[i], xs[i + 1] + hwx[i + 1], ys[j] - hwy[j] - pad,
-                      ys[j] + hwy[j] + pad, org, res, v)
+    (iv, jv), (ih, jh) = np.nonzero(vseg), np.nonzero(hseg)
+    roads = np.concatenate([
+        np.stack([xs[iv] - hwx[iv] - pad, xs[iv] + hwx[iv] + pad, ys[jv] - hwy[jv],
+                  ys[jv + 1] + hwy[jv + 1]], -1),
+        np.stack([xs[ih] - hwx[ih], xs[ih + 1] + hwx[ih + 1], ys[jh] - hwy[jh] - pad,
+                  ys[jh] + hwy[jh] + pad], -1)])
+    fill_rects(raster, roads, org, res, MapClass.ROAD)
+    fill_rects(surface, roads, org, res, Surface.ROAD)
     for face in faces:
         fillet_corners(raster, surface, face, curb + 0.5 * sw, res)
     _zebras(surface, zebras, res)

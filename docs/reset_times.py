@@ -1,4 +1,5 @@
-"""Reset times of ``DSTGrid-RL-v0`` with a fresh map and with a pool of 10 maps (issue 17).
+"""Reset times of ``DSTGrid-RL-v0`` with a fresh map and with a pool of 10 maps (issue 17),
+and of ``DSTGrid-v0`` (the paper's 256 x 256 grid) with a fresh map (issue 16's goal row).
 
 The timer is :func:`dstenv.envs.bench.time_resets`, the one ``dstenv bench env`` uses;
 three runs of 20 resets each, median reported::
@@ -27,8 +28,10 @@ def main() -> None:
     args = ap.parse_args()
     res = {"command": f"python docs/reset_times.py --out {args.out}",
            "date": datetime.now(timezone.utc).isoformat(timespec="seconds"), "ms": {}}
-    for label, pool in (("fresh map", 0), ("map pool 10", 10)):
-        env = gym.make("DSTGrid-RL-v0", config={"world": {"map": {"pool": pool}}})
+    for label, env_id, pool in (("fresh map", "DSTGrid-RL-v0", 0),
+                                ("map pool 10", "DSTGrid-RL-v0", 10),
+                                ("DSTGrid-v0 fresh map", "DSTGrid-v0", 0)):
+        env = gym.make(env_id, config={"world": {"map": {"pool": pool}}})
         runs = sorted(time_resets(env, args.resets, pool) for _ in range(args.runs))
         env.close()
         res["ms"][label] = {"median": round(runs[len(runs) // 2], 1),

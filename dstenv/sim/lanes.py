@@ -190,7 +190,8 @@ class NetworkBuilder:
 
     def build(self, node_xy: np.ndarray, node_control: np.ndarray, node_phase: np.ndarray,
               lane_width: float) -> LaneNetwork:
-        """Pack the lanes; computes headings, curvature limits and connector conflicts."""
+        """Pack the lanes; computes headings, curvature limits and connector conflicts
+        (an uncontrolled node whose connectors conflict becomes a yield junction)."""
         npts = np.array([len(p) for p in self.polys], np.int64)
         start = np.concatenate([[0], np.cumsum(npts)[:-1]]).astype(np.int64)
         pts = np.concatenate(self.polys) if self.polys else np.zeros((0, 2))
@@ -209,6 +210,13 @@ class NetworkBuilder:
         conflicts = self._conflicts(attrs, succ_ptr, succ)
         conf_ptr = np.cumsum([0] + [len(c) for c in conflicts]).astype(np.int64)
         conf = np.array([b for c in conflicts for b in c], np.int64)
+        # a node whose paths merge or cross needs a right-of-way rule: an uncontrolled
+        # one (a bend where two lanes become one) gives way first come, first served
+        node_control = np.array(node_control, np.uint8)
+        for c, others in enumerate(conflicts):
+            if others and 0 <= attrs[c, 1] < len(node_control) \
+                    and node_control[attrs[c, 1]] == Control.NONE:
+                node_control[attrs[c, 1]] = Control.YIELD
         return LaneNetwork(
             pts=pts, hdg=hdg, start=start, npts=npts, length=length,
             ds=length / np.maximum(npts - 1, 1), kind=attrs[:, 0].astype(np.uint8),

@@ -96,10 +96,13 @@ def test_next_junction_distance_and_control(control):
         assert green == (int(net.group[conn]) == 0)
 
 
-def test_next_junction_none_on_a_dead_end_route():
+def test_next_junction_of_a_crossing_built_uncontrolled_is_a_yield():
+    # paths that cross need a right-of-way rule: the network turns an uncontrolled
+    # node whose connectors conflict into a yield junction (first come, first served)
     w = World(seed=0, world_map=cross_map(Control.NONE))
+    assert w.map.lanes.node_control[0] == Control.YIELD  # the crossing; dead ends stay NONE
     lane = lane_ending_near(w.map.lanes, -TRIM, -1.6)
     w.place_ego(lane, 5.0)
     dist, ctl, green = w.next_junction()
-    assert ctl == Control.NONE and not green
+    assert ctl == Control.YIELD and not green
     assert math.isinf(dist) or dist >= 0

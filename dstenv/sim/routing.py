@@ -12,6 +12,8 @@ connector conflicts and the exit lane has room.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numba as nb
 import numpy as np
 
@@ -19,7 +21,8 @@ from dstenv.sim.lanes import lane_pose
 
 __all__ = ["choose_successor", "route_point", "signal_green", "grant_connectors",
            "CAR", "CYCLIST", "PEDESTRIAN", "K_ROAD", "K_CONN", "K_WALK", "K_CROSS",
-           "C_NONE", "C_YIELD", "C_STOP", "C_SIGNAL", "ALL_RED", "AMBER"]
+           "C_NONE", "C_YIELD", "C_STOP", "C_SIGNAL", "ALL_RED", "AMBER",
+           "gridlocked", "GRIDLOCK_SECONDS"]
 
 CAR, CYCLIST, PEDESTRIAN = 0, 1, 2  # AgentKind codes (kept numeric for numba)
 K_ROAD, K_CONN, K_WALK, K_CROSS = 0, 1, 2, 3  # LaneKind codes
@@ -199,3 +202,22 @@ def grant_connectors(planner, route, s, v, hl, akind, grant, req_t, stop_clock, 
             held[nb_rows + i] = c
             req_t[i] = np.inf
             stop_clock[i] = 0.0
+
+
+GRIDLOCK_SECONDS = 20.0  # [s] standstill outside a planned halt that counts as gridlock
+
+
+def gridlocked(world: Any, steps: int) -> tuple[int, int]:
+    """Step ``world`` (a :class:`dstenv.sim.World`) ``steps`` times and count
+    vehicle-steps (mobile cars and cyclists): ``(stuck, total)``, stuck meaning
+    standing still longer than :data:`GRIDLOCK_SECONDS` outside a planned halt (the
+    right-of-way rules' health check: ``docs/gridlock.py``, ``tests/sim/test_traffic.py``).
+    """
+    total = stuck = 0
+    for _ in range(steps):
+        world.step()
+        st = world._state
+        vehicle = ~st["parked"][:-1] & (st["akind"][:-1] != PEDESTRIAN)
+        total += int(vehicle.sum())
+        stuck += int((vehicle & (st["still"][:-1] > GRIDLOCK_SECONDS)).sum())
+    return stuck, total

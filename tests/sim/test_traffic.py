@@ -9,6 +9,7 @@ from dstenv.sensing import label_grid
 from dstenv.sim import World
 from dstenv.sim.ego import boxes_overlap
 from dstenv.sim.lanes import Control, LaneKind
+from dstenv.sim.routing import gridlocked
 from dstenv.sim.types import AgentKind
 
 from .handmade import LW, TRIM, cross_map, lane_ending_near, lane_starting_near, straight_connector
@@ -109,23 +110,10 @@ def test_follower_keeps_distance_behind_stopped_leader():
     assert 1.0 < gap < 4.0  # about the jam distance (2 m)
 
 
-def _gridlocked_share(world, steps):
-    """Share of vehicle-steps (mobile cars and cyclists) standing still > 20 s outside
-    a planned halt."""
-    total = stuck = 0
-    for _ in range(steps):
-        world.step()
-        st = world._state
-        vehicle = ~st["parked"][:-1] & (st["akind"][:-1] != AgentKind.PEDESTRIAN)
-        total += int(vehicle.sum())
-        stuck += int((vehicle & (st["still"][:-1] > 20.0)).sum())
-    return stuck / total
-
-
 def test_city_traffic_flows_through_roundabouts_and_bends():
     # requests look through uncontrolled connectors (roundabout ring pieces, bends) and
     # circulating traffic goes first: before, cars stopped before a ring piece never
     # asked for the yield point beyond it and waited for good (seed 0, 45 s: 5.2 % of
     # vehicle-steps standing > 20 s before, 0.6 % now)
-    share = _gridlocked_share(World(seed=0), 450)
-    assert share < 0.015
+    stuck, total = gridlocked(World(seed=0), 450)
+    assert stuck / total < 0.015

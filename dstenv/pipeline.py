@@ -209,8 +209,6 @@ class Pipeline:
         self.step_index = 0
         self._rng = np.random.default_rng(0)
         self._map_error: MapError | None = None
-        self._betp: np.ndarray | None = None
-        self._betp_prev: np.ndarray | None = None
         self._last: tuple[np.ndarray, float] | None = None  # pose and time of the last step
         self.sweep: Any = None
 
@@ -245,7 +243,6 @@ class Pipeline:
         self.tracker.reset()
         self.step_index = 0
         self._last = None
-        self._betp = self._betp_prev = None
         return self._observe()
 
     def step(self, action: Any = None) -> Frame:
@@ -281,17 +278,20 @@ class Pipeline:
             w = self.world
             self._last = (np.array(w.ego_pose, dtype=np.float64), float(w.time))
             return
-        self._sense(False)
+        self._sense(False, frame=False)
 
     def _sweep_rng(self) -> np.random.Generator:
         """The LIDAR noise of this step: keyed by (episode seed, step), so a sweep does not
         depend on which earlier steps were swept (skipped steps, see :meth:`advance`)."""
         return np.random.default_rng([self.seed, 0x5E45, 0x5EE9, self.step_index])
 
-    def _sense(self, want_masses: bool) -> tuple[np.ndarray, Agents, np.ndarray, np.ndarray,
-                                                 np.ndarray]:
+    def _sense(self, want_masses: bool, frame: bool = True
+               ) -> tuple[np.ndarray, Agents, np.ndarray, np.ndarray, np.ndarray]:
         """Sweep, grids and (on fused steps) the tracker: ``(pose, agents, sensor, gis,
-        masses)``; ``masses`` is the last fused grid."""
+        masses)``; ``masses`` is the last fused grid. Without a ``frame`` to build, a
+        fused step skips BetP when every step is fused (the next frame is then built on
+        a fused step, whose tracker step computes its t-1 from the masses left here:
+        ``GridTracker.step(betp=False)``)."""
         w, spec = self.world, self.spec
         pose = np.array(w.ego_pose, dtype=np.float64)
         agents = w.agents
@@ -309,9 +309,9 @@ class Pipeline:
         gis = gis_grid(w.map, pose, spec, self._map_error)
         if not self.fuse:
             return pose, agents, sensor, gis, None
-        if self.step_index % self.config["protocol"]["update_every"] == 0:
-            out = self.tracker.step(sensor, gis, pose)
-            self._betp, self._betp_prev = out.betp, out.betp_prev
+        every = self.config["protocol"]["update_every"]
+        if self.step_index % every == 0:
+            self.tracker.step(sensor, gis, pose, betp=frame or every > 1)
         masses = self.tracker.filter.masses
         return pose, agents, sensor, gis, masses.copy() if want_masses else masses
 
@@ -331,11 +331,11 @@ class Pipeline:
             # ((B, 2) ego frame for the 2-D model, (B, 4) Velodyne rows for hdl64)
             extras["lidar_points"] = (self.sweep.points.astype(np.float32)
                                       if not self._3d else self.sweep.dense())
-        if self.fuse and (self._betp is None or self._betp_prev is None):
-            raise RuntimeError("Pipeline: no fused frame yet")  # step 0 is always fused
+        # the last fused BetP and its t-1 (step 0 is always fused)
+        betp, betp_prev = self.tracker.latest() if self.fuse else (None, None)
         frame = Frame(
-            pignistic=self._betp,
-            pignistic_prev=self._betp_prev,
+            pignistic=betp,
+            pignistic_prev=betp_prev,
             labels=labels,
             visible=visible_mask(sensor) if labels is not None else None,
             sensor=sensor,

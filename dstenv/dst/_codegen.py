@@ -309,7 +309,6 @@ def _cell(indent: str, past: list[str], m_out: str = "m_out", z_out: str = "z_ou
     and zeta are the expressions ``past`` (in REACHABLE order, then zeta); the new
     masses and zeta go to the arrays named ``m_out`` and ``z_out``."""
     nr = len(REACHABLE)
-    card = [bin(a).count("1") for a in REACHABLE]
     free = [f"p{k}" for k, a in enumerate(REACHABLE) if a & ~FREE == 0]
     occ = [f"p{k}" for k, a in enumerate(REACHABLE) if a & ~OCCUPIED == 0]
     body = [f"p{k} = {past[k]}  # {subset_name(a)}" for k, a in enumerate(REACHABLE)]
@@ -336,13 +335,24 @@ def _cell(indent: str, past: list[str], m_out: str = "m_out", z_out: str = "z_ou
     body += [f"p{nr - 1} = p{nr - 1} + alpha", "# 7. modified conjunctive combination"]
     body += _combination()
     body += [f"{m_out}[{a}, at] = o{d}" for d, a in enumerate(REACHABLE)]
-    body.append("# BetP: each set's share 1/|A| once, then the sum per class")
-    body += [f"q{d} = o{d} * r{card[d]}" for d in range(nr) if card[d] > 1]
+    body.append("# BetP, unless betp is None (numba compiles that case without it)")
+    body.append("if betp is not None:")
+    body += [f"    {line}" for line in _betp()]
+    return [f"        {indent}{line}" for line in body]
+
+
+def _betp() -> list[str]:
+    """BetP of cell ``at`` from its masses ``o<d>`` (REACHABLE order) into ``betp``: each
+    set's share 1/|A| once, then the sum per class. One text for the update and for
+    :data:`BETP_DRIVER`, so both round the same way."""
+    nr = len(REACHABLE)
+    card = [bin(a).count("1") for a in REACHABLE]
+    body = [f"q{d} = o{d} * r{card[d]}" for d in range(nr) if card[d] > 1]
     for x in range(NUM_CLASSES):
         parts = [f"o{d}" if card[d] == 1 else f"q{d}"
                  for d, a in enumerate(REACHABLE) if a >> x & 1]
         body.append(f"betp[{x}, at] = {_sum(parts)}")
-    return [f"        {indent}{line}" for line in body]
+    return body
 
 
 def render() -> str:
@@ -392,6 +402,21 @@ def render() -> str:
     ]
     lines += _row_inplace()
     lines += ["", "", *INPLACE_DRIVER.strip("\n").splitlines()]
+    lines += [
+        "",
+        "",
+        "@nb.njit(cache=True, nogil=True, error_model='numpy', fastmath={'contract'},",
+        "         pipeline_class=NoAliasCompiler)",
+        "def pignistic_planes(m, betp, n):  # pragma: no cover - compiled",
+        '    """BetP of cells 0 .. n - 1 of the state ``m`` into ``betp`` (the update\'s',
+        '    arithmetic: the same bits as an update that writes BetP)."""',
+        "    " + ", ".join(f"r{c}" for c in ratios) + " = "
+        + ", ".join(f"np.float32({1.0 / c!r})" for c in ratios),
+        "    for t in range(n):",
+        "        at = np.uint64(t)",
+    ]
+    lines += [f"        o{d} = m[{a}, at]" for d, a in enumerate(REACHABLE)]
+    lines += [f"        {line}" for line in _betp()]
     return "\n".join(lines) + "\n"
 
 

@@ -171,22 +171,23 @@ def fused_row(i, m_prev, z_prev, sensor, gis, warp_on, geo, prm,
             m_out[26, at] = o12
             m_out[28, at] = o13
             m_out[31, at] = o14
-            # BetP: each set's share 1/|A| once, then the sum per class
-            q2 = o2 * r2
-            q5 = o5 * r2
-            q6 = o6 * r2
-            q7 = o7 * r2
-            q8 = o8 * r4
-            q10 = o10 * r2
-            q11 = o11 * r3
-            q12 = o12 * r3
-            q13 = o13 * r3
-            q14 = o14 * r5
-            betp[0, at] = o0 + q2 + q5 + q8 + q11 + q14
-            betp[1, at] = o1 + q2 + q6 + q8 + q12 + q14
-            betp[2, at] = o3 + q7 + q8 + q13 + q14
-            betp[3, at] = o4 + q5 + q6 + q7 + q8 + q10 + q11 + q12 + q13 + q14
-            betp[4, at] = o9 + q10 + q11 + q12 + q13 + q14
+            # BetP, unless betp is None (numba compiles that case without it)
+            if betp is not None:
+                q2 = o2 * r2
+                q5 = o5 * r2
+                q6 = o6 * r2
+                q7 = o7 * r2
+                q8 = o8 * r4
+                q10 = o10 * r2
+                q11 = o11 * r3
+                q12 = o12 * r3
+                q13 = o13 * r3
+                q14 = o14 * r5
+                betp[0, at] = o0 + q2 + q5 + q8 + q11 + q14
+                betp[1, at] = o1 + q2 + q6 + q8 + q12 + q14
+                betp[2, at] = o3 + q7 + q8 + q13 + q14
+                betp[3, at] = o4 + q5 + q6 + q7 + q8 + q10 + q11 + q12 + q13 + q14
+                betp[4, at] = o9 + q10 + q11 + q12 + q13 + q14
         return
     # copy each run of consecutive sources with a plain loop; unsigned indices
     # skip numba's negative-index wraparound, which would defeat vectorisation
@@ -326,22 +327,23 @@ def fused_row(i, m_prev, z_prev, sensor, gis, warp_on, geo, prm,
         m_out[26, at] = o12
         m_out[28, at] = o13
         m_out[31, at] = o14
-        # BetP: each set's share 1/|A| once, then the sum per class
-        q2 = o2 * r2
-        q5 = o5 * r2
-        q6 = o6 * r2
-        q7 = o7 * r2
-        q8 = o8 * r4
-        q10 = o10 * r2
-        q11 = o11 * r3
-        q12 = o12 * r3
-        q13 = o13 * r3
-        q14 = o14 * r5
-        betp[0, at] = o0 + q2 + q5 + q8 + q11 + q14
-        betp[1, at] = o1 + q2 + q6 + q8 + q12 + q14
-        betp[2, at] = o3 + q7 + q8 + q13 + q14
-        betp[3, at] = o4 + q5 + q6 + q7 + q8 + q10 + q11 + q12 + q13 + q14
-        betp[4, at] = o9 + q10 + q11 + q12 + q13 + q14
+        # BetP, unless betp is None (numba compiles that case without it)
+        if betp is not None:
+            q2 = o2 * r2
+            q5 = o5 * r2
+            q6 = o6 * r2
+            q7 = o7 * r2
+            q8 = o8 * r4
+            q10 = o10 * r2
+            q11 = o11 * r3
+            q12 = o12 * r3
+            q13 = o13 * r3
+            q14 = o14 * r5
+            betp[0, at] = o0 + q2 + q5 + q8 + q11 + q14
+            betp[1, at] = o1 + q2 + q6 + q8 + q12 + q14
+            betp[2, at] = o3 + q7 + q8 + q13 + q14
+            betp[3, at] = o4 + q5 + q6 + q7 + q8 + q10 + q11 + q12 + q13 + q14
+            betp[4, at] = o9 + q10 + q11 + q12 + q13 + q14
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
@@ -505,22 +507,23 @@ def inplace_row(i, m, zeta, sensor, gis, warp_on, geo, prm, betp, rb, src,
             m[26, at] = o12
             m[28, at] = o13
             m[31, at] = o14
-            # BetP: each set's share 1/|A| once, then the sum per class
-            q2 = o2 * r2
-            q5 = o5 * r2
-            q6 = o6 * r2
-            q7 = o7 * r2
-            q8 = o8 * r4
-            q10 = o10 * r2
-            q11 = o11 * r3
-            q12 = o12 * r3
-            q13 = o13 * r3
-            q14 = o14 * r5
-            betp[0, at] = o0 + q2 + q5 + q8 + q11 + q14
-            betp[1, at] = o1 + q2 + q6 + q8 + q12 + q14
-            betp[2, at] = o3 + q7 + q8 + q13 + q14
-            betp[3, at] = o4 + q5 + q6 + q7 + q8 + q10 + q11 + q12 + q13 + q14
-            betp[4, at] = o9 + q10 + q11 + q12 + q13 + q14
+            # BetP, unless betp is None (numba compiles that case without it)
+            if betp is not None:
+                q2 = o2 * r2
+                q5 = o5 * r2
+                q6 = o6 * r2
+                q7 = o7 * r2
+                q8 = o8 * r4
+                q10 = o10 * r2
+                q11 = o11 * r3
+                q12 = o12 * r3
+                q13 = o13 * r3
+                q14 = o14 * r5
+                betp[0, at] = o0 + q2 + q5 + q8 + q11 + q14
+                betp[1, at] = o1 + q2 + q6 + q8 + q12 + q14
+                betp[2, at] = o3 + q7 + q8 + q13 + q14
+                betp[3, at] = o4 + q5 + q6 + q7 + q8 + q10 + q11 + q12 + q13 + q14
+                betp[4, at] = o9 + q10 + q11 + q12 + q13 + q14
         return
     a = 0
     for j in range(1, w + 1):
@@ -705,7 +708,60 @@ def inplace_row(i, m, zeta, sensor, gis, warp_on, geo, prm, betp, rb, src,
         m[26, at] = o12
         m[28, at] = o13
         m[31, at] = o14
-        # BetP: each set's share 1/|A| once, then the sum per class
+        # BetP, unless betp is None (numba compiles that case without it)
+        if betp is not None:
+            q2 = o2 * r2
+            q5 = o5 * r2
+            q6 = o6 * r2
+            q7 = o7 * r2
+            q8 = o8 * r4
+            q10 = o10 * r2
+            q11 = o11 * r3
+            q12 = o12 * r3
+            q13 = o13 * r3
+            q14 = o14 * r5
+            betp[0, at] = o0 + q2 + q5 + q8 + q11 + q14
+            betp[1, at] = o1 + q2 + q6 + q8 + q12 + q14
+            betp[2, at] = o3 + q7 + q8 + q13 + q14
+            betp[3, at] = o4 + q5 + q6 + q7 + q8 + q10 + q11 + q12 + q13 + q14
+            betp[4, at] = o9 + q10 + q11 + q12 + q13 + q14
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def inplace_update(m, zeta, sensor, gis, warp_on, geo, prm, betp, hist, k_hist,
+                   desc):  # pragma: no cover - compiled
+    h, w = sensor.shape
+    rb = np.empty((ROW_PLANES, w), np.float32)
+    src = np.empty(w, np.int64)
+    for r in range(h):
+        i = h - 1 - r if desc else r
+        inplace_row(i, m, zeta, sensor, gis, warp_on, geo, prm, betp, rb, src, hist, k_hist,
+                    desc, m, zeta)
+
+
+@nb.njit(cache=True, nogil=True, error_model='numpy', fastmath={'contract'},
+         pipeline_class=NoAliasCompiler)
+def pignistic_planes(m, betp, n):  # pragma: no cover - compiled
+    """BetP of cells 0 .. n - 1 of the state ``m`` into ``betp`` (the update's
+    arithmetic: the same bits as an update that writes BetP)."""
+    r2, r3, r4, r5 = np.float32(0.5), np.float32(0.3333333333333333), np.float32(0.25), np.float32(0.2)
+    for t in range(n):
+        at = np.uint64(t)
+        o0 = m[1, at]
+        o1 = m[2, at]
+        o2 = m[3, at]
+        o3 = m[4, at]
+        o4 = m[8, at]
+        o5 = m[9, at]
+        o6 = m[10, at]
+        o7 = m[12, at]
+        o8 = m[15, at]
+        o9 = m[16, at]
+        o10 = m[24, at]
+        o11 = m[25, at]
+        o12 = m[26, at]
+        o13 = m[28, at]
+        o14 = m[31, at]
         q2 = o2 * r2
         q5 = o5 * r2
         q6 = o6 * r2
@@ -721,15 +777,3 @@ def inplace_row(i, m, zeta, sensor, gis, warp_on, geo, prm, betp, rb, src,
         betp[2, at] = o3 + q7 + q8 + q13 + q14
         betp[3, at] = o4 + q5 + q6 + q7 + q8 + q10 + q11 + q12 + q13 + q14
         betp[4, at] = o9 + q10 + q11 + q12 + q13 + q14
-
-
-@nb.njit(cache=True, nogil=True, error_model="numpy")
-def inplace_update(m, zeta, sensor, gis, warp_on, geo, prm, betp, hist, k_hist,
-                   desc):  # pragma: no cover - compiled
-    h, w = sensor.shape
-    rb = np.empty((ROW_PLANES, w), np.float32)
-    src = np.empty(w, np.int64)
-    for r in range(h):
-        i = h - 1 - r if desc else r
-        inplace_row(i, m, zeta, sensor, gis, warp_on, geo, prm, betp, rb, src, hist, k_hist,
-                    desc, m, zeta)

@@ -17,11 +17,13 @@ import math
 
 import numpy as np
 
-from dstenv.dst._fused import PRM, REACHABLE, ROW_PLANES, fused_update, inplace_update
+from dstenv.dst._fused import (
+    PRM, REACHABLE, ROW_PLANES, fused_update, inplace_update, pignistic_planes,
+)
 from dstenv.dst.params import DSTParams
 
 __all__ = ["REACHABLE", "ROW_PLANES", "kernel_params", "plane_grid", "grid_view",
-           "fused_update", "inplace_update", "history_rows"]
+           "fused_update", "inplace_update", "pignistic_planes", "history_rows"]
 
 
 def kernel_params(params: DSTParams) -> np.ndarray:

@@ -34,7 +34,7 @@ from itertools import islice
 from pathlib import Path
 from typing import Any
 
-from dstenv.data.generate import GenerateSpec, generate
+from dstenv.data.bench_goals import timed_generate
 from dstenv.data.sampling import episode_seeds, iter_frames, scenario_config
 from dstenv.data.shards import ShardWriter
 
@@ -93,34 +93,17 @@ def _encodings(config: dict[str, Any], n: int, tmp: Path) -> dict[str, Any]:
 
 def _generate_rate(config: dict[str, Any], frames: int, workers: int, stride: int,
                    tmp: Path, repeat: int, **spec_kw: Any) -> dict[str, float]:
-    spec = GenerateSpec(config=config, frames=frames, seed=1, split="train",
-                        frames_per_shard=max(1, frames // (2 * workers)), episode_length=200,
-                        stride=stride, warmup=stride, **spec_kw)
     rates, cpu_rates = [], []
     for r in range(repeat):
         out = tmp / f"gen-w{workers}-s{stride}-{len(list(tmp.iterdir()))}"
-        c0, t0 = _cpu_seconds(), time.perf_counter()
-        generate(spec, out, workers=workers, progress=False)
-        rates.append(frames / (time.perf_counter() - t0))
-        cpu_rates.append(frames / max(_cpu_seconds() - c0, 1e-9))
+        wall, cpu = timed_generate(config, frames, workers, out, stride=stride, **spec_kw)
+        rates.append(frames / wall)
+        cpu_rates.append(frames / max(cpu, 1e-9))
         size = sum(p.stat().st_size for p in out.rglob("*.h5"))
     rate = statistics.median(rates)
     return {"frames_per_s": rate, "frames_per_hour": 3600 * rate, "bytes_per_frame": size / frames,
             "frames": frames, "runs_frames_per_s": rates,
             "frames_per_cpu_hour": 3600 * statistics.median(cpu_rates)}
-
-
-def _cpu_seconds() -> float:
-    """CPU time of this process and its finished children (the pool's workers) [s].
-
-    On a shared machine the wall-clock rate of K workers depends on what else runs;
-    frames per CPU-second times the free cores is the rate of an idle machine.
-    """
-    import resource
-
-    own = resource.getrusage(resource.RUSAGE_SELF)
-    kids = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
 
 
 #: generate variants: label -> (workers, stride, episodes per map, gzip level, engine)

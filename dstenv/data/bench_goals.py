@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["goal_rows", "print_goals"]
+__all__ = ["goal_rows", "print_goals", "timed_generate", "cpu_seconds"]
 
 
 def _median(fn: Callable[[], float], repeat: int) -> tuple[float, list[float]]:
@@ -37,16 +37,43 @@ def _median(fn: Callable[[], float], repeat: int) -> tuple[float, list[float]]:
     return statistics.median(runs), runs
 
 
-def _generate_seconds(config: dict[str, Any], frames: int, workers: int, tmp: Path) -> float:
+def cpu_seconds() -> float:
+    """CPU time of this process and its finished children (the pool's workers) [s].
+
+    On a shared machine the wall-clock rate of K workers depends on what else runs;
+    frames per CPU-second times the free cores is the rate of an idle machine.
+    """
+    import resource
+
+    own = resource.getrusage(resource.RUSAGE_SELF)
+    kids = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
+
+
+def timed_generate(config: dict[str, Any], frames: int, workers: int, out: Path, *,
+                   stride: int = 10, **spec_kw: Any) -> tuple[float, float]:
+    """One ``dstenv generate`` run as every data benchmark times it.
+
+    ``frames`` frames of seed 1 into split ``train``, episodes of 200 steps, one frame
+    every ``stride`` steps from step ``stride``, shards of ``frames // (2 workers)``;
+    ``spec_kw``: other :class:`~dstenv.data.generate.GenerateSpec` fields.
+
+    Returns:
+        ``(wall [s], CPU [s])``; CPU of this process and its finished workers
+        (:func:`cpu_seconds`).
+    """
     from dstenv.data.generate import GenerateSpec, generate
 
     spec = GenerateSpec(config=config, frames=frames, seed=1, split="train",
                         frames_per_shard=max(1, frames // (2 * workers)), episode_length=200,
-                        stride=10, warmup=10)
-    out = tmp / f"gen-{len(list(tmp.iterdir()))}"
-    t0 = time.perf_counter()
+                        stride=stride, warmup=stride, **spec_kw)
+    c0, t0 = cpu_seconds(), time.perf_counter()
     generate(spec, out, workers=workers, progress=False)
-    return time.perf_counter() - t0
+    return time.perf_counter() - t0, cpu_seconds() - c0
+
+
+def _generate_seconds(config: dict[str, Any], frames: int, workers: int, tmp: Path) -> float:
+    return timed_generate(config, frames, workers, tmp / f"gen-{len(list(tmp.iterdir()))}")[0]
 
 
 def _generate_rates(config: dict[str, Any], frames: int, workers: int, tmp: Path

@@ -39,3 +39,20 @@ def test_steady_rate_cancels_start_up(monkeypatch, tmp_path):
     r = bench_goals._generate_rates({}, 40, 2, tmp_path)
     assert r["steady"] == 36_000.0  # 10 frames/s, start-up gone
     assert r["short_run"] == 3600 * 40 / 9.0  # start-up included
+
+
+def test_timed_generate_runs_the_documented_spec(tmp_path):
+    """The one generate run every data benchmark times: seed 1, split train, a frame
+    every ``stride`` steps from step ``stride``, two shards per worker."""
+    import h5py
+
+    from dstenv.data.bench_goals import timed_generate
+
+    config = scenario_config(None, {"grid": {"height": 32, "width": 32}})
+    wall, cpu = timed_generate(config, 4, 1, tmp_path / "out", stride=5)
+    assert wall > 0 and cpu > 0
+    shards = sorted((tmp_path / "out" / "train").glob("*.h5"))
+    assert len(shards) == 2
+    for path in shards:  # each shard is a task of its own episodes
+        with h5py.File(path) as f:
+            assert f["step"][:].tolist() == [5, 10]

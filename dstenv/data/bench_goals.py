@@ -80,11 +80,12 @@ def _generate_rates(config: dict[str, Any], frames: int, workers: int, tmp: Path
                     ) -> dict[str, float]:
     """frames/h of a short run of ``frames`` (worker start-up included) and the steady
     rate of a long run: the extra ``2 * frames`` of a run three times as long, over the
-    extra time (start-up, imports and numba cache loads cancel)."""
+    extra time (start-up, imports and numba cache loads cancel). NaN when the long run
+    was not slower (too few frames for the noise, e.g. ``--quick``)."""
     short = _generate_seconds(config, frames, workers, tmp)
     long = _generate_seconds(config, 3 * frames, workers, tmp)
     return {"short_run": 3600 * frames / short,
-            "steady": 3600 * 2 * frames / max(long - short, 1e-9),
+            "steady": 3600 * 2 * frames / (long - short) if long > short else float("nan"),
             "short_s": short, "long_s": long}
 
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 from dstenv.data.bench_goals import _protocol, print_goals
 from dstenv.data.sampling import scenario_config
 
@@ -39,6 +41,9 @@ def test_steady_rate_cancels_start_up(monkeypatch, tmp_path):
     r = bench_goals._generate_rates({}, 40, 2, tmp_path)
     assert r["steady"] == 36_000.0  # 10 frames/s, start-up gone
     assert r["short_run"] == 3600 * 40 / 9.0  # start-up included
+    # a long run no slower than the short one (noise, tiny --quick counts): no rate
+    monkeypatch.setattr(bench_goals, "_generate_seconds", lambda *a: 5.0)
+    assert math.isnan(bench_goals._generate_rates({}, 40, 2, tmp_path)["steady"])
 
 
 def test_timed_generate_runs_the_documented_spec(tmp_path):

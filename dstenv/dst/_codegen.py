@@ -355,6 +355,24 @@ def _betp() -> list[str]:
     return body
 
 
+
+def _kernel_head(signature: list[str], ratios: range) -> list[str]:
+    """Decorator, signature (its last line marked compiled) and the shared preamble of a
+    generated row kernel: grid shape, parameters, constants, reciprocal ratios."""
+    return [
+        "",
+        "",
+        "@nb.njit(cache=True, nogil=True, error_model='numpy', fastmath={'contract'},",
+        "         pipeline_class=NoAliasCompiler)",
+        *signature[:-1],
+        signature[-1] + "  # pragma: no cover - compiled",
+        "    h, w = sensor.shape",
+        "    " + ", ".join(PRM) + " = " + ", ".join(f"prm[{k}]" for k in range(len(PRM))),
+        "    zero, one = np.float32(0.0), np.float32(1.0)",
+        "    " + ", ".join(f"r{c}" for c in ratios) + " = "
+        + ", ".join(f"np.float32({1.0 / c!r})" for c in ratios),
+    ]
+
 def render() -> str:
     """Source text of ``_fused.py``."""
     ratios = range(2, NUM_CLASSES + 1)
@@ -372,34 +390,13 @@ def render() -> str:
     ]
     for block in (NOALIAS_COMPILER, SOURCES):
         lines += ["", "", *block.strip("\n").splitlines()]
-    lines += [
-        "",
-        "",
-        "@nb.njit(cache=True, nogil=True, error_model='numpy', fastmath={'contract'},",
-        "         pipeline_class=NoAliasCompiler)",
-        "def fused_row(i, m_prev, z_prev, sensor, gis, warp_on, geo, prm,",
-        "              m_out, z_out, betp, rb, src):  # pragma: no cover - compiled",
-        "    h, w = sensor.shape",
-        "    " + ", ".join(PRM) + " = " + ", ".join(f"prm[{k}]" for k in range(len(PRM))),
-        "    zero, one = np.float32(0.0), np.float32(1.0)",
-        "    " + ", ".join(f"r{c}" for c in ratios) + " = "
-        + ", ".join(f"np.float32({1.0 / c!r})" for c in ratios),
-    ]
+    lines += _kernel_head(["def fused_row(i, m_prev, z_prev, sensor, gis, warp_on, geo, prm,",
+                           "              m_out, z_out, betp, rb, src):"], ratios)
     lines += _row()
     lines += ["", "", *DRIVER.strip("\n").splitlines()]
-    lines += [
-        "",
-        "",
-        "@nb.njit(cache=True, nogil=True, error_model='numpy', fastmath={'contract'},",
-        "         pipeline_class=NoAliasCompiler)",
-        "def inplace_row(i, m, zeta, sensor, gis, warp_on, geo, prm, betp, rb, src,",
-        "                hist, k_hist, desc, m_src, z_src):  # pragma: no cover - compiled",
-        "    h, w = sensor.shape",
-        "    " + ", ".join(PRM) + " = " + ", ".join(f"prm[{k}]" for k in range(len(PRM))),
-        "    zero, one = np.float32(0.0), np.float32(1.0)",
-        "    " + ", ".join(f"r{c}" for c in ratios) + " = "
-        + ", ".join(f"np.float32({1.0 / c!r})" for c in ratios),
-    ]
+    lines += _kernel_head(
+        ["def inplace_row(i, m, zeta, sensor, gis, warp_on, geo, prm, betp, rb, src,",
+         "                hist, k_hist, desc, m_src, z_src):"], ratios)
     lines += _row_inplace()
     lines += ["", "", *INPLACE_DRIVER.strip("\n").splitlines()]
     lines += [

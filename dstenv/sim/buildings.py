@@ -15,6 +15,8 @@ from typing import Any
 import numba as nb
 import numpy as np
 
+from dstenv.sim.parking import block_side
+
 __all__ = ["block_buildings", "city_buildings"]
 
 
@@ -106,14 +108,7 @@ def _rows(rng, inner, order, params, block):  # pragma: no cover - numba
     n = 0
     for si in order:
         # start, direction along and inward normal of side si (as _sides of citygen)
-        if si == 0:
-            sx, sy, ax, ay, ix, iy, length = x0, y0, 1.0, 0.0, 0.0, 1.0, x1 - x0
-        elif si == 1:
-            sx, sy, ax, ay, ix, iy, length = x1, y0, 0.0, 1.0, -1.0, 0.0, y1 - y0
-        elif si == 2:
-            sx, sy, ax, ay, ix, iy, length = x1, y1, -1.0, 0.0, 0.0, -1.0, x1 - x0
-        else:
-            sx, sy, ax, ay, ix, iy, length = x0, y1, 0.0, -1.0, 1.0, 0.0, y1 - y0
+        sx, sy, ax, ay, ix, iy, length = block_side(x0, x1, y0, y1, si)
         depth_room = (y1 - y0) if ax != 0 else (x1 - x0)
         setback = rng.uniform(sb_min, sb_max)
         room = depth_room / 2 - setback if block else depth_room - setback - 2.0

@@ -92,6 +92,20 @@ def side_slots(start: np.ndarray, along: np.ndarray, inward: np.ndarray, length:
 
 
 @nb.njit(cache=True)
+def block_side(x0, x1, y0, y1, k):
+    """Side ``k`` (0-3, counter-clockwise from the bottom) of the block ``x0..x1 x
+    y0..y1``: ``(start x, start y, along x, along y, inward x, inward y, length)``, as
+    ``citygen._sides`` lists them."""
+    if k == 0:
+        return x0, y0, 1.0, 0.0, 0.0, 1.0, x1 - x0
+    if k == 1:
+        return x1, y0, 0.0, 1.0, -1.0, 0.0, y1 - y0
+    if k == 2:
+        return x1, y1, -1.0, 0.0, 0.0, -1.0, x1 - x0
+    return x0, y1, 0.0, -1.0, 1.0, 0.0, y1 - y0
+
+
+@nb.njit(cache=True)
 def _irregular(rng, params, cdf, lo, hi, avoid):  # pragma: no cover - numba
     """``(S, 6)`` rows of the irregular layout along one side (see :func:`side_slots`;
     ``params``: length, keep_clear, curb, sidewalk, gap min / max, lateral jitter,
@@ -203,14 +217,7 @@ def _city(rng, boxes, ptr, side_k, params, cdf, lo, hi, avoid):  # pragma: no co
         x0, x1, y0, y1 = boxes[b, 0], boxes[b, 1], boxes[b, 2], boxes[b, 3]
         for i in range(ptr[b], ptr[b + 1]):
             k = side_k[i]
-            if k == 0:
-                sx, sy, ax, ay, ix, iy, length = x0, y0, 1.0, 0.0, 0.0, 1.0, x1 - x0
-            elif k == 1:
-                sx, sy, ax, ay, ix, iy, length = x1, y0, 0.0, 1.0, -1.0, 0.0, y1 - y0
-            elif k == 2:
-                sx, sy, ax, ay, ix, iy, length = x1, y1, -1.0, 0.0, 0.0, -1.0, x1 - x0
-            else:
-                sx, sy, ax, ay, ix, iy, length = x0, y1, 0.0, -1.0, 1.0, 0.0, y1 - y0
+            sx, sy, ax, ay, ix, iy, length = block_side(x0, x1, y0, y1, k)
             if int((length - 2 * keep_clear) // SLOT_LENGTH) < 1 or rng.random() >= p_park:
                 continue
             one[0], one[1], one[2], one[3] = length, keep_clear, curb, sw

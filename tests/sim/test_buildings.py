@@ -7,14 +7,7 @@ import pytest
 
 from dstenv.sim import default_config
 from dstenv.sim.buildings import block_buildings, city_buildings
-
-
-def _sides(face):
-    x0, x1, y0, y1 = face
-    return [(np.array([x0, y0]), np.array([1.0, 0]), np.array([0, 1.0]), x1 - x0),
-            (np.array([x1, y0]), np.array([0, 1.0]), np.array([-1.0, 0]), y1 - y0),
-            (np.array([x1, y1]), np.array([-1.0, 0]), np.array([0, -1.0]), x1 - x0),
-            (np.array([x0, y1]), np.array([0, -1.0]), np.array([1.0, 0]), y1 - y0)]
+from dstenv.sim.citygen import _sides
 
 
 def _reference(face, cfg, rng, side=None):

@@ -8,6 +8,7 @@ import pytest
 
 from dstenv.sim import default_config
 from dstenv.sim.parking import SLOT_LENGTH, city_slots, draw_vehicles, side_slots
+from dstenv.sim.citygen import _sides
 
 
 def _reference(start, along, inward, length, cfg, rng, avoid):
@@ -78,14 +79,6 @@ def _lattice_reference(start, along, inward, length, cfg, avoid):
         ok = np.hypot(avoid[None, :, 0] - centres[:, None, 0],
                       avoid[None, :, 1] - centres[:, None, 1]).min(1) >= SLOT_LENGTH / 2 + curb + sw
     return np.column_stack([centres[ok], heading[ok], np.zeros((ok.sum(), 3))])
-
-
-def _sides(face):
-    x0, x1, y0, y1 = face
-    return [(np.array([x0, y0]), np.array([1.0, 0]), np.array([0, 1.0]), x1 - x0),
-            (np.array([x1, y0]), np.array([0, 1.0]), np.array([-1.0, 0]), y1 - y0),
-            (np.array([x1, y1]), np.array([-1.0, 0]), np.array([0, -1.0]), x1 - x0),
-            (np.array([x0, y1]), np.array([0, -1.0]), np.array([1.0, 0]), y1 - y0)]
 
 
 @pytest.mark.parametrize("layout", ["irregular", "lattice"])

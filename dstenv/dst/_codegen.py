@@ -194,6 +194,15 @@ def _combination() -> list[str]:
     return [f"o{d} = {_sum(terms[d])}" for d in range(len(REACHABLE))]
 
 
+def _gather(pad: str, masses: str, zeta: str) -> list[str]:
+    """Lines (indented by ``pad``) that copy the reachable masses and zeta of source
+    cell ``s`` of the state arrays named ``masses`` / ``zeta`` into the row buffer's
+    column ``u``."""
+    nr = len(REACHABLE)
+    return ([f"{pad}rb[{k}, u] = {masses}[{a}, s]" for k, a in enumerate(REACHABLE)]
+            + [f"{pad}rb[{nr}, u] = {zeta}[s]"])
+
+
 def _row() -> list[str]:
     """Steps 1-8 for row i: sources, then the cell loop over the previous grid itself
     when the whole row comes from one run of consecutive cells (no turn: ~25% faster),
@@ -225,9 +234,8 @@ def _row() -> list[str]:
         "        for t in range(a, j):",
         "            s, u = np.uint64(off + t), np.uint64(t)",
     ]
-    lines += [f"            rb[{k}, u] = m_prev[{a}, s]" for k, a in enumerate(REACHABLE)]
+    lines += _gather("            ", "m_prev", "z_prev")
     lines += [
-        f"            rb[{nr}, u] = z_prev[s]",
         "        a = j",
         "    for t in range(w):",
         "        u, at = np.uint64(t), np.uint64(row + t)",
@@ -293,9 +301,8 @@ def _row_inplace() -> list[str]:
         "                for t in range(a, e):",
         "                    s, u = np.uint64(off + t), np.uint64(t)",
     ]
-    lines += [f"                    rb[{k}, u] = m[{a}, s]" for k, a in enumerate(REACHABLE)]
+    lines += _gather("                    ", "m", "zeta")
     lines += [
-        f"                    rb[{nr}, u] = zeta[s]",
         "            a = e",
         *("    " + line for line in save),
         "    for t in range(w):",

@@ -7,9 +7,17 @@ variants); the numerical core (:mod:`dstenv.dst`, :mod:`dstenv.sim`,
 
 from __future__ import annotations
 
+from pathlib import Path
+
+from dstenv import _jitcache
+
 __version__ = "0.1.0"
 
 __all__ = ["__version__"]
+
+# numba's cache must see when a kernel's imported modules change (see _jitcache)
+_jitcache.register_package("dstenv", Path(__file__).parent)
+_jitcache.install_when_imported()
 
 
 def _register() -> None:

@@ -134,7 +134,8 @@ def benchmark_command(args: argparse.Namespace) -> str:
 def run_cli_benchmark(args: argparse.Namespace, split: str = "test") -> dict[str, Any]:
     """Shared by ``dstenv benchmark`` and ``dstenv kitti evaluate``: config, run, print."""
     from dstenv.data.cli import parse_set
-    from dstenv.segment.benchmark import preset_config, run_benchmark
+    from dstenv.segment.benchmark import run_benchmark
+    from dstenv.segment.presets import preset_config
 
     overrides = parse_set(args.set or [])
     for section, row in (("tune", "dst-tuned"), ("complete", "dst-complete")):
@@ -199,7 +200,7 @@ def _benchmark(args: argparse.Namespace) -> int:
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add ``dstenv train`` and ``dstenv benchmark`` to the CLI."""
-    from dstenv.segment.benchmark import PRESETS
+    from dstenv.segment.presets import PRESETS
     from dstenv.segment.losses import LOSSES
     from dstenv.segment.models import MODELS
 

@@ -104,7 +104,8 @@ def real_benchmark(
     Returns:
         The real-data results (also in ``out/kitti/results.json``).
     """
-    from dstenv.segment.benchmark import default_benchmark_config, run_benchmark
+    from dstenv.segment.benchmark import run_benchmark
+    from dstenv.segment.presets import default_benchmark_config
 
     kdir = out / "kitti"
     data = kdir / "data"

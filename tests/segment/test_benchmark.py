@@ -5,7 +5,8 @@ import json
 import pytest
 
 from dstenv.cli import main
-from dstenv.segment.benchmark import preset_config, run_benchmark
+from dstenv.segment.benchmark import run_benchmark
+from dstenv.segment.presets import preset_config
 from dstenv.segment.checkpoint import load_checkpoint
 
 

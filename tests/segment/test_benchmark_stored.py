@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from dstenv.segment.benchmark import preset_config, run_benchmark
+from dstenv.segment.benchmark import run_benchmark
+from dstenv.segment.presets import preset_config
 from dstenv.segment.replay import split_index, stored_episodes
 
 

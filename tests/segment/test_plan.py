@@ -15,7 +15,8 @@ def test_several_episodes_per_map_replay_and_score(tmp_path):
     from dstenv.data import ShardDataset
     from dstenv.data.generate import GenerateSpec, generate
     from dstenv.data.sampling import scenario_config
-    from dstenv.segment.benchmark import preset_config, run_benchmark
+    from dstenv.segment.benchmark import run_benchmark
+    from dstenv.segment.presets import preset_config
 
     spec = GenerateSpec(
         config=scenario_config(None, {"grid": {"height": 32, "width": 32}}), frames=6, seed=2,
@@ -78,7 +79,8 @@ def test_no_map_networks_fine_tune_on_the_map_free_training_frames(tmp_path):
     import torch
 
     from dstenv.data import ShardDataset
-    from dstenv.segment.benchmark import preset_config, run_benchmark
+    from dstenv.segment.benchmark import run_benchmark
+    from dstenv.segment.presets import preset_config
     from dstenv.segment.checkpoint import load_checkpoint
 
     with pytest.raises(ConfigError, match="no_map: epochs"):

@@ -5,7 +5,7 @@ import pytest
 
 from dstenv.config import ConfigError
 from dstenv.segment import report
-from dstenv.segment.benchmark import preset_config, protocol_overrides
+from dstenv.segment.presets import preset_config, protocol_overrides
 from dstenv.segment.results import goal, segmenter_results
 from dstenv.segment.score import DISTANCE_BANDS, OBJECT_CLASSES, SCOPES, Scores
 
@@ -113,7 +113,7 @@ def test_presets_validate():
         preset_config("tpu")
     with pytest.raises(ConfigError, match="unknown key 'frame'"):
         preset_config("cpu", {"data": {"frame": 3}})
-    from dstenv.segment.benchmark import _check
+    from dstenv.segment.presets import check_config as _check
 
     with pytest.raises(ConfigError, match="search.key: 'speed' is not a training option"):
         _check(preset_config("tiny", {"search": {"key": "speed", "values": [1]}}))
@@ -129,7 +129,7 @@ def test_paper_protocol_names_missing_pipeline_keys():
         protocol_overrides("kitti")
     if "protocol" in default_config():
         assert protocol_overrides("paper")["protocol"]["update_every"] == 10
-        from dstenv.segment.benchmark import _check
+        from dstenv.segment.presets import check_config as _check
 
         with pytest.raises(ConfigError, match="data.stride = 4: the paper protocol fuses every 10"):
             _check(preset_config("tiny", {"protocol": "paper"}))

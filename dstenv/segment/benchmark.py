@@ -26,7 +26,7 @@ Stages (each resumable: rerunning the same command reuses finished work):
 **Evaluation-only data** (``source = "kitti"`` shards of ``dstenv kitti convert``,
 or shards without a train split) is scored by the same :func:`score`: DST with
 the generation parameters from the stored BetP, other DST parameters only when
-the shards hold every filtered frame (:func:`dstenv.segment.replay.stored_episodes`),
+the shards hold every filtered frame (:func:`dstenv.segment.shardindex.stored_episodes`),
 fixed ``tune.params`` / ``complete.params``, and the given checkpoints.
 
 ``protocol = "paper"`` applies :data:`~dstenv.segment.presets.PAPER_PROTOCOL` to the

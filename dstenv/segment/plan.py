@@ -26,10 +26,12 @@ from dstenv.dst.params import DSTParams
 from dstenv.segment.replay import (
     Episode,
     check_replay,
-    episode_targets,
     filter_period,
     generation_params,
     record_episodes,
+)
+from dstenv.segment.shardindex import (
+    episode_targets,
     shard_attrs,
     split_index,
     stored_episodes,

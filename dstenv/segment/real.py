@@ -57,7 +57,7 @@ def _finetune(sim: Mapping[str, Any], ckpts: Mapping[str, Path], data: Path, fra
     import torch
 
     from dstenv.data import ShardDataset
-    from dstenv.segment.replay import split_index
+    from dstenv.segment.shardindex import split_index
     from dstenv.segment.results import HEADLINE
     from dstenv.segment.train import train
 

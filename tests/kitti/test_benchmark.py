@@ -9,7 +9,7 @@ import pytest
 
 from dstenv.cli import main
 from dstenv.segment.checkpoint import save_checkpoint
-from dstenv.segment.replay import split_index, stored_episodes
+from dstenv.segment.shardindex import split_index, stored_episodes
 from dstenv.segment.segmenters import TorchSegmenter
 
 from .conftest import make_sequence

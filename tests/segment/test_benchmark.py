@@ -54,7 +54,7 @@ def test_tiny_benchmark_scores_every_segmenter_on_the_same_cells(tiny):
 
 def test_test_maps_never_in_training(tiny):
     from dstenv.data import ShardDataset
-    from dstenv.segment.replay import split_index
+    from dstenv.segment.shardindex import split_index
 
     out, _ = tiny
     seeds = {

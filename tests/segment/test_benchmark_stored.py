@@ -7,7 +7,7 @@ import pytest
 
 from dstenv.segment.benchmark import run_benchmark
 from dstenv.segment.presets import preset_config
-from dstenv.segment.replay import split_index, stored_episodes
+from dstenv.segment.shardindex import split_index, stored_episodes
 
 
 def _generate(out, stride, warmup):

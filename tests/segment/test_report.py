@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from dstenv.config import ConfigError
-from dstenv.segment import report
+from dstenv.segment import figures, report
 from dstenv.segment.presets import preset_config, protocol_overrides
 from dstenv.segment.results import goal, segmenter_results
 from dstenv.segment.score import DISTANCE_BANDS, OBJECT_CLASSES, SCOPES, Scores
@@ -89,8 +89,8 @@ def test_real_data_report_has_no_preset_or_goal_line():
 
 def test_figures_are_written(tmp_path):
     res = _results()
-    assert report.plot_confusions(res, tmp_path / "cm.png").stat().st_size > 1000
-    assert report.plot_curves(res["histories"], tmp_path / "curves.png").stat().st_size > 1000
+    assert figures.plot_confusions(res, tmp_path / "cm.png").stat().st_size > 1000
+    assert figures.plot_curves(res["histories"], tmp_path / "curves.png").stat().st_size > 1000
     lab = np.zeros((8, 8), np.int64)
     lab[0] = 255
     ex = {
@@ -99,10 +99,10 @@ def test_figures_are_written(tmp_path):
         "predictions": {"dst": lab.clip(0, 4), "unet": lab.clip(0, 4)},
         "labels": lab,
     }
-    assert report.plot_examples([ex, ex], tmp_path / "ex.png").stat().st_size > 1000
+    assert figures.plot_examples([ex, ex], tmp_path / "ex.png").stat().st_size > 1000
     seg = res["segmenters"]["unet-light"]
     res["curve"] = [{"train_frames": n, **seg} for n in (140, 1400)]
-    assert report.plot_size_curve(res, tmp_path / "c.png").stat().st_size > 1000
+    assert figures.plot_size_curve(res, tmp_path / "c.png").stat().st_size > 1000
     assert "| 1400 | 1.000 [1.000, 1.000] |" in report.markdown_table(res)
 
 

@@ -10,7 +10,8 @@ from highway_env.road.lane import StraightLane
 
 from dstenv.config import ConfigError
 from dstenv.envs import DSTGridObservation
-from dstenv.sim.highway import HighwayWorld, place_buildings, rasterise_lanes
+from dstenv.sim.highway import HighwayWorld
+from dstenv.sim.highway_map import place_buildings, rasterise_lanes
 from dstenv.sim.types import MapClass
 
 

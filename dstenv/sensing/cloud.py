@@ -198,17 +198,28 @@ def _extent_marks(x, y, b, rng, ground, obstacle, nearest, occluded_hits, max_ra
                   marks):  # pragma: no cover - numba
     """One pass over the points: how far each bin's ray clears (the farthest used point,
     clipped at the blocker; returned, ``(n_bins,)``) and the own cells in ``marks``:
-    ground returns before the blocker free, obstacle returns occupied."""
+    ground returns before the blocker free, obstacle returns occupied. The points'
+    cells come first, in a loop of their own that vectorises (the floors and the
+    bounds test were most of the pass as scalar code: 0.80 -> 0.61 ms on the bench
+    sweep); the same cells and marks."""
     h, w = marks.shape
-    ext = np.zeros(nearest.shape[0])
+    n = x.shape[0]
     occ = np.uint8(SensorState.OCCUPIED)
     free = np.uint8(SensorState.FREE)
     inv_cell = 1.0 / cell  # a product, not a division a point
+    own = np.empty(n, np.int32)  # flat cell of each point within max_range, else -1
+    for p in range(n):
+        i = int(math.floor(i0 - x[p] * inv_cell + 0.5))
+        j = int(math.floor(j0 - y[p] * inv_cell + 0.5))
+        inside = (i >= 0) & (i < h) & (j >= 0) & (j < w) & (not rng[p] > max_range)
+        own[p] = i * w + j if inside else -1
+    flat = marks.reshape(h * w)
+    ext = np.zeros(nearest.shape[0])
     # consecutive points mostly share a bin (a scan comes column by column): the bin's
     # extent is kept in a register until the bin changes, not stored and reloaded a point
     kk = 0
     acc = ext[0]
-    for p in range(x.shape[0]):
+    for p in range(n):
         k = b[p]
         nk = nearest[k]
         rp = rng[p]
@@ -221,17 +232,13 @@ def _extent_marks(x, y, b, rng, ground, obstacle, nearest, occluded_hits, max_ra
                 kk = k
                 acc = ext[k]
             acc = max(acc, min(rp, nk))
-        if rp > max_range:
+        q = own[p]
+        if q < 0:
             continue
-        if not ((g and first) or (o and (first or occluded_hits))):
-            continue
-        i = int(math.floor(i0 - x[p] * inv_cell + 0.5))
-        j = int(math.floor(j0 - y[p] * inv_cell + 0.5))
-        if 0 <= i < h and 0 <= j < w:
-            if o:
-                marks[i, j] = occ
-            elif marks[i, j] != occ:
-                marks[i, j] = free
+        if o and (first or occluded_hits):
+            flat[q] = occ
+        elif g and first and flat[q] != occ:
+            flat[q] = free
     ext[kk] = acc
     return ext
 

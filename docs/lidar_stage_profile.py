@@ -88,13 +88,7 @@ def road_stages():
     cand, _, plane = timed("road: RANSAC hypotheses", ransac.best_plane, xyz, pick, tri,
                            math.cos(math.radians(gcfg["max_tilt_deg"])),
                            float(gcfg["inlier_distance"]))
-    t0 = time.process_time()
-    for _ in range(2):  # fit_ground_plane's refit
-        _, centre, scatter = ransac.inlier_moments(cand, plane, gcfg["inlier_distance"])
-        normal = np.linalg.eigh(scatter)[1][:, 0]
-        normal = normal if normal[2] > 0 else -normal
-        plane = np.append(normal, -normal @ centre)
-    best_t["road: refit"] = min(best_t.get("road: refit", np.inf), time.process_time() - t0)
+    plane = timed("road: refit", ransac.refit, cand, plane, float(gcfg["inlier_distance"]), 2)
     h, cell, flat = timed("road: local-ground walk", ground.ground_walk, xyz, plane, gcfg,
                           polar=polar)
     n_bins = max(round(360.0 / rcfg["azimuth_bin_deg"]), 1)

@@ -31,7 +31,7 @@ import numba
 import numpy as np
 
 from dstenv.config import Validated, merge_config
-from dstenv.sensing.ransac import best_plane, candidates, inlier_moments, sample_candidates
+from dstenv.sensing.ransac import best_plane, candidates, refit, sample_candidates
 
 __all__ = ["CloudError", "default_ground_config", "fit_ground_plane", "ground_heights",
            "classify_points", "ground_config", "ground_walk", "polar_coordinates",
@@ -114,15 +114,8 @@ def fit_ground_plane(points: np.ndarray, config: dict[str, Any] | None = None, *
                                 float(cfg["inlier_distance"]))
     if best < 0:
         raise CloudError("ground fit: no near-horizontal plane among the RANSAC hypotheses")
-    for _ in range(2):  # least-squares refit on the inliers: the normal is the
-        # eigenvector of the smallest eigenvalue of their scatter matrix
-        count, centre, scatter = inlier_moments(cand, plane, cfg["inlier_distance"])
-        if count < 3:
-            break
-        n = np.linalg.eigh(scatter)[1][:, 0]
-        n = n if n[2] > 0 else -n
-        plane = np.append(n, -n @ centre)
-    return plane
+    # least-squares refit on the inliers, twice
+    return refit(cand, plane, float(cfg["inlier_distance"]), 2)
 
 
 def ground_heights(

@@ -3,8 +3,8 @@
 Candidates (points near the road), their sample and the triplets of the hypotheses
 (NumPy's draws, replayed in numba where NumPy takes a tail shuffle), the best
 hypothesis (most candidates within the inlier band, scored in blocks, a hypothesis
-dropped once it can no longer win) and the inlier moments of the least-squares
-refit. Split from :mod:`dstenv.sensing.ground` to keep both modules small.
+dropped once it can no longer win) and the least-squares refit on its inliers. Split
+from :mod:`dstenv.sensing.ground` to keep both modules small.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ import math
 import numba
 import numpy as np
 
-__all__ = ["candidates", "sample_candidates", "best_plane", "inlier_moments"]
+__all__ = ["candidates", "sample_candidates", "best_plane", "inlier_moments", "refit"]
 
 
 @numba.njit(cache=True)
@@ -208,3 +208,23 @@ def inlier_moments(cand, plane, dist):  # pragma: no cover - numba
             m[2, 1] += q2 * q1
             m[2, 2] += q2 * q2
     return n, centre, m
+
+
+@numba.njit(cache=True)
+def refit(cand, plane, dist, rounds):  # pragma: no cover - numba
+    """``(4,)`` the plane refit ``rounds`` times by least squares to the candidates
+    ``cand (K, 3)`` within ``dist`` of it: the normal is the eigenvector of the smallest
+    eigenvalue of their scatter matrix (``np.linalg.eigh``), turned up; stops early when
+    fewer than 3 are left. One call (was ~0.15 ms of NumPy calls; the same planes on
+    the 40 KITTI scans and the bench sweeps)."""
+    plane = plane.copy()
+    for _ in range(rounds):
+        count, centre, scatter = inlier_moments(cand, plane, dist)
+        if count < 3:
+            break
+        n = np.ascontiguousarray(np.linalg.eigh(scatter)[1][:, 0])
+        if not n[2] > 0:
+            n = -n
+        plane[0], plane[1], plane[2] = n[0], n[1], n[2]
+        plane[3] = -np.dot(n, centre)
+    return plane

@@ -383,15 +383,18 @@ def _ground_walk(xyz, plane, r_all, angle, n_sec, bin_size, ego_radius, max_slop
     to_sec = n_sec / (2 * math.pi)
     inv_bin = 1.0 / bin_size
     cell = np.empty(n, np.int64)  # sector * n_bin + range bin of every point
+    for p in range(n):  # the bins alone: a loop that vectorises
+        s = min(int((angle[p] + math.pi) * to_sec), n_sec - 1)
+        cell[p] = s * n_bin + int(r_all[p] * inv_bin)
     lowest = np.full((n_sec, n_bin), np.inf)
     highest = np.full((n_sec, n_bin), -np.inf)
-    for p in range(n):
+    low = lowest.reshape(n_sec * n_bin)  # flat views, indexed by cell
+    high = highest.reshape(n_sec * n_bin)
+    for p in range(n):  # then the scattered lowest / highest
         hp = h[p]
-        s = min(int((angle[p] + math.pi) * to_sec), n_sec - 1)
-        k = int(r_all[p] * inv_bin)
-        cell[p] = s * n_bin + k
-        lowest[s, k] = min(lowest[s, k], hp)
-        highest[s, k] = max(highest[s, k], hp)
+        q = cell[p]
+        low[q] = min(low[q], hp)
+        high[q] = max(high[q], hp)
     ground = np.zeros((n_sec, n_bin))
     first = int(ego_radius / bin_size)
     for s in range(n_sec):

@@ -1,15 +1,14 @@
 """Old and new 3-D LIDAR sweep + road in one process: CPU time, alternately.
 
-On a loaded machine wall-clock medians and separate processes hide differences of a
-few per cent; this times a copy of an older ``dstenv`` (renamed ``dstenv_old``)
-against the current one in turns, in one process (``docs/realism-lidar.md``; its
-second round used OLD = aa76a0a, its third 997b2d4, its fourth 90fcc83, its fifth
-2255cb4, its sixth b160de0). First it counts where the two differ (the fifth round's
-float32 road and sweep may, by rounding; issue 13 allows 0.1 % of cells and points, planes within
-1e-4): the sensor grids, ground and obstacle masks and planes of the bench world's
-sweeps (4 seeds, with and without yaw rate; each version's own sweep through its own
-road) and of every KITTI scan of ``/work/shared/data`` if present. Then it times both,
-minimum and median CPU time::
+On a loaded machine wall-clock medians and separate processes hide differences of a few
+per cent; this times a copy of an older ``dstenv`` (renamed ``dstenv_old``) against the
+current one in turns, in one process (``docs/realism-lidar.md``; its second round used
+OLD = aa76a0a, its third 997b2d4, its fourth 90fcc83, its fifth 2255cb4, its sixth
+b160de0). First it counts where the two differ (the fifth round's float32 road and sweep
+may, by rounding; issue 13 allows 0.1 % of cells and points, planes within 1e-4): the
+sensor grids, ground and obstacle masks and planes of the bench world's sweeps (4 seeds,
+with and without yaw rate; each version's own sweep through its own road) and of every
+KITTI scan of ``/work/shared/data`` if present. Then it times both, minimum and median CPU time::
 
     mkdir -p /tmp/old && git archive OLD dstenv | tar -x -C /tmp/old   # OLD: a commit
     cd /tmp/old && mv dstenv dstenv_old

@@ -123,11 +123,12 @@ def generate_city(cfg: dict[str, Any], traffic: dict[str, Any], rng: np.random.G
     edges += [RoadEdge(nid(i, j), nid(i + 1, j), node_xy[[nid(i, j), nid(i + 1, j)]],
                        int(lanes_y[j]), int(lanes_y[j]), _lw(lwy[j], lw), float(med_y[j]))
               for i, j in zip(*np.nonzero(hseg))]
+    kerb_r = curb + 0.5 * sw  # [m] kerb corners: painted (fillet_corners) and driven round
     rounds = pick_roundabouts(node_xy, edges, hwx.repeat(ny), np.tile(hwy, nx),
-                              curb + 0.5 * sw, lw, cfg["roundabout_prob"], geo)
+                              kerb_r, lw, cfg["roundabout_prob"], geo)
     builder = NetworkBuilder()
     degree = add_road_lanes(builder, len(node_xy), edges, reach + STOP_MARGIN, lw,
-                            right_radius=curb + 0.5 * sw + 0.5 * lw, roundabouts=rounds)
+                            kerb_radius=kerb_r, roundabouts=rounds)
     u = rng.random(len(node_xy))
     p_stop, p_sig = traffic["stop_sign_prob"], traffic["signal_prob"]
     control = np.where(u < p_stop, Control.STOP, np.where(u < p_stop + p_sig, Control.SIGNAL,
@@ -206,7 +207,7 @@ def generate_city(cfg: dict[str, Any], traffic: dict[str, Any], rng: np.random.G
     fill_rects(raster, roads, org, res, MapClass.ROAD)
     fill_rects(surface, roads, org, res, Surface.ROAD)
     for face in faces:
-        fillet_corners(raster, surface, face, curb + 0.5 * sw, res)
+        fillet_corners(raster, surface, face, kerb_r, res)
     _zebras(surface, zebras, res)
     medians = [(e.poly, e.median, reach[e.u] + STOP_MARGIN, reach[e.v] + STOP_MARGIN)
                for e in edges if e.median > 0]

@@ -313,7 +313,7 @@ def load_osm(path: str | Path, *, resolution: float = 0.2, lane_width: float = 3
     trims = np.array([half.get(n, 3.0) + 1.5 for n in range(len(gid))])
     builder = NetworkBuilder()
     degree = add_road_lanes(builder, len(gid), edges, trims, lane_width,
-                            right_radius=KERB_RADIUS + lane_width / 2)
+                            kerb_radius=KERB_RADIUS)
     rng = np.random.default_rng(0)  # fixed: the same file gives the same junction rules
     tr = traffic or {"stop_sign_prob": 0.0, "signal_prob": 0.0, "signal_green": 12.0}
     u = rng.random(len(gid))

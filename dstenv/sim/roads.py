@@ -71,7 +71,7 @@ def _wrap(a: float) -> float:
 
 def add_road_lanes(builder: NetworkBuilder, n_nodes: int, edges: list[RoadEdge],
                    trims: np.ndarray, lane_width: float, uturn_trim: float = 3.0,
-                   right_radius: float = 6.0, roundabouts: list | None = None) -> np.ndarray:
+                   kerb_radius: float = 4.375, roundabouts: list | None = None) -> np.ndarray:
     """Add the road and connector lanes of a street graph to ``builder``.
 
     Lanes keep to the right. Road lanes stop ``trims[node]`` metres before each
@@ -86,8 +86,13 @@ def add_road_lanes(builder: NetworkBuilder, n_nodes: int, edges: list[RoadEdge],
         trims: ``(n_nodes,) float64`` stop-line distance from each node [m].
         lane_width: [m].
         uturn_trim: stop-line distance at dead ends [m].
-        right_radius: radius of right turns from the kerb lane [m] (they hug the kerb
-            corner; other manoeuvres are smooth cubic curves).
+        kerb_radius: radius [m] of the painted kerb corner that right turns go round
+            (the default puts a 3.25 m kerb lane on a 6 m turn). A right turn is an arc
+            concentric with it (the corners square): straight - arc of radius
+            ``kerb_radius + max(da, db)`` - straight, ``da`` / ``db`` the distances of
+            its two lanes' centres from their kerbs, so it stays ``min(da, db)`` from
+            the kerb all the way round, as a car that keeps to its lane does; other
+            manoeuvres are smooth cubic curves.
         roundabouts: :class:`~dstenv.sim.roundabout.Roundabout` s replacing the
             connectors of their nodes by a one-way ring.
 
@@ -121,6 +126,7 @@ def add_road_lanes(builder: NetworkBuilder, n_nodes: int, edges: list[RoadEdge],
                 d0, d1 = lane_poly[1] - lane_poly[0], lane_poly[-1] - lane_poly[-2]
                 out[a].append((lid, ei, k, n, float(np.arctan2(d0[1], d0[0])), lane_poly[0]))
                 inc[b].append((lid, ei, k, n, float(np.arctan2(d1[1], d1[0])), lane_poly[-1]))
+    lws = [e.lane_width or lane_width for e in edges]
     rings = {r.node: r for r in roundabouts or []}
     for node in range(n_nodes):
         if node in rings:
@@ -131,16 +137,16 @@ def add_road_lanes(builder: NetworkBuilder, n_nodes: int, edges: list[RoadEdge],
             by_edge.setdefault(o[1], []).append(o)
         for a, ea, ka, na, ha, pa in inc[node]:
             made = _connect(builder, node, degree[node], by_edge, a, ea, ka, na, ha, pa, False,
-                            right_radius)
+                            kerb_radius, lws)
             if not made:  # e.g. a middle lane at a T: let it turn anyway
                 _connect(builder, node, degree[node], by_edge, a, ea, ka, na, ha, pa, True,
-                         right_radius)
+                         kerb_radius, lws)
     return degree
 
 
 def _connect(builder: NetworkBuilder, node: int, deg: int, by_edge: dict, a: int, ea: int,
              ka: int, na: int, ha: float, pa: np.ndarray, relaxed: bool,
-             right_radius: float) -> bool:
+             kerb_radius: float, lws: list[float]) -> bool:
     made = False
     for eb, outs in by_edge.items():
         if eb == ea and deg > 1:
@@ -168,8 +174,9 @@ def _connect(builder: NetworkBuilder, node: int, deg: int, by_edge: dict, a: int
         if np.hypot(pb[0] - pa[0], pb[1] - pa[1]) < 1e-6:
             continue
         poly = None
-        if turn == Turn.RIGHT and ka == na - 1:
-            poly = fillet_curve(pa, ha, pb, hb, right_radius)
+        if turn == Turn.RIGHT:  # round the kerb corner, each lane as far from it as before
+            gap = max(_kerb_gap(ka, na, lws[ea]), _kerb_gap(k_out, nb_, lws[eb]))
+            poly = fillet_curve(pa, ha, pb, hb, kerb_radius + gap)
         if turn == Turn.UTURN:
             poly = balloon(pa, ha, pb)
         if poly is None:
@@ -179,3 +186,9 @@ def _connect(builder: NetworkBuilder, node: int, deg: int, by_edge: dict, a: int
         builder.link(c, b)
         made = True
     return made
+
+
+def _kerb_gap(k: int, n: int, lw: float) -> float:
+    """Distance [m] from the right kerb to the centre of lane ``k`` of ``n`` (``k = 0``
+    innermost; the lanes of a direction fill the carriageway from the kerb)."""
+    return (n - k - 0.5) * lw

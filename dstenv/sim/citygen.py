@@ -29,7 +29,7 @@ from dstenv.sim.roundabout import (island_clutter, paint_roundabout, pick_rounda
                                    ring_nodes)
 from dstenv.sim.sidewalks import LANE_OFFSET, add_block_rings
 from dstenv.sim.clutter import concat_obstacles, median_clutter, place_clutter
-from dstenv.sim.warp import Warp, draw_warp, warp_boxes, warp_lanes, warp_obstacles
+from dstenv.sim.warp import Warp, draw_warp, kerb_ease, warp_boxes, warp_lanes, warp_obstacles
 from dstenv.sim.parking import SLOT_LENGTH, city_slots
 from dstenv.sim.types import MapClass, WorldMap
 
@@ -206,8 +206,10 @@ def generate_city(cfg: dict[str, Any], traffic: dict[str, Any], rng: np.random.G
                   ys[jh] + hwy[jh] + pad], -1)])
     fill_rects(raster, roads, org, res, MapClass.ROAD)
     fill_rects(surface, roads, org, res, Surface.ROAD)
+    # the corners a shear squeezes keep the right turns' kerb clearance (warp.kerb_ease)
+    ease = kerb_ease(cfg["shear_deg"], 0.5 * max(lwx.max(), lwy.max())) if pad > 0 else 0.0
     for face in faces:
-        fillet_corners(raster, surface, face, kerb_r, res)
+        fillet_corners(raster, surface, face, kerb_r + ease, res)
     _zebras(surface, zebras, res)
     medians = [(e.poly, e.median, reach[e.u] + STOP_MARGIN, reach[e.v] + STOP_MARGIN)
                for e in edges if e.median > 0]

@@ -92,3 +92,39 @@ def test_autopilot_turns_right_at_a_bend_without_leaving_the_road():
         seen = seen or w.route[0] == turn
         assert not w.off_road
     assert seen and w.route[0] != turn
+
+
+def _corner_gap(theta_deg: float, ease: float, corner: tuple[int, int], gap: float = 1.625
+                ) -> float:
+    """Smallest distance [m] between a kerb lane's right turn (an arc ``gap`` from a kerb
+    corner of radius ``KERB_R``, and its straights) and the kerb painted ``ease`` larger,
+    both through a warp's shear of ``theta_deg``; the block in quadrant ``corner``."""
+    from dstenv.sim.warp import Warp
+
+    m = Warp(0.0, 1e9, 0.0, 0.0, 1e9, 0.0, np.deg2rad(theta_deg), np.zeros(2),
+             np.zeros(2)).matrix
+    sx, sy = corner
+    phi = np.linspace(0.0, np.pi / 2, 400)
+    towards = np.stack([-sx * np.cos(phi), -sy * np.sin(phi)], -1)  # centre -> corner
+    t = np.linspace(0.0, 20.0, 400)
+    r = KERB_R + ease
+    kerb = np.vstack([np.array([sx, sy]) * r + r * towards,
+                      np.stack([sx * (r + t), 0 * t], -1), np.stack([0 * t, sy * (r + t)], -1)])
+    lane = np.vstack([np.array([sx, sy]) * KERB_R + (KERB_R + gap) * towards,
+                      np.stack([sx * (KERB_R + t), -sy * gap + 0 * t], -1),
+                      np.stack([-sx * gap + 0 * t, sy * (KERB_R + t)], -1)])
+    k, ln = kerb @ m.T, lane @ m.T
+    return float(np.hypot(*(ln[:, None] - k[None]).transpose(2, 0, 1)).min())
+
+
+@pytest.mark.parametrize("theta", [5.0, 15.0, -15.0, 30.0])
+def test_kerb_ease_keeps_a_right_turns_gap_to_the_kerb_through_the_shear(theta):
+    from dstenv.sim.warp import kerb_ease
+
+    corners = [(1, 1), (-1, 1), (1, -1), (-1, -1)]
+    squeezed = [_corner_gap(theta, 0.0, c) for c in corners]
+    assert min(squeezed) < 1.625 - 0.05  # two corners of a block lose clearance
+    assert max(squeezed) == pytest.approx(1.625, abs=0.01)  # the other two keep it
+    e = kerb_ease(theta, 1.625)
+    assert all(_corner_gap(theta, e, c) == pytest.approx(1.625, abs=0.01) for c in corners)
+    assert kerb_ease(0.0, 1.625) == 0.0

@@ -25,6 +25,11 @@ cutting).
 JSON out (stdout, and ``--out``): per scenario and connector kind the number of
 connectors, the share that leaves the road, the worst overlap [m], the 1st percentile
 of the clearance [m], and the env15 share.
+
+Measured 2026-12-02 (docs/realism.md, "Right-turn bends"; ``--seeds 50 --pursuit
+40``): right turns leaving the road, default 1.19 % (worst 0.72 m) -> 0, dense 6.06 %
+(0.90 m) -> 0, suburb 0.07 % -> 0; driven right turns off the road 1 / 3 / 0 of 40 ->
+0 / 0 / 0 (the ego cuts <= 0.19 m towards the kerb, before and after).
 """
 
 from __future__ import annotations

@@ -43,10 +43,13 @@ VARIANTS: dict[str, tuple[dict[str, Any], int]] = {
     "DSTGrid-RL-v0": ({"preset": {"grid": RL_GRID, "observation": RL_OBSERVATION}}, 400),
     "DSTGrid-Continuous-v0": ({"preset": {"grid": RL_GRID, "observation": RL_OBSERVATION,
                                           "action": {"type": "continuous"}}}, 400),
-    # the route fixes the turns: speed-only meta-actions, Discrete(3)
+    # the route fixes the turns: speed-only meta-actions, Discrete(3). 60 s: the
+    # privileged autopilot, which keeps every junction rule, makes the 100 m of a
+    # success in 65 of 100 episodes in 40 s, 91 in 60 s and 96 in 90 s (seeds 500-599,
+    # `python docs/autopilot_outcomes.py --steps N`); the rest wait at junctions
     "DSTGrid-Occluded-v0": ({"preset": {"grid": RL_GRID, "observation": RL_OBSERVATION,
                                         "world": OCCLUDED_WORLD, "action": {"type": "speed"}}},
-                            400),
+                            600),
     "DSTGrid-Highway-v0": ({"preset": {"source": "highway", "grid": RL_GRID,
                                        "observation": RL_OBSERVATION}}, 200),
 }

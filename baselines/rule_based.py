@@ -54,7 +54,7 @@ class GridRuleDriver:
     * obstacle: the first grid cell within ``corridor`` m of the route ahead whose
       BetP(static) + BetP(moving) exceeds ``occupied`` sets the distance to stop in;
       the wanted speed is the fastest whose braking distance at ``brake`` m/s^2 plus
-      ``margin`` m fits before it;
+      ``margin`` m fits before it, and the slowest once the current speed's does not;
     * bend: the route turns by more than ``bend_angle`` rad within ``bend_range`` m:
       at most the middle speed;
     * junction within ``junction_range`` m: at most the middle speed unless its
@@ -130,6 +130,8 @@ class GridRuleDriver:
         stop_dist = self.speeds ** 2 / (2 * self.brake)
         fits = self.speeds[stop_dist <= max(room, 0.0)]
         want = float(fits.max()) if len(fits) else float(self.speeds.min())
+        if v * v / (2 * self.brake) >= room:  # the current speed no longer stops in time
+            want = float(self.speeds.min())
         middle = float(self.speeds[len(self.speeds) // 2])
         if self._bend_ahead(path, dist):
             want = min(want, middle)

@@ -72,7 +72,9 @@ def test_grid_rule_driver_reads_only_the_observation(small_config: dict) -> None
     blocked["grid"][3, 20 - 12, 19:21] = 255  # a moving object 12 m ahead on the route
     assert policy.act(blocked, {}) == 0  # brake
     # 12 m ahead - 4 m margin = 8 m: 4.5 m/s stops in 4.2 m at 2.4 m/s^2, 9 m/s does not
-    assert policy.act({**blocked, "ego": _obs(target=4.5)["ego"]}, {}) == 1
+    assert policy.act({**blocked, "ego": _obs(speed=4.5, target=4.5)["ego"]}, {}) == 1
+    # ... but still driving 9 m/s (16.9 m to stop) the target goes on down to 0
+    assert policy.act({**blocked, "ego": _obs(speed=9.0, target=4.5)["ego"]}, {}) == 0
     beside = _obs()
     beside["grid"][3, 20 - 12, 2:4] = 255  # 17 m to the left of the route: ignored
     assert policy.act(beside, {}) == 1

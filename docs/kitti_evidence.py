@@ -40,7 +40,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from scipy.ndimage import distance_transform_edt, label
+from scipy.ndimage import binary_dilation, distance_transform_edt, label
 
 from dstenv.dst import CLASSES, SensorState
 from dstenv.grid import GridSpec
@@ -72,6 +72,8 @@ class Tally:
         self.mov_lab = np.zeros(len(BANDS))
         self.mov_hit = np.zeros(len(BANDS))
         self.mov_betp = []
+        self.halo = 0  # strong cells not labelled moving that touch a moving cell
+        self.face = np.zeros(2)  # occupied visible cells on or touching moving ones: moving, not
         self.ring = np.zeros((2, 3))  # near / far side x sensor state
         self.objects = 0
         self.edge = 0
@@ -104,6 +106,9 @@ class Tally:
             self.grid_cells[b] += np.count_nonzero(inb)
             self.fov_states[b] += np.bincount(sensor[inb & region], minlength=3)
         self.mov_betp.append(betp_moving[vis & region & mov])
+        touch = binary_dilation(mov, np.ones((3, 3), bool))
+        self.halo += np.count_nonzero(strong & touch & ~mov)
+        self.face += (np.count_nonzero(occ & mov), np.count_nonzero(occ & touch & ~mov))
         self._ring(mov & region, vis, sensor, region)
 
     def _ring(self, mov: np.ndarray, vis: np.ndarray, sensor: np.ndarray,
@@ -148,6 +153,7 @@ class Tally:
                 "cells_per_frame": r(s / max(1, self.frames)),
                 "label_share": dict(zip(CATS, r(self.strong_cat / max(1.0, s)))),
                 "sensor_share": shares(self.strong_state),
+                "touching_moving_share": r(self.halo / max(1.0, s)),
             },
             "false_alarms": {
                 name: {"per_occupied_visible_cell": r(self.fa[b] / max(1.0, self.occ[b])),
@@ -162,6 +168,7 @@ class Tally:
                 "cells": int(betp.size),
                 "mean_betp_moving": r(betp.mean()) if betp.size else None,
                 "share_strong": r((betp > STRONG).mean()) if betp.size else None,
+                "occupied_face_labelled_moving": r(self.face[0] / max(1.0, self.face.sum())),
             },
             "moving_ring": {
                 "objects": self.objects,

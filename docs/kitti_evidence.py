@@ -25,6 +25,8 @@ Figures (``strong``: visible, BetP(moving) at t > 0.45):
 - ``moving_ring``: sensor states in the ring 1-3 m around each labelled moving object
   that has a visible cell, on its near side (closer to the ego than the object's
   centroid) and far side; ``edge_share``: objects whose ring is less than half free;
+- ``moving_objects_per_frame``: moving objects (KITTI boxes, simulated agents) by
+  kind whose centre lies in the grid, and in the region;
 - ``occupied``: unknown / free / occupied share of the sensor grid by distance.
 
 The KITTI frames are the 40 scans of sequence 0003 fused at 10 Hz from scan 0; frames
@@ -81,6 +83,21 @@ class Tally:
         self.grid_states = np.zeros((len(BANDS), 3))
         self.grid_cells = np.zeros(len(BANDS))
         self.fov_states = np.zeros((len(BANDS), 3))
+        self.spec = spec
+        self.agents: dict[str, np.ndarray] = {}  # kind -> moving ones in the grid, in region
+
+    def add_agents(self, kind: np.ndarray, xy: np.ndarray, moving: np.ndarray,
+                   region: np.ndarray) -> None:
+        """Moving objects of one frame: ``kind (N,)`` names, ``xy (N, 2)`` ego-frame
+        centres [m], ``moving (N,) bool``; counted when their centre cell is in the grid,
+        and in ``region``."""
+        i, j = self.spec.to_cell(xy[:, 0], xy[:, 1])
+        inside = self.spec.inside(i, j) & moving
+        ins = np.zeros(len(kind), bool)
+        ins[inside] = region[i[inside], j[inside]]
+        for k in set(kind.tolist()):
+            c = self.agents.setdefault(k, np.zeros(2))
+            c += (np.count_nonzero(inside & (kind == k)), np.count_nonzero(ins & (kind == k)))
 
     def add(self, betp_moving: np.ndarray, labels: np.ndarray, sensor: np.ndarray,
             region: np.ndarray) -> None:
@@ -178,6 +195,9 @@ class Tally:
                 "far_side": shares(self.ring[1]),
                 "edge_share": r(self.edge / max(1, self.objects)),
             },
+            "moving_objects_per_frame": {
+                k: {"grid": r(v[0] / max(1, self.frames)), "region": r(v[1] / max(1, self.frames))}
+                for k, v in sorted(self.agents.items())},
             "occupied": {
                 "grid": {name: shares(self.grid_states[b]) for b, name in enumerate(names)},
                 "region": {name: shares(self.fov_states[b]) for b, name in enumerate(names)},
@@ -188,6 +208,7 @@ class Tally:
 def kitti_tally(root: str, sequence: str, first: int) -> Tally:
     """Fuse every scan of a KITTI sequence (no map) and tally frames ``first`` on."""
     from dstenv.kitti.grids import camera_fov, dontcare_cells
+    from dstenv.kitti.readers import OBJECT_TYPES
     from dstenv.kitti.sequence import KittiSequence, convert_sequence, kitti_config
     from dstenv.sensing.cloud import cloud_sensor_grid
 
@@ -197,6 +218,8 @@ def kitti_tally(root: str, sequence: str, first: int) -> Tally:
     seq = KittiSequence(root, sequence)
     fov = camera_fov(seq.calib, spec, cfg["labels"]["image_width"])
     dcb = seq.labels.select(seq.labels.is_dontcare)
+    lab = cfg["labels"]
+    moving = seq.moving(lab["rule"], lab["threshold"], lab["window"])
     tally = Tally(spec)
     for fr in convert_sequence(seq, cfg):
         pts = seq.scan(fr.step)
@@ -206,6 +229,9 @@ def kitti_tally(root: str, sequence: str, first: int) -> Tally:
         dc = dontcare_cells(pts, obstacle, dcb.bbox[dcb.frame == fr.step], seq.calib, spec,
                             cfg["labels"]["dontcare_dilation"])
         tally.add(fr.pignistic[MOVING], fr.labels, fr.sensor, fov & ~dc)
+        sel = seq.boxes.frame == fr.step
+        tally.add_agents(np.array([OBJECT_TYPES[t] for t in seq.boxes.type[sel]], dtype=object),
+                         seq.boxes.centre[sel, :2], moving[sel], fov)
     return tally
 
 
@@ -231,14 +257,29 @@ def sim_tallies(cfg: dict, drives: int, seed0: int) -> tuple[Tally, Tally]:
     inside the camera view and over the whole grid."""
     from dstenv.data.sampling import iter_frames
     from dstenv.pipeline import Pipeline, camera_mask
+    from dstenv.sim.types import AgentKind
 
     spec = GridSpec(GRID, GRID, CELL)
     fov, every = camera_mask(spec, SIM_FOV), np.ones(spec.shape, bool)
     t_fov, t_all = Tally(spec), Tally(spec)
     seeds = iter(range(seed0, seed0 + drives))
-    for fr in iter_frames(lambda: Pipeline(cfg), seeds, 60, 10, 10):
+    made: list[Pipeline] = []
+
+    def make() -> Pipeline:
+        made.append(Pipeline(cfg))
+        return made[0]
+
+    for fr in iter_frames(make, seeds, 60, 10, 10):
         t_fov.add(fr.pignistic[MOVING], fr.labels, fr.sensor, fov)
         t_all.add(fr.pignistic[MOVING], fr.labels, fr.sensor, every)
+        world, thr = made[0].world, made[0].moving_threshold
+        a = world.agents
+        c, s = np.cos(world.ego_pose[2]), np.sin(world.ego_pose[2])
+        d = a.xy - world.ego_pose[:2]
+        xy = np.stack([c * d[:, 0] + s * d[:, 1], c * d[:, 1] - s * d[:, 0]], axis=1)
+        kind = np.array([AgentKind(k).name.title() for k in a.kind], dtype=object)
+        for t, region in ((t_fov, fov), (t_all, every)):
+            t.add_agents(kind, xy, a.speed > thr, region)
     return t_fov, t_all
 
 

@@ -37,7 +37,7 @@ _ROOTS: dict[str, Path] = {}  # package name -> package directory
 def register_package(name: str, directory: str | Path) -> None:
     """Serve the kernels of package ``name`` (importable from ``directory``)."""
     _ROOTS[name] = Path(directory).resolve()
-    for cached in (_import_nodes, _imports, _closure, _stamp):
+    for cached in (_import_nodes, _imports, _closure, _file_digest, _stamp):
         cached.cache_clear()
 
 
@@ -113,12 +113,12 @@ def _defining_file(module: str, name: str, depth: int = 0) -> Path | None:
     if file is None or file.name != "__init__.py" or depth > 8:
         return file
     for node in _import_nodes(file):
-        if isinstance(node, ast.ImportFrom) and any(
-                (alias.asname or alias.name) == name for alias in node.names):
-            source = next(alias.name for alias in node.names
-                          if (alias.asname or alias.name) == name)
-            found = _defining_file(_absolute(file, node), source, depth + 1)
-            return found if found is not None else file
+        if not isinstance(node, ast.ImportFrom):
+            continue
+        for alias in node.names:
+            if (alias.asname or alias.name) == name:
+                found = _defining_file(_absolute(file, node), alias.name, depth + 1)
+                return found if found is not None else file
     return file
 
 
@@ -162,11 +162,17 @@ def dependency_files(source: str | Path) -> list[Path]:
 
 
 @functools.lru_cache(maxsize=None)
+def _file_digest(path: Path) -> bytes:
+    """sha256 of one file, read once per process however many closures hold it."""
+    return hashlib.sha256(path.read_bytes()).digest()
+
+
+@functools.lru_cache(maxsize=None)
 def _stamp(path: Path) -> str:
     digest = hashlib.sha256()
     for file in _closure(path):
         digest.update(str(file.relative_to(_ROOTS[_owner(file)])).encode())
-        digest.update(hashlib.sha256(file.read_bytes()).digest())
+        digest.update(_file_digest(file))
     return digest.hexdigest()
 
 

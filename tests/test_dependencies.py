@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from dstenv.config import tomllib
+from dstenv.scenario_files import tomllib
 
 ROOT = Path(__file__).resolve().parents[1]
 PYPROJECT = tomllib.loads((ROOT / "pyproject.toml").read_text())

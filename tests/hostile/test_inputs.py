@@ -11,7 +11,8 @@ import pytest
 
 from dstenv.config import ConfigError, build_config
 from dstenv.kitti.readers import KittiError, read_calib, read_labels, read_oxts
-from dstenv.sim.osm import OSM_LIMITS, load_osm
+from dstenv.sim.osm import load_osm
+from dstenv.sim.osm_xml import OSM_LIMITS
 
 KITTI = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "kitti-tracking"
 OSM = """<?xml version="1.0"?>
@@ -201,7 +202,7 @@ def test_failed_reset_config_leaves_the_env_working():
 
 
 def test_deeply_nested_toml_is_a_named_error(tmp_path):
-    from dstenv.config import load_scenario
+    from dstenv.scenario_files import load_scenario
 
     path = tmp_path / "deep.toml"
     path.write_text("x = " + "[" * 5000 + "]" * 5000 + "\n")

@@ -9,7 +9,8 @@ import pytest
 
 from dstenv.sim import World
 from dstenv.sim.lanes import LaneKind
-from dstenv.sim.osm import EARTH_RADIUS, latlon_to_mercator, load_osm
+from dstenv.sim.osm import load_osm
+from dstenv.sim.osm_xml import EARTH_RADIUS, latlon_to_mercator
 from dstenv.sim.types import MapClass
 
 SHARED = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "osm"

@@ -8,7 +8,7 @@ import pytest
 from dstenv.dst import CLASSES
 from dstenv.grid import GridSpec
 from dstenv.sensing import label_grid
-from dstenv.sim import World, pullin, spawn
+from dstenv.sim import World, agenttable, pullin
 from dstenv.sim.ego import box_corners, boxes_overlap
 from dstenv.sim.lanes import Control
 from dstenv.sim.raster import lookup
@@ -39,7 +39,7 @@ def _world(parked_at=(-43.0, -19.0, -13.0)):
     w.place_ego(lane_starting_near(net, -TRIM, LW / 2), 30.0)
     st = w._state
     for y in parked_at:
-        spawn.add_row(st, AgentKind.CAR, (LW + STRIP / 2, y), np.pi / 2, 4.5, 1.8, parked=True,
+        agenttable.add_row(st, AgentKind.CAR, (LW + STRIP / 2, y), np.pi / 2, 4.5, 1.8, parked=True,
                       at=len(st["v"]) - 1)
     return w, lane_ending_near(net, LW / 2, -TRIM)
 

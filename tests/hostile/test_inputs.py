@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import bz2
 
-from pathlib import Path
 
 import pytest
 
@@ -13,8 +12,9 @@ from dstenv.config import ConfigError, build_config
 from dstenv.kitti.readers import KittiError, read_calib, read_labels, read_oxts
 from dstenv.sim.osm import load_osm
 from dstenv.sim.osm_xml import OSM_LIMITS
+from shared_data import SHARED_DATA
 
-KITTI = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "kitti-tracking"
+KITTI = SHARED_DATA / "kitti-tracking"
 OSM = """<?xml version="1.0"?>
 <osm version="0.6">
  <bounds minlat="49.0" minlon="8.4" maxlat="49.001" maxlon="8.401"/>

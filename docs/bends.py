@@ -43,7 +43,8 @@ from pathlib import Path
 import numpy as np
 from scipy.ndimage import distance_transform_edt
 
-from dstenv.config import load_scenario, section
+from dstenv.config import section
+from dstenv.scenario_files import load_scenario
 from dstenv.sim import World
 from dstenv.sim.citygen import generate_city
 from dstenv.sim.lanes import LaneKind, Turn

@@ -22,6 +22,7 @@ import numpy as np
 
 from dstenv.grid import GridSpec
 from dstenv.sensing import cast3d, cloud, draws, ground, lidar3d, ransac
+from dstenv.sensing.polar import prepare_points
 from dstenv.sim.bench import BENCH_CONFIG
 from dstenv.sim.types import MapClass
 from dstenv.sim.world import World
@@ -79,7 +80,7 @@ def sweep_stages():
 
 
 def road_stages():
-    xyz, polar = timed("road: prepare (copy, polar)", ground.prepare_points, points)
+    xyz, polar = timed("road: prepare (copy, polar)", prepare_points, points)
     pick = timed("road: RANSAC candidates", ransac.candidates, xyz, polar[0],
                  float(gcfg["fit_range"]), float(gcfg["ego_radius"]),
                  float(gcfg["max_candidate_z"]))

@@ -20,7 +20,7 @@ import sys
 
 import numpy as np
 
-from dstenv.config import load_scenario
+from dstenv.scenario_files import load_scenario
 from dstenv.sim import World, default_config
 from dstenv.sim.cli import draw_legend, draw_world
 

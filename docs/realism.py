@@ -37,7 +37,8 @@ from typing import Any
 import numpy as np
 from scipy import ndimage
 
-from dstenv.config import load_scenario, merge_config
+from dstenv.config import merge_config
+from dstenv.scenario_files import load_scenario
 from dstenv.dst import CLASSES, SensorState
 from dstenv.pipeline import Pipeline, default_config
 from dstenv.sensing.labels import MAP_TO_CLASS

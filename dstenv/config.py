@@ -14,9 +14,8 @@ a message that names the key and the allowed range. It returns a
 instead of merging again; :func:`section` validates one section for direct use of
 a lower layer (``World({"traffic": {"cars": 3}})``).
 
-Scenario files are TOML files in the top-level ``scenarios/`` directory (installed
-as the ``dstenv.scenarios`` package). A scenario file holds an optional
-``description`` string and sections that override the default configuration.
+Scenario files (TOML overrides, shipped in ``scenarios/`` or the user's) are read by
+:mod:`dstenv.scenario_files`.
 """
 
 from __future__ import annotations
@@ -24,18 +23,10 @@ from __future__ import annotations
 import copy
 import importlib
 import math
-import os
-import sys
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from importlib import resources
 from pathlib import Path
 from typing import Any
-
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover
-    import tomli as tomllib
 
 __all__ = [
     "CLIError",
@@ -52,12 +43,8 @@ __all__ = [
     "one_of",
     "PROB",
     "merge_config",
-    "list_scenarios",
-    "scenario_path",
-    "load_scenario",
 ]
 
-_SCENARIO_META_KEYS = ("description",)
 
 
 class ConfigError(ValueError):
@@ -202,7 +189,7 @@ SECTIONS: dict[str, str] = {
     "observation": "dstenv.envs.observation:SECTION",
     "action": "dstenv.envs.actions:SECTION",
     "reward": "dstenv.envs.rewards:SECTION",
-    "info": "dstenv.envs.dstgrid:INFO_SECTION",
+    "info": "dstenv.envs.info:INFO_SECTION",
 }
 
 
@@ -291,7 +278,12 @@ def build_config(scenario: str | Path | None = None, *overrides: Override,
         from dstenv.pipeline import default_config
 
         defaults = default_config()
-    cfg = load_scenario(scenario, defaults) if scenario is not None else dict(defaults)
+    if scenario is not None:
+        from dstenv.scenario_files import load_scenario
+
+        cfg = load_scenario(scenario, defaults)
+    else:
+        cfg = dict(defaults)
     for i, item in enumerate(overrides):
         name, value = item if isinstance(item, tuple) else ("config" if i == 0 else
                                                              f"override {i + 1}", item)
@@ -360,72 +352,3 @@ def _check_type(default: Any, value: Any, path: str) -> Any:
             raise ConfigError(f"{path}: expected a list, got {value!r}")
         return type(default)(value)
     return value
-
-
-def _scenario_dir() -> Path:
-    return Path(str(resources.files("dstenv.scenarios")))
-
-
-def list_scenarios() -> list[str]:
-    """Names of the scenario files shipped with dstenv (``scenarios/*.toml``)."""
-    return sorted(p.stem for p in _scenario_dir().glob("*.toml"))
-
-
-def scenario_path(name_or_path: str | Path) -> Path:
-    """Resolve a scenario name (``"dense"``) or a path to a ``.toml`` file.
-
-    A bare name (no ``.toml`` suffix, no folder) always means a shipped scenario,
-    so a file or folder called ``dense`` in the working directory never shadows it;
-    write ``./dense.toml`` (or any path with a folder or the suffix) for a file.
-
-    Raises:
-        ConfigError: if no such scenario exists (listing the known names).
-    """
-    text = str(name_or_path)
-    candidate = Path(name_or_path)
-    if candidate.suffix == ".toml" or "/" in text or (os.sep != "/" and os.sep in text):
-        if not candidate.is_file():
-            raise ConfigError(f"scenario file not found: {candidate}; give an existing "
-                              f".toml file or a shipped name ({', '.join(list_scenarios())})")
-        return candidate
-    path = _scenario_dir() / f"{text}.toml"
-    if not path.is_file():
-        known = ", ".join(list_scenarios())
-        raise ConfigError(f"unknown scenario {text!r}; known scenarios: {known} "
-                          f"(a file needs its .toml suffix or a folder, e.g. ./{text}.toml)")
-    return path
-
-
-def load_scenario(
-    name_or_path: str | Path, defaults: Mapping[str, Any] | None = None
-) -> dict[str, Any]:
-    """Read a scenario file and merge it into ``defaults``.
-
-    Args:
-        name_or_path: a shipped scenario name or a path to a TOML file.
-        defaults: the full default configuration to override; when ``None`` the raw
-            (validated-as-TOML) overrides are returned without the meta keys.
-
-    Returns:
-        The merged configuration. Relative paths in the file (e.g. an OSM map)
-        stay as written; :func:`scenario_path` gives the directory to resolve them.
-
-    Raises:
-        ConfigError: unreadable file, invalid TOML (with line), or unknown keys.
-    """
-    path = scenario_path(name_or_path)
-    try:
-        with path.open("rb") as fh:
-            raw = tomllib.load(fh)
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: invalid TOML: {exc}") from None
-    except RecursionError:
-        raise ConfigError(f"{path}: invalid TOML: nested too deeply") from None
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read: {exc.strerror}") from None
-    overrides = {k: v for k, v in raw.items() if k not in _SCENARIO_META_KEYS}
-    if "description" in raw and not isinstance(raw["description"], str):
-        raise ConfigError(f"{path}: 'description' must be a string")
-    if defaults is None:
-        return overrides
-    return merge_config(defaults, overrides, where=str(path))

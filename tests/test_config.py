@@ -4,7 +4,8 @@ import pytest
 
 from pathlib import Path
 
-from dstenv.config import ConfigError, load_scenario, merge_config, scenario_path
+from dstenv.config import ConfigError, merge_config
+from dstenv.scenario_files import load_scenario, scenario_path
 
 DEFAULTS = {"world": {"lanes": 2, "speed": 10.0, "name": "city", "flag": False}, "seed": 0}
 

@@ -18,11 +18,11 @@ from pathlib import Path
 
 import pytest
 
-from dstenv.config import tomllib
+from dstenv.scenario_files import tomllib
 
 ROOT = Path(__file__).resolve().parents[1]
 PYPROJECT = tomllib.loads((ROOT / "pyproject.toml").read_text())
-FIRST_PARTY = {"dstenv", "tests", "baselines", "scenarios", "conftest", "rl_common",
+FIRST_PARTY = {"dstenv", "tests", "baselines", "scenarios", "conftest", "shared_data", "rl_common",
                "fcn_dst", "evaluate", "ppo_grid", "random_policy", "rule_based", "curves"}
 
 

@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from dstenv.config import ConfigError, list_scenarios, load_scenario, scenario_path
+from dstenv.config import ConfigError
+from dstenv.scenario_files import list_scenarios, load_scenario, scenario_path
 from dstenv.sim import World
 from dstenv.sim import default_config as world_defaults
 

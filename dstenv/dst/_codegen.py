@@ -39,6 +39,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from dstenv.dst.frame import FREE, M, NUM_CLASSES, OCCUPIED, OMEGA, subset_name
+from dstenv.dst._templates import DRIVER, INPLACE_DRIVER, NOALIAS_COMPILER, SOURCES
 from dstenv.dst.inputs import MAP_SETS, SENSOR_SETS
 
 TARGET = Path(__file__).with_name("_fused.py")
@@ -67,75 +68,6 @@ REACHABLE = _closure(set(SM_SETS))
 POS = {a: k for k, a in enumerate(REACHABLE)}
 PRM = ("alpha", "keep", "dinc", "ddec", "g_occ", "g_conf", "cs", "ncs", "cm", "ncm")
 """Order of the kernel's float32 parameter vector (keep = 1 - alpha, ncs = 1 - cs, ...)."""
-
-NOALIAS_COMPILER = '''
-class NoAliasCompiler(CompilerBase):
-    """numba's nopython pipeline with every pointer argument marked ``noalias``.
-
-    Lets LLVM vectorise loops over many arrays without run-time overlap checks.
-    Only for kernels whose array arguments never overlap (the filter owns them all).
-    """
-
-    def define_pipelines(self):
-        self.state.flags.noalias = True
-        return [DefaultPassBuilder.define_nopython_pipeline(self.state)]
-'''
-
-SOURCES = '''
-
-@nb.njit(cache=True, nogil=True, error_model="numpy")
-def row_sources(i, h, w, warp_on, geo, src):  # pragma: no cover - compiled
-    """Spec step 1 for row i: src[j] = flat index of the previous cell that cell (i, j)
-    comes from, by the float64 formula of reference.source_cells (no fastmath here, so
-    both pick the same cells); cells from outside read the vacuous pad h * w + j."""
-    ct, st, dx, dy, cell = geo[0], geo[1], geo[2], geo[3], geo[4]
-    i0, j0 = h // 2, w // 2
-    inv = 1.0 / cell
-    x = (i0 - i) * cell
-    for j in range(w):
-        if warp_on:
-            y = (j0 - j) * cell
-            si = np.floor(i0 - (ct * x - st * y + dx) * inv + 0.5)
-            sj = np.floor(j0 - (st * x + ct * y + dy) * inv + 0.5)
-            inside = (si >= 0) & (si < h) & (sj >= 0) & (sj < w)
-            src[j] = np.int64(si) * w + np.int64(sj) if inside else h * w + j
-        else:
-            src[j] = i * w + j
-'''
-
-DRIVER = '''
-
-@nb.njit(cache=True, nogil=True, error_model="numpy")
-def fused_update(m_prev, z_prev, sensor, gis, warp_on, geo, prm,
-                 m_out, z_out, betp, first, stop):  # pragma: no cover - compiled
-    w = sensor.shape[1]
-    rb = np.empty((ROW_PLANES, w), np.float32)
-    src = np.empty(w, np.int64)
-    for i in range(first, stop):
-        fused_row(i, m_prev, z_prev, sensor, gis, warp_on, geo, prm, m_out, z_out, betp, rb, src)
-'''
-"""The update of rows ``first .. stop - 1``; it releases the GIL, so bands of rows can
-run in Python threads (rows are independent: any banding gives the same result)."""
-
-
-INPLACE_DRIVER = '''
-
-@nb.njit(cache=True, nogil=True, error_model="numpy")
-def inplace_update(m, zeta, sensor, gis, warp_on, geo, prm, betp, hist, k_hist,
-                   desc):  # pragma: no cover - compiled
-    h, w = sensor.shape
-    rb = np.empty((ROW_PLANES, w), np.float32)
-    src = np.empty(w, np.int64)
-    for r in range(h):
-        i = h - 1 - r if desc else r
-        inplace_row(i, m, zeta, sensor, gis, warp_on, geo, prm, betp, rb, src, hist, k_hist,
-                    desc, m, zeta)
-'''
-"""The whole update in place, one thread: rows in ascending order (descending when
-``desc``), with a ring of the ``k_hist`` last overwritten rows (``hist``:
-``(ROW_PLANES, k_hist * W) float32``) for sources that lie behind the current row;
-:func:`dstenv.dst._kernel.history_rows` sizes it from the motion."""
-
 
 def route(b: int, c: int) -> int:
     """Where the product m_past(B) m_sm(C) goes (spec step 7)."""

@@ -10,8 +10,9 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from dstenv.config import ConfigError, Section, Validated, between, build_config
+from dstenv.config import ConfigError, Validated, build_config
 from dstenv.envs.actions import action_mode, default_action_config
+from dstenv.envs.info import INFO_SECTION, step_info
 from dstenv.envs.navigation import ego_vector, navigation_spaces, route_points
 from dstenv.envs.observation import SECTION as OBSERVATION_SECTION
 from dstenv.envs.observation import observation_mode
@@ -25,17 +26,6 @@ from dstenv.pipeline import default_config as pipeline_config
 __all__ = ["DSTGridEnv"]
 
 _ENV_SECTIONS = ("observation", "action", "reward", "info")
-
-#: The ``info`` section: optional extras of the step's ``info`` dict.
-INFO_SECTION = Section(lambda: {
-    # add info["labels"] (H, W) uint8 and info["visible"] (H, W) bool: ground truth
-    # computed every step (label_grid), ~15 % of a 256 x 256 step
-    "labels": False,
-    "lidar_points": False,  # add info["lidar_points"] (B, 2) float32 [m]
-    # [m] route progress that makes an episode without collision, off-road or arrival a
-    # success (info["is_success"])
-    "success_distance": 100.0,
-}, {"success_distance": between(0.0, 1e5, "m")})
 
 
 class DSTGridEnv(gym.Env):
@@ -133,7 +123,7 @@ class DSTGridEnv(gym.Env):
     ## Arguments
 
     * ``config``: overrides of :meth:`default_config`.
-    * ``scenario``: a scenario name (``dstenv.config.list_scenarios()``) or TOML path.
+    * ``scenario``: a scenario name (``dstenv.scenario_files.list_scenarios()``) or TOML path.
     * ``preset``: the registered variant's settings (a partial config).
       Precedence: :meth:`default_config` < ``scenario`` < ``preset`` < ``config``, so
       ``gym.make("DSTGrid-Continuous-v0", config={"grid": ...})`` keeps the variant.
@@ -349,32 +339,10 @@ class DSTGridEnv(gym.Env):
                                       cfg["route_spacing"])}
 
     def _info(self, terms: dict[str, float], terminated: bool) -> dict[str, Any]:
-        f, w = self._frame, self._world
-        assert f is not None and w is not None
-        info: dict[str, Any] = {
-            "sensor": f.sensor,
-            "gis": f.gis,
-            "ego_pose": f.ego_pose,
-            "ego_speed": float(w.ego_speed),
-            "time": float(f.time),
-            "seed": f.seed,
-            "collision": bool(w.collision),
-            "off_road": bool(w.off_road),
-            "arrived": bool(getattr(w, "route_done", False)),
-            "rewards": terms,
-            "route_progress": self._progress,
-        }
-        if self.config["info"]["labels"]:
-            info["labels"], info["visible"] = f.labels, f.visible
-        crash, off, arrived = info["collision"], info["off_road"], info["arrived"]
-        info["is_success"] = not (crash or off) and (
-            arrived or self._progress >= self.config["info"]["success_distance"])
-        info["termination_reason"] = (("collision" if crash else "off_road" if off else "arrived")
-                                      if terminated else "timeout")
-        if self.config["info"]["lidar_points"]:
-            info["lidar_points"] = f.extras["lidar_points"]
-        self._last_info = info
-        return info
+        assert self._frame is not None and self._world is not None
+        self._last_info = step_info(self._frame, self._world, terms, self._progress,
+                                    terminated, self.config["info"])
+        return self._last_info
 
     def render(self) -> np.ndarray | None:
         if self.render_mode is None:

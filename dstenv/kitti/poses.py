@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 # The devkit's projection is defined once, next to the OSM loader that shares it.
-from dstenv.sim.osm import EARTH_RADIUS, latlon_to_mercator
+from dstenv.sim.osm_xml import EARTH_RADIUS, latlon_to_mercator
 
 __all__ = [
     "EARTH_RADIUS",

@@ -22,10 +22,16 @@ __all__ = [
     "plot_curves",
     "plot_examples",
     "plot_size_curve",
+    "score_text",
 ]
 
 #: RGB colour per class in ``CLASSES`` order, ``[0, 1]`` floats (:mod:`dstenv.palette`)
 CLASS_COLORS = as_float(CLASS_RGB)
+
+
+def score_text(x: float | None) -> str:
+    """A score as the report's tables and the figures print it: 3 decimals, "-" if none."""
+    return "-" if x is None else f"{x:.3f}"
 
 
 def _plt():
@@ -72,7 +78,7 @@ def plot_confusions(results: dict[str, Any], path: str | Path, scope: str = "all
         ax.set_xticks(range(len(CLASSES)), short, rotation=45, ha="right", fontsize=7)
         ax.set_yticks(range(len(CLASSES)), short, fontsize=7)
         miou = seg[scope]["miou"]
-        ax.set_title(f"{label}\nmIoU {'-' if miou is None else f'{miou:.3f}'}", fontsize=8)
+        ax.set_title(f"{label}\nmIoU {score_text(miou)}", fontsize=8)
         ax.set_xlabel("predicted", fontsize=7)
     axes[0][0].set_ylabel("true", fontsize=7)
     fig.suptitle(f"confusion matrices ({scope} cells)", fontsize=9)

@@ -18,7 +18,13 @@ import numpy as np
 from dstenv.dst.frame import CLASSES
 from dstenv.dst.params import DSTParams
 from dstenv.io import atomic_write_bytes
-from dstenv.segment.figures import plot_confusions, plot_curves, plot_examples, plot_size_curve
+from dstenv.segment.figures import (
+    plot_confusions,
+    plot_curves,
+    plot_examples,
+    plot_size_curve,
+    score_text,
+)
 from dstenv.segment.replay import Episode, filter_episode
 
 __all__ = [
@@ -34,10 +40,6 @@ def write_json(path: str | Path, results: dict[str, Any]) -> Path:
     path = Path(path)
     atomic_write_bytes(path, (json.dumps(results, indent=2, allow_nan=False) + "\n").encode())
     return path
-
-
-def _fmt(x: float | None) -> str:
-    return "-" if x is None else f"{x:.3f}"
 
 
 def _ci(x: float | None, ci: list[float] | None) -> str:
@@ -67,7 +69,7 @@ def _iou_table(segs: dict[str, Any], scope: str) -> list[str]:
         cells = []
         for c in CLASSES:
             cells.append(_ci(m["iou"][c], cis.get(c)) if c in ("static", "moving")
-                         else _fmt(m["iou"][c]))
+                         else score_text(m["iou"][c]))
         lines.append(
             f"| {label} | {seg['kind']} | " + " | ".join(cells)
             + f" | **{_ci(m['miou'], m.get('ci', {}).get('miou'))}** |"
@@ -98,7 +100,7 @@ def _object_table(segs: dict[str, Any]) -> list[str]:
         row = [_ci(o[c][k], o[c]["ci"][k]) for c in ("static", "moving")
                for k in ("recall", "precision")]
         for b in range(len(names)):
-            row += [_fmt(o[c]["bands"][b]["recall"]) for c in ("static", "moving")]
+            row += [score_text(o[c]["bands"][b]["recall"]) for c in ("static", "moving")]
         lines.append(f"| {label} | " + " | ".join(row) + " |")
     counts = {c: first[c]["objects"] for c in ("static", "moving")}
     lines += ["", f"Objects with an observed cell: static {counts['static']}, "
@@ -117,9 +119,9 @@ def _prf_table(segs: dict[str, Any], scope: str) -> list[str]:
     for label, seg in segs.items():
         m = seg[scope]
         lines.append(
-            f"| {label} | {_fmt(m['accuracy'])} | {_fmt(m['mean_precision'])} | "
-            f"{_fmt(m['mean_recall'])} | "
-            + " | ".join(f"{_fmt(m['precision'][c])} | {_fmt(m['recall'][c])}"
+            f"| {label} | {score_text(m['accuracy'])} | {score_text(m['mean_precision'])} | "
+            f"{score_text(m['mean_recall'])} | "
+            + " | ".join(f"{score_text(m['precision'][c])} | {score_text(m['recall'][c])}"
                          for c in ("static", "moving")) + " |"
         )
     return lines + [""]
@@ -134,8 +136,9 @@ def _goal_lines(goal: dict[str, Any] | None, real: dict[str, Any] | None) -> lis
         lines += [
             "## Goal (simulated test maps, observed cells)",
             "",
-            f"Best network **{goal['best_learned']}** mIoU {_fmt(goal['best_learned_miou'])} vs "
-            f"best non-learned **{goal['best_baseline']}** {_fmt(goal['best_baseline_miou'])}: "
+            f"Best network **{goal['best_learned']}** mIoU "
+            f"{score_text(goal['best_learned_miou'])} vs best non-learned "
+            f"**{goal['best_baseline']}** {score_text(goal['best_baseline_miou'])}: "
             f"margin {_ci(goal['margin'], goal['margin_ci'])} (goal >= "
             f"{goal['margin_goal']:.2f} with the interval above 0: {met(goal['margin_met'])}); "
             f"moving IoU difference {_ci(goal['moving_diff'], goal['moving_diff_ci'])} "
@@ -196,7 +199,7 @@ def markdown_table(results: dict[str, Any]) -> str:
         lines += ["## Training seeds (observed mIoU per seed, mean, t-interval)", ""]
         for k, sd in seeded.items():
             o = sd["observed"]
-            lines.append(f"- **{k}**: " + ", ".join(_fmt(v) for v in o["miou"])
+            lines.append(f"- **{k}**: " + ", ".join(score_text(v) for v in o["miou"])
                          + f"; mean {_ci(o['miou_mean'], o['miou_ci'])}")
         lines.append("")
     if results.get("curve"):
@@ -205,7 +208,7 @@ def markdown_table(results: dict[str, Any]) -> str:
         for row in results["curve"]:
             o = row["observed"]
             lines.append(f"| {row['train_frames']} | {_ci(o['miou'], o['ci']['miou'])} | "
-                         f"{_fmt(o['iou']['static'])} | {_fmt(o['iou']['moving'])} |")
+                         f"{score_text(o['iou']['static'])} | {score_text(o['iou']['moving'])} |")
         lines.append("")
     search = results.get("search")
     if search:

@@ -34,9 +34,8 @@ from dstenv.sensing.ground import (
     fit_ground_plane,
     ground_config,
     ground_walk,
-    polar_coordinates,
-    prepare_points,
 )
+from dstenv.sensing.polar import polar_coordinates, prepare_points
 from dstenv.sensing.raycast import sensor_grid
 
 __all__ = ["default_ray_config", "ray_config", "scan_sensor_grid", "cloud_sensor_grid"]

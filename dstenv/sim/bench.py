@@ -69,7 +69,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
 
         chain = chain_of(world)
 
-        from dstenv.config import load_scenario, merge_config
+        from dstenv.config import merge_config
+        from dstenv.scenario_files import load_scenario
         from dstenv.sim.config import default_config
 
         clean_cfg = merge_config(default_config(), load_scenario("clean")["world"], "clean")
@@ -100,8 +101,8 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             classify_points,
             fit_ground_plane,
             ground_config,
-            prepare_points,
         )
+        from dstenv.sensing.polar import prepare_points
 
         cloud = sweep3d()
         # the stages of the point-cloud road on this cloud, as cloud_sensor_grid runs them

@@ -124,7 +124,8 @@ def render_png(world: Any, out: str | Path, sweep: Any = None, extent: float | N
 
 
 def _cmd(args: argparse.Namespace) -> int:
-    from dstenv.config import build_config, scenario_path
+    from dstenv.config import build_config
+    from dstenv.scenario_files import scenario_path
     from dstenv.sim import World
 
     path = scenario_path(args.scenario)

@@ -1,17 +1,6 @@
 """Placing agents: parked cars, moving traffic, pedestrians, the ego and task traffic.
 
-The world state is a dict of structure-of-arrays over B rows, the ego last:
-``xy (B,2)``, ``yaw``, ``v``, ``hl``/``hw`` (half length / width), ``akind``
-(:class:`AgentKind`), ``mobile``, ``parked``, ``route (B,K)`` lanes ahead,
-``s`` arc length on ``route[:,0]``, ``lat`` lateral offset (left +) and the
-``lat_goal`` it returns to, junction
-``grant`` (reserved connector), request time ``req_t``, ``stop_clock``, ``halt``
-timer, ``stuck``, ``still`` (standstill time), ``lc`` (lane change / pass, see
-:mod:`dstenv.sim.lanechange`), ``hazard`` (double parked, hazard lights on), ``park
-(B,2)`` (a car pulling into a space: target arc length on ``route[:,0]`` and lateral
-offset [m]; -1 / 0 when none, see :mod:`dstenv.sim.pullin`), ``idm
-(B,5)`` (desired speed, accel, comfortable decel, headway, jam gap) and ``height``
-[m] (body height).
+Agents are rows of the world's state table (:mod:`dstenv.sim.agenttable`), the ego last.
 """
 
 from __future__ import annotations
@@ -20,13 +9,13 @@ from typing import Any
 
 import numpy as np
 
+from dstenv.sim.agenttable import FIELDS, add_row, empty_table, insert_rows, no_park
 from dstenv.sim.lanes import LaneKind, LaneNetwork, lane_pose, project_on_lane
 from dstenv.sim.parking import CLASS_HI, CLASS_LO
 from dstenv.sim.placement import free_spot, near_any, place_mobile, plan_route_nb
 from dstenv.sim.types import AGENT_HEIGHT, AgentKind, WorldMap
 
-__all__ = ["populate", "respawn", "pull_out", "plan_route", "nearest_lane", "add_row", "net_tuple",
-           "state_tuple", "rules_tuple"]
+__all__ = ["populate", "respawn", "pull_out", "plan_route", "nearest_lane", "BODY"]
 
 #: kind -> (length range, width range, accel, comfortable decel, headway, jam gap)
 BODY = {
@@ -34,35 +23,8 @@ BODY = {
     AgentKind.CYCLIST: ((1.7, 1.9), (0.55, 0.7), 1.0, 2.0, 1.0, 1.5),
     AgentKind.PEDESTRIAN: ((0.45, 0.55), (0.45, 0.55), 0.8, 1.5, 0.6, 0.4),
 }
-_TRAFFIC_FIELDS = ("xy", "yaw", "v", "hl", "hw", "akind", "mobile", "parked", "route", "s",
-                   "lat", "grant", "req_t", "stop_clock", "halt", "stuck", "still", "lat_goal",
-                   "lc", "hazard", "park")
-_FIELDS = (*_TRAFFIC_FIELDS, "idm", "height")
 #: size ranges of the vehicle classes: (C, 3) low and high length, width, height [m]
 _CLASS_LO, _CLASS_HI = CLASS_LO, CLASS_HI
-
-
-def net_tuple(net: LaneNetwork) -> tuple:
-    """Lane-network arrays in the order :func:`dstenv.sim.traffic.traffic_step` expects."""
-    return (net.pts, net.hdg, net.start, net.npts, net.ds, net.length, net.kind, net.node,
-            net.turn, net.group, net.vmax, net.succ_ptr, net.succ, net.conf_ptr, net.conf,
-            net.node_control, net.node_phase)
-
-
-def state_tuple(st: dict[str, np.ndarray]) -> tuple:
-    """State arrays in the order :func:`dstenv.sim.traffic.traffic_step` expects."""
-    return tuple(st[k] for k in _TRAFFIC_FIELDS)
-
-
-def rules_tuple(tr: dict[str, Any], lane_width: float) -> tuple:
-    """Traffic-rule parameters for :func:`dstenv.sim.traffic.traffic_step` (``lane_width``
-    [m]: the network's, sets the lane-change speed)."""
-    return tuple(float(tr[k]) for k in ("signal_green", "stop_duration", "halt_rate",
-                                        "halt_duration", "pause_rate", "pause_duration",
-                                        "crossing_prob", "lateral_drift", "drift_time",
-                                        "lateral_speed", "delivery_halt_factor",
-                                        "lane_change_rate", "lane_change_time")) + (
-        float(lane_width),)
 
 
 def plan_route(net: LaneNetwork, lane: int, rng: np.random.Generator, k: int,
@@ -91,42 +53,6 @@ def nearest_lane(net: LaneNetwork, x: float, y: float, yaw: float,
     return lane, float((p - net.start[lane]) * net.ds[lane])
 
 
-def _empty(k: int) -> dict[str, np.ndarray]:
-    return {"xy": np.zeros((0, 2)), "yaw": np.zeros(0), "v": np.zeros(0), "hl": np.zeros(0),
-            "hw": np.zeros(0), "akind": np.zeros(0, np.uint8), "mobile": np.zeros(0, bool),
-            "parked": np.zeros(0, bool), "route": np.zeros((0, k), np.int64), "s": np.zeros(0),
-            "lat": np.zeros(0), "grant": np.zeros(0, np.int64), "req_t": np.zeros(0),
-            "stop_clock": np.zeros(0), "halt": np.zeros(0), "stuck": np.zeros(0, bool),
-            "still": np.zeros(0), "lat_goal": np.zeros(0), "lc": np.zeros(0),
-            "hazard": np.zeros(0, bool), "park": np.zeros((0, 2)), "idm": np.zeros((0, 5)),
-            "height": np.zeros(0)}
-
-
-def add_row(st: dict[str, np.ndarray], kind: AgentKind, xy, yaw: float, length: float,
-            width: float, *, speed: float = 0.0, parked: bool = False, route=None, s: float = 0.0,
-            lat: float = 0.0, idm=(0.0, 1.0, 1.0, 1.0, 1.0), at: int | None = None,
-            height: float | None = None) -> int:
-    """Insert one agent row (before row ``at``; default: append). Returns its index.
-
-    ``height`` [m] defaults to :data:`AGENT_HEIGHT` of ``kind``."""
-    k = st["route"].shape[1]
-    row = {"xy": np.asarray(xy, float).reshape(1, 2), "yaw": [yaw], "v": [speed],
-           "hl": [length / 2], "hw": [width / 2], "akind": [int(kind)],
-           "mobile": [route is not None and not parked], "parked": [parked],
-           "route": (np.full((1, k), -1) if route is None else np.asarray(route).reshape(1, k)),
-           "s": [s], "lat": [lat], "grant": [-1], "req_t": [np.inf], "stop_clock": [0.0],
-           "halt": [0.0], "stuck": [False], "still": [0.0], "lat_goal": [lat], "lc": [0.0],
-           "hazard": [False], "park": np.array([[-1.0, 0.0]]),
-           "idm": np.asarray(idm, float).reshape(1, 5),
-           "height": [AGENT_HEIGHT[int(kind)] if height is None else height]}
-    at = len(st["v"]) if at is None else at
-    for f in _FIELDS:  # (np.concatenate: the same as np.insert, without its overhead)
-        a = st[f]
-        st[f] = np.concatenate([a[:at], np.asarray(row[f], dtype=a.dtype).reshape(1, *a.shape[1:]),
-                                a[at:]])
-    return at
-
-
 def _add_parked(st: dict[str, np.ndarray], slots: np.ndarray, rng: np.random.Generator) -> None:
     """Append parked vehicles at ``slots`` ``(S, 6)`` (x, y, yaw, length, width, height;
     a slot of length 0 gets a car size drawn here) in one go."""
@@ -147,15 +73,10 @@ def _add_parked(st: dict[str, np.ndarray], slots: np.ndarray, rng: np.random.Gen
             "grant": np.full(n, -1, np.int64), "req_t": np.full(n, np.inf),
             "stop_clock": np.zeros(n), "halt": np.zeros(n), "stuck": np.zeros(n, bool),
             "still": np.zeros(n), "lat_goal": np.zeros(n), "lc": np.zeros(n),
-            "hazard": np.zeros(n, bool), "park": _no_park(n), "idm": np.zeros((n, 5)),
+            "hazard": np.zeros(n, bool), "park": no_park(n), "idm": np.zeros((n, 5)),
             "height": height}
-    for f in _FIELDS:
+    for f in FIELDS:
         st[f] = np.concatenate([st[f], rows[f].astype(st[f].dtype)])
-
-
-def _no_park(n: int) -> np.ndarray:
-    """``(n, 2)`` rows of ``park`` for agents that are not pulling into a space."""
-    return np.tile([-1.0, 0.0], (n, 1))
 
 
 def _free(st, xy, yaw, length, width, gap) -> bool:
@@ -197,30 +118,23 @@ def _mobile(world_map, st, rng, cfg, kind, lanes, cdf, k, *, lane=None, s=None, 
     m, xy, yaw, v, hl, hw, route, s_arc, idm, height = placed
     if m:
         lat_a = np.full(m, lat)
-        _insert(st, {"xy": xy, "yaw": yaw, "v": v, "hl": hl, "hw": hw,
+        insert_rows(st, {"xy": xy, "yaw": yaw, "v": v, "hl": hl, "hw": hw,
                      "akind": np.full(m, int(kind), np.uint8), "mobile": np.ones(m, bool),
                      "parked": np.zeros(m, bool), "route": route, "s": s_arc, "lat": lat_a,
                      "grant": np.full(m, -1, np.int64), "req_t": np.full(m, np.inf),
                      "stop_clock": np.zeros(m), "halt": np.zeros(m), "stuck": np.zeros(m, bool),
                      "still": np.zeros(m), "lat_goal": lat_a.copy(), "lc": np.zeros(m),
-                     "hazard": np.zeros(m, bool), "park": _no_park(m), "idm": idm,
+                     "hazard": np.zeros(m, bool), "park": no_park(m), "idm": idm,
                      "height": height},
                 len(st["v"]) if at is None else at)
     return int(m)
-
-
-def _insert(st: dict[str, np.ndarray], rows: dict[str, np.ndarray], at: int) -> None:
-    """Insert the rows (one array per field of :data:`_FIELDS`) before row ``at``."""
-    for f in _FIELDS:
-        a = st[f]
-        st[f] = np.concatenate([a[:at], rows[f].astype(a.dtype, copy=False), a[at:]])
 
 
 def populate(world_map: WorldMap, cfg: dict[str, Any], rng: np.random.Generator,
              k: int) -> dict[str, np.ndarray]:
     """All agents of a new episode: parked cars, ego, task traffic, moving traffic."""
     net, tr, ego = world_map.lanes, cfg["traffic"], cfg["ego"]
-    st = _empty(k)
+    st = empty_table(k)
     slots = world_map.meta.get("parking_slots", np.zeros((0, 6)))
     taken = rng.random(len(slots)) < tr["parked_density"]
     double = np.zeros(len(slots), bool)
@@ -404,7 +318,7 @@ def respawn(world_map: WorldMap, st: dict[str, np.ndarray], i: int, rng: np.rand
     keep = {f: st[f][i].copy() for f in ("hl", "hw", "akind", "idm")}
     # a respawned agent starts on its lane's usual line (cyclists keep to the kerb side)
     keep["lat"] = -(net.lane_width / 2 - 0.8) if keep["akind"] == AgentKind.CYCLIST else 0.0
-    tmp = {f: np.delete(st[f], i, axis=0) for f in _FIELDS}
+    tmp = {f: np.delete(st[f], i, axis=0) for f in FIELDS}
     w = net.length[lanes] / net.length[lanes].sum()
     for _ in range(30):
         ln = int(rng.choice(lanes, p=w))

@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from dstenv.config import ConfigError, section
-from dstenv.sim import pullin, spawn
+from dstenv.sim import agenttable, pullin, spawn
 from dstenv.sim.citygen import generate_city
 from dstenv.sim.clutter import street_clutter
 from dstenv.sim.ego import bicycle_step, hits, pure_pursuit, pursuit_lookahead
@@ -129,8 +129,8 @@ class World:
         auto = ego_action is None
         u = self.rng.random((len(st["v"]), n_randoms(ROUTE_LEN)))
         acc, gap, pulling = traffic_step(
-            spawn.net_tuple(net), self._nbr, spawn.state_tuple(st), st["idm"],
-            spawn.rules_tuple(cfg["traffic"], net.lane_width), self.time, dt, u, auto)
+            agenttable.net_tuple(net), self._nbr, agenttable.state_tuple(st), st["idm"],
+            agenttable.rules_tuple(cfg["traffic"], net.lane_width), self.time, dt, u, auto)
         e = len(st["v"]) - 1
         x, y, yaw, v = st["xy"][e, 0], st["xy"][e, 1], st["yaw"][e], st["v"][e]
         if auto:
@@ -197,7 +197,7 @@ class World:
         x, y, h = lane_pose(net.pts, net.hdg, net.start, net.npts, net.ds, lane, s)
         plan = spawn.plan_route(net, lane, self.rng, ROUTE_LEN, tr["crossing_prob"], tuple(route))
         st = self._state
-        i = spawn.add_row(st, kind, (x - lat * np.sin(h), y + lat * np.cos(h)), h,
+        i = agenttable.add_row(st, kind, (x - lat * np.sin(h), y + lat * np.cos(h)), h,
                           (l_lo + l_hi) / 2, (w_lo + w_hi) / 2, speed=speed, route=plan, s=s,
                           lat=lat, idm=(v0, amax, bcomf, headway, jam), at=len(st["v"]) - 1)
         self._update_flags()

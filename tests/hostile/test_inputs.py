@@ -5,15 +5,16 @@ from __future__ import annotations
 
 import bz2
 
-from pathlib import Path
 
 import pytest
 
 from dstenv.config import ConfigError, build_config
 from dstenv.kitti.readers import KittiError, read_calib, read_labels, read_oxts
-from dstenv.sim.osm import OSM_LIMITS, load_osm
+from dstenv.sim.osm import load_osm
+from dstenv.sim.osm_xml import OSM_LIMITS
+from shared_data import SHARED_DATA
 
-KITTI = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "kitti-tracking"
+KITTI = SHARED_DATA / "kitti-tracking"
 OSM = """<?xml version="1.0"?>
 <osm version="0.6">
  <bounds minlat="49.0" minlon="8.4" maxlat="49.001" maxlon="8.401"/>
@@ -201,7 +202,7 @@ def test_failed_reset_config_leaves_the_env_working():
 
 
 def test_deeply_nested_toml_is_a_named_error(tmp_path):
-    from dstenv.config import load_scenario
+    from dstenv.scenario_files import load_scenario
 
     path = tmp_path / "deep.toml"
     path.write_text("x = " + "[" * 5000 + "]" * 5000 + "\n")

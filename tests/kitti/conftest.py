@@ -12,16 +12,14 @@ Synthetic world (x east, y north; the ego's Velodyne drives east at 10 m/s)::
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
 import pytest
+from shared_data import SHARED_DATA
 
 FIXTURES = Path(__file__).resolve().parent / "fixtures"
-# ../shared/data next to the repository, or $DSTENV_SHARED_DATA (a worktree elsewhere)
-_DATA = Path(__file__).resolve().parents[2] / ".." / "shared" / "data"
-SHARED = Path(os.environ.get("DSTENV_SHARED_DATA", _DATA)) / "kitti-tracking"
+SHARED = SHARED_DATA / "kitti-tracking"
 SENSOR_Z = -1.73
 CAR = (4.0, 1.8, 1.5)  # length, width, height [m]
 POLE = (25.0, -10.0, 0.4, 2.0)  # x, y, side, height [m]

@@ -9,7 +9,8 @@ from dstenv.grid import GridSpec
 from dstenv.kitti.osm import MapAlignment, map_lookup
 from dstenv.kitti.readers import KittiError
 from dstenv.kitti.sequence import KittiSequence
-from dstenv.sim.osm import latlon_to_mercator, load_osm
+from dstenv.sim.osm import load_osm
+from dstenv.sim.osm_xml import latlon_to_mercator
 from dstenv.sim.types import MapClass
 
 from .conftest import FIXTURES, SHARED

@@ -2,14 +2,12 @@
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import pytest
+from shared_data import SHARED_DATA
 
-# ../shared/data next to the repository, or $DSTENV_SHARED_DATA (a worktree elsewhere)
-_DATA = Path(__file__).resolve().parents[2] / ".." / "shared" / "data"
-SHARED = Path(os.environ.get("DSTENV_SHARED_DATA", _DATA)) / "kitti-tracking"
+SHARED = SHARED_DATA / "kitti-tracking"
 
 
 @pytest.fixture(scope="session")

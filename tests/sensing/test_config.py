@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from dstenv.config import ConfigError, load_scenario, merge_config
+from dstenv.config import ConfigError, merge_config
+from dstenv.scenario_files import load_scenario
 from dstenv.sensing import default_config
 from dstenv.sensing.config import gis_config, gis_is_exact, labels_config, lidar_config
 

@@ -13,9 +13,8 @@ from dstenv.sensing.ground import (
     fit_ground_plane,
     ground_heights,
     ground_walk,
-    polar_coordinates,
-    prepare_points,
 )
+from dstenv.sensing.polar import polar_coordinates, prepare_points
 
 
 def _cloud(slope=0.0, seed=0):

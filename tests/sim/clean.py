@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from dstenv.config import load_scenario, merge_config
+from dstenv.config import merge_config
+from dstenv.scenario_files import load_scenario
 
 
 def clean_world(overrides: dict[str, Any] | None = None) -> dict[str, Any]:

@@ -2,17 +2,18 @@
 
 import bz2
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from dstenv.sim import World
 from dstenv.sim.lanes import LaneKind
-from dstenv.sim.osm import EARTH_RADIUS, latlon_to_mercator, load_osm
+from dstenv.sim.osm import load_osm
+from dstenv.sim.osm_xml import EARTH_RADIUS, latlon_to_mercator
 from dstenv.sim.types import MapClass
+from shared_data import SHARED_DATA
 
-SHARED = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "osm"
+SHARED = SHARED_DATA / "osm"
 DEG = math.pi * EARTH_RADIUS / 180.0  # [m] per degree of longitude at lat 0 (scale 1)
 
 TINY = """<?xml version='1.0' encoding='UTF-8'?>

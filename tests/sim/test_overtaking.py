@@ -220,7 +220,7 @@ def test_new_knobs_are_validated_by_name():
 def test_default_city_changes_lanes_and_passes_halted_vehicles():
     """Issue 12: in the shipped default scenario (not boosted rates) vehicles change lanes
     and get past halted delivery vans / double-parked cars on their own."""
-    from dstenv.config import load_scenario
+    from dstenv.scenario_files import load_scenario
     from dstenv.sim import default_config
 
     w = World(load_scenario("default", {"world": default_config()})["world"], seed=0)

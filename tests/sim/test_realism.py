@@ -109,7 +109,7 @@ def test_clutter_is_varied_seeded_and_off_in_the_clean_world():
 
 
 def test_osm_maps_get_street_clutter_beside_the_roads():
-    from dstenv.config import load_scenario, scenario_path
+    from dstenv.scenario_files import load_scenario, scenario_path
     from dstenv.sim.raster import lookup
     from dstenv.sim.types import MapClass
 

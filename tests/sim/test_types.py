@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from dstenv.sim.osm import building_height
+from dstenv.sim.osm_xml import building_height
 from dstenv.sim.types import (
     AGENT_HEIGHT,
     DEFAULT_BUILDING_HEIGHT,

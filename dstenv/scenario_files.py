@@ -1,0 +1,98 @@
+"""Scenario files: TOML overrides of the default configuration, shipped or the user's.
+
+Shipped scenarios live in the top-level ``scenarios/`` directory (installed as the
+``dstenv.scenarios`` package). A file holds an optional ``description`` string and
+sections that override the default configuration; :func:`load_scenario` merges it
+with :func:`dstenv.config.merge_config`, so unknown keys are rejected by name, and
+:func:`dstenv.config.build_config` validates the result.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from collections.abc import Mapping
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from dstenv.config import ConfigError, merge_config
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+__all__ = ["list_scenarios", "load_scenario", "scenario_path", "tomllib"]
+
+#: top-level keys of a scenario file that are not configuration sections
+_SCENARIO_META_KEYS = ("description",)
+
+
+def _scenario_dir() -> Path:
+    return Path(str(resources.files("dstenv.scenarios")))
+
+
+def list_scenarios() -> list[str]:
+    """Names of the scenario files shipped with dstenv (``scenarios/*.toml``)."""
+    return sorted(p.stem for p in _scenario_dir().glob("*.toml"))
+
+
+def scenario_path(name_or_path: str | Path) -> Path:
+    """Resolve a scenario name (``"dense"``) or a path to a ``.toml`` file.
+
+    A bare name (no ``.toml`` suffix, no folder) always means a shipped scenario,
+    so a file or folder called ``dense`` in the working directory never shadows it;
+    write ``./dense.toml`` (or any path with a folder or the suffix) for a file.
+
+    Raises:
+        ConfigError: if no such scenario exists (listing the known names).
+    """
+    text = str(name_or_path)
+    candidate = Path(name_or_path)
+    if candidate.suffix == ".toml" or "/" in text or (os.sep != "/" and os.sep in text):
+        if not candidate.is_file():
+            raise ConfigError(f"scenario file not found: {candidate}; give an existing "
+                              f".toml file or a shipped name ({', '.join(list_scenarios())})")
+        return candidate
+    path = _scenario_dir() / f"{text}.toml"
+    if not path.is_file():
+        known = ", ".join(list_scenarios())
+        raise ConfigError(f"unknown scenario {text!r}; known scenarios: {known} "
+                          f"(a file needs its .toml suffix or a folder, e.g. ./{text}.toml)")
+    return path
+
+
+def load_scenario(
+    name_or_path: str | Path, defaults: Mapping[str, Any] | None = None
+) -> dict[str, Any]:
+    """Read a scenario file and merge it into ``defaults``.
+
+    Args:
+        name_or_path: a shipped scenario name or a path to a TOML file.
+        defaults: the full default configuration to override; when ``None`` the raw
+            (validated-as-TOML) overrides are returned without the meta keys.
+
+    Returns:
+        The merged configuration. Relative paths in the file (e.g. an OSM map)
+        stay as written; :func:`scenario_path` gives the directory to resolve them.
+
+    Raises:
+        ConfigError: unreadable file, invalid TOML (with line), or unknown keys.
+    """
+    path = scenario_path(name_or_path)
+    try:
+        with path.open("rb") as fh:
+            raw = tomllib.load(fh)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: invalid TOML: {exc}") from None
+    except RecursionError:
+        raise ConfigError(f"{path}: invalid TOML: nested too deeply") from None
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read: {exc.strerror}") from None
+    overrides = {k: v for k, v in raw.items() if k not in _SCENARIO_META_KEYS}
+    if "description" in raw and not isinstance(raw["description"], str):
+        raise ConfigError(f"{path}: 'description' must be a string")
+    if defaults is None:
+        return overrides
+    return merge_config(defaults, overrides, where=str(path))

@@ -140,8 +140,8 @@ PRESETS: dict[str, dict[str, Any]] = {
         "device": "cpu",
         "examples": 1,
     },
-    # the README's main job, aimed at <= 30 min on a 2-core CPU (measured 51 min on shared
-    # cores, docs/benchmark.md: not yet). Short episodes on many maps:
+    # the README's main job, aimed at <= 30 min on a 2-core CPU (measured 21.6 min on the
+    # idle machine, docs/benchmark.md). Short episodes on many maps:
     # 2500 frames = 500 maps of 5 frames, about 50 test maps for the bootstrap; the 3-D
     # LIDAR (the same point-cloud road as KITTI scans), a quarter of the drives without
     # a map, three training seeds of 6 epochs, each then fine-tuned on the drives without

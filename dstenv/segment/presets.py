@@ -166,7 +166,7 @@ PRESETS: dict[str, dict[str, Any]] = {
             "lr": 2e-3,
             "crop": 96,
             "loss": "wce+lovasz",
-            "weight_power": 0.5,  # not yet chosen by a recorded search (search.values runs one)
+            "weight_power": 0.5,  # chosen on validation: benchmarks/search/cpu-weight-power.json
         },
         # the no-map network for KITTI without OSM: +2 epochs on the ~500 map-free frames
         "no_map": {"epochs": 2},

@@ -46,7 +46,6 @@ __all__ = [
 ]
 
 
-
 class ConfigError(ValueError):
     """A configuration or scenario file is invalid; the message names the problem."""
 

@@ -23,7 +23,7 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
-__all__ = ["list_scenarios", "load_scenario", "scenario_path", "tomllib"]
+__all__ = ["list_scenarios", "load_scenario", "scenario_path"]
 
 #: top-level keys of a scenario file that are not configuration sections
 _SCENARIO_META_KEYS = ("description",)

@@ -43,9 +43,9 @@ def write_json(path: str | Path, results: dict[str, Any]) -> Path:
 
 
 def _ci(x: float | None, ci: list[float] | None) -> str:
-    if x is None:
-        return "-"
-    return f"{x:.3f}" if ci is None else f"{x:.3f} [{ci[0]:.3f}, {ci[1]:.3f}]"
+    if x is None or ci is None:
+        return score_text(x)
+    return f"{score_text(x)} [{score_text(ci[0])}, {score_text(ci[1])}]"
 
 
 _SCOPE_TITLES = {

@@ -1,6 +1,5 @@
-"""The agent state table: one dict of structure-of-arrays over B rows, the ego last.
-
-The world state is a dict of structure-of-arrays over B rows, the ego last:
+"""The agent state table: the world state is one dict of structure-of-arrays over B
+rows, the ego last:
 ``xy (B,2)``, ``yaw``, ``v``, ``hl``/``hw`` (half length / width), ``akind``
 (:class:`AgentKind`), ``mobile``, ``parked``, ``route (B,K)`` lanes ahead,
 ``s`` arc length on ``route[:,0]``, ``lat`` lateral offset (left +) and the

@@ -198,8 +198,9 @@ class World:
         plan = spawn.plan_route(net, lane, self.rng, ROUTE_LEN, tr["crossing_prob"], tuple(route))
         st = self._state
         i = agenttable.add_row(st, kind, (x - lat * np.sin(h), y + lat * np.cos(h)), h,
-                          (l_lo + l_hi) / 2, (w_lo + w_hi) / 2, speed=speed, route=plan, s=s,
-                          lat=lat, idm=(v0, amax, bcomf, headway, jam), at=len(st["v"]) - 1)
+                               (l_lo + l_hi) / 2, (w_lo + w_hi) / 2, speed=speed, route=plan,
+                               s=s, lat=lat, idm=(v0, amax, bcomf, headway, jam),
+                               at=len(st["v"]) - 1)
         self._update_flags()
         return i
 

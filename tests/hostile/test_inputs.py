@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import bz2
 
-
 import pytest
 
 from dstenv.config import ConfigError, build_config

@@ -78,6 +78,11 @@ class Args(EnvArgs):
     ent_coef: float = opt(0.01, "entropy bonus")
     vf_coef: float = opt(0.5, "value loss weight")
     torch_threads: int = opt(1, "torch CPU threads (envs use the other cores)")
+    warm_start: str = opt("", "'' (none) | grid: DAgger from the grid rule driver before "
+                              "PPO (imitation.py); its env steps count in the budget")
+    warm_start_steps: int = opt(24_000, "env steps of the warm start (all rounds and envs)")
+    warm_start_rounds: int = opt(4, "DAgger rounds (round 0: the rule driver drives)")
+    warm_start_epochs: int = opt(3, "epochs of the supervised fit after each round")
     checkpoint_every: int = opt(10_000, "save the model every this many steps; 0 = at "
                                         "the end only")
     tensorboard: bool = opt(False, "also log to tensorboard (needs the tensorboard extra)")
@@ -132,31 +137,41 @@ class GridCNN(BaseFeaturesExtractor):
 
 
 class TrainingLog(BaseCallback):
-    """Episode rows to ``episodes.csv`` (the learning curve), checkpoints, wall clock."""
+    """Episode rows to ``episodes.csv`` (the learning curve), checkpoints, wall clock.
+
+    ``timesteps`` of a row counts every env step of the run so far, the warm start's
+    (``phase`` ``dagger<round>``) included; PPO's rows (``phase`` ``ppo``) are offset by
+    :attr:`offset`, the warm start's steps.
+    """
 
     def __init__(self, args: Args, out: Path) -> None:
         super().__init__()
         self.args, self.out = args, out
         self.start = time.monotonic()
+        self.offset = 0
+        self.warm: dict[str, Any] | None = None  # the warm start's record for model.json
         self._last_ckpt = 0
         self._fh = open(out / "episodes.csv", "w", newline="")
         self._csv = csv.writer(self._fh)
         self._csv.writerow(["timesteps", "wall_s", "env", "return", "length", "success",
-                            "collision", "off_road", "progress_m"])
+                            "collision", "off_road", "progress_m", "phase"])
+
+    def write_episode(self, timesteps: int, rank: int, ep: dict[str, Any], phase: str) -> None:
+        """One row for a finished episode (``Monitor``'s ``info["episode"]``)."""
+        self._csv.writerow([timesteps, round(self.elapsed, 1), rank, round(float(ep["r"]), 4),
+                            int(ep["l"]), int(ep["is_success"]), int(ep["collision"]),
+                            int(ep["off_road"]), round(float(ep["route_progress"]), 2), phase])
+        self._fh.flush()
 
     def _on_step(self) -> bool:
         for rank, info in enumerate(self.locals["infos"]):
             ep = info.get("episode")
             if ep is not None:
-                self._csv.writerow([self.num_timesteps, round(self.elapsed, 1), rank,
-                                    round(float(ep["r"]), 4), int(ep["l"]),
-                                    int(ep["is_success"]), int(ep["collision"]),
-                                    int(ep["off_road"]), round(float(ep["route_progress"]), 2)])
-                self._fh.flush()
+                self.write_episode(self.offset + self.num_timesteps, rank, ep, "ppo")
         every = self.args.checkpoint_every
         if every > 0 and self.num_timesteps - self._last_ckpt >= every:
             self._last_ckpt = self.num_timesteps
-            save(self.model, self.out, self.args, self.elapsed)
+            save(self.model, self.out, self.args, self.elapsed, self.warm)
         return True
 
     @property
@@ -207,7 +222,8 @@ def build_model(args: Args, env: VecEnv | gym.Env) -> PPO:
                device="cpu", verbose=0, tensorboard_log=tb)
 
 
-def save(model: PPO, out: Path, args: Args, wall_s: float) -> Path:
+def save(model: PPO, out: Path, args: Args, wall_s: float,
+         warm: dict[str, Any] | None = None) -> Path:
     """Write ``model.pt`` (the policy's state_dict) and its ``model.json`` sidecar
     atomically; return the ``.pt`` path."""
     buf = io.BytesIO()
@@ -216,7 +232,9 @@ def save(model: PPO, out: Path, args: Args, wall_s: float) -> Path:
     atomic_write_bytes(path, buf.getvalue())
     meta = {
         "args": asdict(args),
-        "timesteps": int(model.num_timesteps),
+        "timesteps": int(model.num_timesteps),  # PPO's env steps
+        "env_steps": int(model.num_timesteps) + (warm or {}).get("timesteps", 0),
+        "warm_start": warm,
         "wall_time_s": round(wall_s, 1),
         "finished_utc": time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime()),
         "machine": machine_info(),
@@ -260,6 +278,36 @@ def load(path: str | Path, env: gym.Env) -> tuple[PPO, dict[str, Any]]:
     return model, meta
 
 
+def warm_start(args: Args, model: PPO, env: VecEnv, log: TrainingLog) -> dict[str, Any]:
+    """DAgger from the grid rule driver (:mod:`imitation`) on the training env;
+    returns its record for ``model.json`` (env steps, wall time, rounds)."""
+    from imitation import dagger
+    from rule_based import GridRuleDriver
+
+    if args.warm_start != "grid":
+        raise ValueError(f"--warm-start: expected '' or grid, got {args.warm_start!r}")
+    rounds = args.warm_start_rounds
+    per_round = args.warm_start_steps // (rounds * args.n_envs) if rounds > 0 else 0
+    if per_round < 1 or args.warm_start_steps >= args.total_timesteps:
+        raise ValueError(f"--warm-start-steps {args.warm_start_steps}: needs >= one step per "
+                         f"round and env ({rounds} x {args.n_envs}) and less than "
+                         f"--total-timesteps {args.total_timesteps}")
+    expert = GridRuleDriver()
+    probe = make_env(args, train_config(args))
+    try:
+        probe.reset(seed=args.seed)
+        expert.reset(probe, args.seed)
+    finally:
+        probe.close()
+    result = dagger(model, env, expert, rounds, per_round, epochs=args.warm_start_epochs,
+                    seed=args.seed,
+                    on_episode=lambda r, i, steps, ep: log.write_episode(steps, i, ep,
+                                                                         f"dagger{r}"),
+                    log=print if args.verbose else (lambda _: None))
+    return {"method": "dagger from the grid rule driver", "timesteps": result.timesteps,
+            "wall_s": round(result.wall_s, 1), "rounds": result.rounds}
+
+
 def train(args: Args) -> tuple[PPO, dict[str, Any]]:
     """Train PPO as ``args`` says; returns the model and the ``model.json`` content."""
     torch.set_num_threads(args.torch_threads)
@@ -272,8 +320,13 @@ def train(args: Args) -> tuple[PPO, dict[str, Any]]:
         model.set_logger(configure(str(out), formats + (["tensorboard"] if args.tensorboard
                                                         else [])))
         log = TrainingLog(args, out)
-        model.learn(total_timesteps=args.total_timesteps, callback=log, progress_bar=False)
-        save(model, out, args, log.elapsed)
+        ppo_steps = args.total_timesteps
+        if args.warm_start:
+            log.warm = warm_start(args, model, env, log)
+            log.offset = log.warm["timesteps"]
+            ppo_steps -= log.offset
+        model.learn(total_timesteps=max(ppo_steps, 0), callback=log, progress_bar=False)
+        save(model, out, args, log.elapsed, log.warm)
     finally:
         env.close()
     meta = json.loads((out / "model.json").read_text())

@@ -75,7 +75,8 @@ def test_training_writes_state_dict_and_log(trained: dict) -> None:
     assert meta["command"].startswith("python baselines/ppo_grid.py")
     assert "--total-timesteps 64" in meta["command"]
     rows = (out / "episodes.csv").read_text().splitlines()
-    assert rows[0] == "timesteps,wall_s,env,return,length,success,collision,off_road,progress_m"
+    assert rows[0] == ("timesteps,wall_s,env,return,length,success,collision,off_road,"
+                       "progress_m,phase")
     assert len(rows) >= 2  # 64 steps of 30-step episodes finish at least two
     # only tensors inside: loads with weights_only=True
     state = torch.load(out / "model.pt", weights_only=True)

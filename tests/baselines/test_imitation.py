@@ -1,0 +1,86 @@
+"""DAgger warm start: returns, the supervised fit, and a warm-started PPO run."""
+
+from __future__ import annotations
+
+import csv
+import json
+
+import numpy as np
+import pytest
+
+import ppo_grid
+from imitation import _fit, discounted_returns
+from ppo_grid import Args, build_model, make_vec_env
+from rl_common import parse_args
+
+
+def test_discounted_returns_stop_at_episode_ends() -> None:
+    rewards = np.array([[1.0, 2.0], [1.0, 0.0], [1.0, 4.0]])
+    dones = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 0.0]])
+    g = discounted_returns(rewards, dones, 0.5)
+    # env 0: its episode ends after step 1, so step 0 sees only 1 + 0.5 * 1
+    np.testing.assert_allclose(g[:, 0], [1.5, 1.0, 1.0])
+    # env 1 runs through: 2 + 0.5 * (0 + 0.5 * 4)
+    np.testing.assert_allclose(g[:, 1], [3.0, 2.0, 4.0])
+
+
+def test_fit_learns_labels_and_returns(env_flags: list[str]) -> None:
+    """Labels that follow the ego speed feature, returns that follow it too: the fit
+    must reach them on held-out rows (an untrained policy guesses ~1/3)."""
+    args = parse_args(Args, [*env_flags, "--n-envs", "1", "--vec-env", "dummy"])
+    env = make_vec_env(args)
+    try:
+        model = build_model(args, env)
+        space = env.observation_space
+        rng = np.random.default_rng(0)
+        n = 600
+        data = {k: rng.uniform(0, 1, (n, *space[k].shape)).astype(space[k].dtype)
+                for k in space.spaces if k != "grid"}
+        data["grid"] = np.zeros((n, *space["grid"].shape), np.uint8)  # an empty street
+        speed = data["ego"][:, 0]
+        data["label"] = np.digitize(speed, [1 / 3, 2 / 3])  # 0, 1, 2 by speed
+        returns = (10.0 * speed).astype(np.float32)
+        before = _fit(model, data, returns, epochs=0, lr=1e-3, batch=64,
+                      rng=np.random.default_rng(0))
+        after = _fit(model, data, returns, epochs=30, lr=3e-3, batch=64,
+                     rng=np.random.default_rng(0))
+    finally:
+        env.close()
+    assert before["accuracy"] < 0.6
+    assert after["accuracy"] > 0.85
+    assert after["value_rmse"] < 0.5 * before["value_rmse"]
+
+
+def test_warm_started_run_counts_its_steps(env_flags: list[str], tmp_path) -> None:
+    out = tmp_path / "ws"
+    meta = ppo_grid.main([*env_flags, "--n-envs", "2", "--vec-env", "dummy", "--n-steps", "32",
+                          "--batch-size", "32", "--n-epochs", "1", "--total-timesteps", "184",
+                          "--map-pool", "2", "--verbose", "0", "--warm-start", "grid",
+                          "--warm-start-steps", "120", "--warm-start-rounds", "2",
+                          "--out", str(out)])
+    warm = meta["warm_start"]
+    assert warm["timesteps"] == 120 and [r["driver"] for r in warm["rounds"]] == [
+        "expert", "learner"]
+    assert warm["rounds"][1]["samples"] == 120
+    # the rule driver labels its own driving: the policy fitted to it agrees on most
+    assert warm["rounds"][0]["accuracy"] >= 0.5
+    assert meta["timesteps"] == 64 and meta["env_steps"] == 184
+    rows = list(csv.DictReader(open(out / "episodes.csv")))
+    phases = [r["phase"] for r in rows]
+    assert phases[0] == "dagger0" and "dagger1" in phases and phases[-1] == "ppo"
+    steps = [int(r["timesteps"]) for r in rows]
+    assert steps == sorted(steps) and steps[-1] <= 184
+    assert min(int(r["timesteps"]) for r in rows if r["phase"] == "ppo") > 120
+    assert json.loads((out / "model.json").read_text())["env_steps"] == 184
+
+
+@pytest.mark.parametrize("flags, match", [
+    (["--warm-start", "autopilot"], "--warm-start"),
+    (["--warm-start", "grid", "--warm-start-steps", "1"], "--warm-start-steps"),
+    (["--warm-start", "grid", "--warm-start-steps", "500"], "--warm-start-steps"),
+])
+def test_bad_warm_start_flags(env_flags: list[str], tmp_path, flags: list[str],
+                              match: str) -> None:
+    with pytest.raises(ValueError, match=match):
+        ppo_grid.main([*env_flags, "--n-envs", "2", "--vec-env", "dummy", "--total-timesteps",
+                       "100", "--verbose", "0", *flags, "--out", str(tmp_path / "x")])

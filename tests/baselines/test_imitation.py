@@ -59,8 +59,8 @@ def test_warm_started_run_counts_its_steps(env_flags: list[str], tmp_path) -> No
                           "--warm-start-steps", "120", "--warm-start-rounds", "2",
                           "--out", str(out)])
     warm = meta["warm_start"]
-    assert warm["timesteps"] == 120 and [r["driver"] for r in warm["rounds"]] == [
-        "expert", "learner"]
+    assert warm["timesteps"] == 120 and [r["expert_share"] for r in warm["rounds"]] == [
+        1.0, 0.5]
     assert warm["rounds"][1]["samples"] == 120
     # the rule driver labels its own driving: the policy fitted to it agrees on most
     assert warm["rounds"][0]["accuracy"] >= 0.5

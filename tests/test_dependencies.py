@@ -23,7 +23,8 @@ from dstenv.scenario_files import tomllib
 ROOT = Path(__file__).resolve().parents[1]
 PYPROJECT = tomllib.loads((ROOT / "pyproject.toml").read_text())
 FIRST_PARTY = {"dstenv", "tests", "baselines", "scenarios", "conftest", "shared_data", "rl_common",
-               "fcn_dst", "evaluate", "ppo_grid", "random_policy", "rule_based", "curves"}
+               "fcn_dst", "evaluate", "ppo_grid", "random_policy", "rule_based", "curves",
+               "imitation"}
 
 
 def _canonical(name: str) -> str:

@@ -9,8 +9,9 @@ network trained on drives at one speed meets another on KITTI. This script measu
     python docs/ego_speed.py --run RUN --kitti-root /work/shared/data/kitti-tracking \\
         --out docs/ego-speed.json
 
-- ``sim``: the ego's speed under the autopilot in the benchmark's world (``dense``,
-  the main job's drives: steps 10, 20, ..., 190 of 20 s drives, ``--drives`` seeds),
+- ``sim``: the ego's speed under the autopilot in the benchmark's world (``dense``;
+  steps 10, 20, ..., 190 of 20 s drives as the ``curve`` preset keeps them, ``--drives``
+  seeds; the main job's 6 s drives are its first 5 s),
   with what it is waiting for when it stands (the next junction's control, or a body
   within 10 m ahead);
 - ``kitti``: the forward speed ``vf`` of the OXTS rows of the sample's sequences;

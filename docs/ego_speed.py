@@ -115,6 +115,19 @@ def _interior(mask: np.ndarray) -> np.ndarray:
     return m
 
 
+def _edge_table(acc: dict) -> dict:
+    """``{speed bin: cells and mean BetP(moving) on edge and interior cells}`` from
+    ``{speed bin: [edge value arrays, interior value arrays]}``, bins in speed order."""
+    out = {}
+    for key in sorted(acc, key=lambda k: float(k.split("-")[0])):
+        edge, inner = (np.concatenate(p) for p in acc[key])
+        out[key] = {"edge_cells": int(len(edge)),
+                    "edge_betp_moving": round(float(edge.mean()), 3) if len(edge) else None,
+                    "interior_cells": int(len(inner)),
+                    "interior_betp_moving": round(float(inner.mean()), 3) if len(inner) else None}
+    return out
+
+
 def static_evidence(root: Path, dt: float) -> dict:
     """Mean BetP(moving) on visible static cells, edge and interior, by ego speed."""
     from dstenv.data.datasets import ShardDataset
@@ -142,14 +155,7 @@ def static_evidence(root: Path, dt: float) -> dict:
             v = float(np.hypot(*(b[1] - a[1]))) / ((b[0] - a[0]) * dt)
             acc[_bin(v)][0].append(b[2])
             acc[_bin(v)][1].append(b[3])
-    out = {}
-    for key in sorted(acc):
-        edge, inner = (np.concatenate(p) for p in acc[key])
-        out[key] = {"edge_cells": int(len(edge)),
-                    "edge_betp_moving": round(float(edge.mean()), 3) if len(edge) else None,
-                    "interior_cells": int(len(inner)),
-                    "interior_betp_moving": round(float(inner.mean()), 3) if len(inner) else None}
-    return out
+    return _edge_table(acc)
 
 
 #: the ``fast`` variant of :func:`sim_at_speed`: the ego drives at KITTI's speed
@@ -189,14 +195,7 @@ def sim_at_speed(drives: int, fast: bool) -> dict:
             inner = _interior(static)
             acc[_bin(v)][0].append(f.pignistic[MOVING][static & ~inner & f.visible])
             acc[_bin(v)][1].append(f.pignistic[MOVING][inner & f.visible])
-    out: dict = {"speed": _summary(np.array(speeds))}
-    for key in sorted(acc, key=lambda k: float(k.split("-")[0])):
-        edge, inner = (np.concatenate(p) for p in acc[key])
-        out[key] = {"edge_cells": int(len(edge)),
-                    "edge_betp_moving": round(float(edge.mean()), 3) if len(edge) else None,
-                    "interior_cells": int(len(inner)),
-                    "interior_betp_moving": round(float(inner.mean()), 3) if len(inner) else None}
-    return out
+    return {"speed": _summary(np.array(speeds))} | _edge_table(acc)
 
 
 def main() -> None:

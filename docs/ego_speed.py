@@ -164,23 +164,16 @@ FAST = {"world": {"ego": {"autopilot_speed": 13.9, "initial_speed": 12.0},
                   "traffic": {"signal_prob": 0.0, "stop_sign_prob": 0.0}}}
 
 
-def _deep(base: dict, over: dict) -> dict:
-    out = dict(base)
-    for k, v in over.items():
-        out[k] = _deep(out.get(k, {}), v) if isinstance(v, dict) else v
-    return out
-
-
 def sim_at_speed(drives: int, fast: bool) -> dict:
     """Static-cell moving evidence on fresh no-map drives, by the ego's speed."""
+    from dstenv.config import merge_config
     from dstenv.data.sampling import scenario_config
     from dstenv.pipeline import Pipeline
 
     over = {"grid": {"height": 128, "width": 128}, "lidar": {"model": "hdl64"},
             "gis": {"no_map_prob": 1.0}, "world": {"traffic": {"parked_density": 0.3}}}
-    if fast:
-        over = _deep(over, FAST)
-    pipe = Pipeline(scenario_config("dense", over))
+    cfg = scenario_config("dense", over)
+    pipe = Pipeline(merge_config(cfg, FAST, "fast") if fast else cfg)
     acc = defaultdict(lambda: [[], []])
     speeds = []
     for seed in range(drives):

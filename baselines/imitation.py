@@ -105,7 +105,7 @@ def _fit(model: PPO, data: dict[str, np.ndarray], returns: np.ndarray, epochs: i
     the held-out (last 10 %) label accuracy, its class-balanced twin (mean recall over
     the classes present) and the value error."""
     policy = model.policy
-    keys = [k for k in data if k not in ("label",)]
+    keys = [k for k in data if k != "label"]
     n = len(data["label"])
     n_val = max(n // 10, 1)
     train_idx, val_idx = np.arange(n - n_val), np.arange(n - n_val, n)

@@ -278,12 +278,13 @@ def load(path: str | Path, env: gym.Env) -> tuple[PPO, dict[str, Any]]:
     return model, meta
 
 
-def warm_start(args: Args, model: PPO, env: VecEnv, log: TrainingLog) -> dict[str, Any]:
-    """DAgger from the grid rule driver (:mod:`imitation`) on the training env;
-    returns its record for ``model.json`` (env steps, wall time, rounds)."""
-    from imitation import dagger
-    from rule_based import GridRuleDriver
+def warm_start_steps_per_round(args: Args) -> int:
+    """Vector steps per DAgger round of ``args``' warm start.
 
+    Raises:
+        ValueError: an unknown ``--warm-start``, or ``--warm-start-steps`` below one step
+            per round and env or not below ``--total-timesteps``.
+    """
     if args.warm_start != "grid":
         raise ValueError(f"--warm-start: expected '' or grid, got {args.warm_start!r}")
     rounds = args.warm_start_rounds
@@ -292,6 +293,17 @@ def warm_start(args: Args, model: PPO, env: VecEnv, log: TrainingLog) -> dict[st
         raise ValueError(f"--warm-start-steps {args.warm_start_steps}: needs >= one step per "
                          f"round and env ({rounds} x {args.n_envs}) and less than "
                          f"--total-timesteps {args.total_timesteps}")
+    return per_round
+
+
+def warm_start(args: Args, model: PPO, env: VecEnv, log: TrainingLog) -> dict[str, Any]:
+    """DAgger from the grid rule driver (:mod:`imitation`) on the training env;
+    returns its record for ``model.json`` (env steps, wall time, rounds)."""
+    from imitation import dagger
+    from rule_based import GridRuleDriver
+
+    rounds = args.warm_start_rounds
+    per_round = warm_start_steps_per_round(args)
     expert = GridRuleDriver()
     probe = make_env(args, train_config(args))
     try:
@@ -310,6 +322,8 @@ def warm_start(args: Args, model: PPO, env: VecEnv, log: TrainingLog) -> dict[st
 
 def train(args: Args) -> tuple[PPO, dict[str, Any]]:
     """Train PPO as ``args`` says; returns the model and the ``model.json`` content."""
+    if args.warm_start:
+        warm_start_steps_per_round(args)  # bad flags fail before any env is built
     torch.set_num_threads(args.torch_threads)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

@@ -126,6 +126,17 @@ class LaneNetwork:
 
 
 @nb.njit(cache=True)
+def heading_trig(hdg):  # pragma: no cover - numba
+    """``(cos, sin)`` of the lane headings, ``(P,) float64`` each, computed once per
+    network for the traffic's look-ahead paths (numba's scalar cos/sin, so the values
+    are bit-identical to evaluating them in a kernel)."""
+    c, s = np.empty_like(hdg), np.empty_like(hdg)
+    for p in range(hdg.shape[0]):
+        c[p], s[p] = np.cos(hdg[p]), np.sin(hdg[p])
+    return c, s
+
+
+@nb.njit(cache=True)
 def lane_pose(pts, hdg, start, npts, ds, lane, s):
     """``(x, y, yaw)`` at arc length ``s`` on ``lane`` (clamped to the lane)."""
     f = s / ds[lane]

@@ -158,8 +158,12 @@ def grant_connectors(planner, route, s, v, hl, akind, grant, req_t, stop_clock, 
                         key[i] -= 1e9
                     break
     order = np.argsort(key)
-    waiting = np.full(nb_rows, -1)  # connectors of older requests that may go but wait
-    n_wait = 0
+    # how many held / granted / waiting entries name each lane: a request conflicts
+    # when any lane of its conflict list is named (one pass over that list)
+    named = np.zeros(n_lanes, np.int64)
+    for k in range(2 * nb_rows):
+        if held[k] >= 0:
+            named[held[k]] += 1
     for oi in range(nb_rows):
         i = order[oi]
         if req_t[i] == np.inf:
@@ -174,18 +178,12 @@ def grant_connectors(planner, route, s, v, hl, akind, grant, req_t, stop_clock, 
         if not ok:
             continue
         # no overtaking: a request never jumps an older conflicting one that waits
-        for k in range(2 * nb_rows + n_wait):
-            g = held[k] if k < 2 * nb_rows else waiting[k - 2 * nb_rows]
-            if g < 0:
-                continue
-            for q in range(conf_ptr[c], conf_ptr[c + 1]):
-                if conf[q] == g:
-                    ok = False
-            if not ok:
+        for q in range(conf_ptr[c], conf_ptr[c + 1]):
+            if named[conf[q]] > 0:
+                ok = False
                 break
         if not ok:  # conflicting traffic has the junction: later conflicting ones wait too
-            waiting[n_wait] = c
-            n_wait += 1
+            named[c] += 1
             continue
         # the exit lane must have room (never block the box); a lane shorter than a
         # car only needs to be empty
@@ -200,6 +198,7 @@ def grant_connectors(planner, route, s, v, hl, akind, grant, req_t, stop_clock, 
         if room >= min(2.0 * hl[i] + 3.0, length[ex] - 0.01):
             grant[i] = c
             held[nb_rows + i] = c
+            named[c] += 1
             req_t[i] = np.inf
             stop_clock[i] = 0.0
 

@@ -63,7 +63,7 @@ def _seg_dist(px, py, ax, ay, bx, by):
 
 
 @nb.njit(cache=True)
-def traffic_step(net, nbr, st, idm, rules, t, dt, u, ego_auto):
+def traffic_step(net, nbr, trig, st, idm, rules, t, dt, u, ego_auto):
     """Advance all mobile agents by ``dt`` (state arrays are updated in place).
 
     Args:
@@ -71,6 +71,7 @@ def traffic_step(net, nbr, st, idm, rules, t, dt, u, ego_auto):
             turn, group, vmax, succ_ptr, succ, conf_ptr, conf, node_control, node_phase)``.
         nbr: ``(left, right, oncoming)`` lanes beside each lane
             (:func:`dstenv.sim.lanechange.lane_neighbours`).
+        trig: ``(cos, sin)`` of ``hdg`` (:func:`dstenv.sim.lanes.heading_trig`).
         st: state arrays over B rows (ego last) ``(xy, yaw, v, hl, hw, akind, mobile,
             parked, route, s, lat, grant, req_t, stop_clock, halt, stuck, still,
             lat_goal, lc, hazard, park)`` (``lc``: lane-change state of
@@ -116,6 +117,7 @@ def traffic_step(net, nbr, st, idm, rules, t, dt, u, ego_auto):
      halt, stuck, still, lat_goal, lc, hazard, park) = st
     (green, stop_dur, halt_rate, halt_mean, pause_rate, pause_mean, cross_prob, drift,
      drift_time, lat_speed, delivery, lc_rate, lc_time, lane_width) = rules
+    cos_h, sin_h = trig
     nb_rows = xy.shape[0]
     ego = nb_rows - 1
     n_route = route.shape[1]
@@ -131,7 +133,7 @@ def traffic_step(net, nbr, st, idm, rules, t, dt, u, ego_auto):
         np.full(nb_rows, 1e9), np.zeros(nb_rows)
     blocker = np.full(nb_rows, -1)
     vlims = np.zeros(nb_rows)
-    path = np.empty((PATH_MAX, 4))  # x, y, heading, distance ahead of the centre
+    path = np.empty((PATH_MAX, 6))  # x, y, heading, distance ahead, cos, sin of heading
     for i in range(nb_rows):
         if not planner[i]:
             continue
@@ -170,23 +172,37 @@ def traffic_step(net, nbr, st, idm, rules, t, dt, u, ego_auto):
                 if npath >= PATH_MAX or d > look:
                     break
                 h = hdg[p]
-                path[npath, 0] = pts[p, 0] - lat[i] * np.sin(h)
-                path[npath, 1] = pts[p, 1] + lat[i] * np.cos(h)
+                ch, sh = cos_h[p], sin_h[p]
+                path[npath, 0] = pts[p, 0] - lat[i] * sh
+                path[npath, 1] = pts[p, 1] + lat[i] * ch
                 path[npath, 2] = h
                 path[npath, 3] = d
+                path[npath, 4] = ch
+                path[npath, 5] = sh
                 npath += 1
             base += length[ln]
         reach = look + hl[i] + 8.0
         margin = 0.15 if ped else 0.3
+        # bounding box of the path points: a body further from it than the largest
+        # reach of the test below (0.3 m along, half widths plus margin across) cannot
+        # meet the path, so the per-point test is skipped (the result is the same)
+        bx0 = by0 = 1e18
+        bx1 = by1 = -1e18
+        for p in range(npath):
+            bx0, bx1 = min(bx0, path[p, 0]), max(bx1, path[p, 0])
+            by0, by1 = min(by0, path[p, 1]), max(by1, path[p, 1])
         for j in range(nb_rows):
             if j == i:
                 continue
             dx, dy = xy[j, 0] - xy[i, 0], xy[j, 1] - xy[i, 1]
             if dx * dx + dy * dy > reach * reach:
                 continue
+            pad = 0.3 + hw[i] + hl[j] + hw[j] + margin + 1e-6
+            if (xy[j, 0] < bx0 - pad or xy[j, 0] > bx1 + pad or xy[j, 1] < by0 - pad
+                    or xy[j, 1] > by1 + pad):
+                continue
             for p in range(npath):
-                h = path[p, 2]
-                ch, sh = np.cos(h), np.sin(h)
+                h, ch, sh = path[p, 2], path[p, 4], path[p, 5]
                 ex, ey = xy[j, 0] - path[p, 0], xy[j, 1] - path[p, 1]
                 lon = ex * ch + ey * sh
                 if abs(lon) > 0.3:
@@ -321,17 +337,18 @@ def traffic_step(net, nbr, st, idm, rules, t, dt, u, ego_auto):
             halt[i] = min(-mean * np.log(max(u[i, 2], 1e-9)), 4.0 * mean)
     # 6. safety net: a move that would make two footprints overlap is undone (the agent
     # stands still for this step); earlier rows are final, later rows still old
+    near = _near_index(xy, old_xy, hl, hw)
     for i in range(nb_rows - 1):
         if not mobile[i] or (old_s[i] == s[i] and old_route[i, 0] == route[i, 0]
                              and old_lat[i] == lat[i]):
             continue
-        if not _touches(i, xy, yaw, hl, hw, old_xy, old_yaw):
+        if not _touches(i, xy, yaw, hl, hw, old_xy, old_yaw, near):
             continue
         if park[i, 0] >= 0.0 and lat[i] != old_lat[i]:  # pulling in: roll on, not sideways
             lat[i] = old_lat[i]
             x, y, h = lane_pose(pts, hdg, start, npts, ds, route[i, 0], s[i])
             xy[i, 0], xy[i, 1], yaw[i] = x - lat[i] * np.sin(h), y + lat[i] * np.cos(h), h
-            if not _touches(i, xy, yaw, hl, hw, old_xy, old_yaw):
+            if not _touches(i, xy, yaw, hl, hw, old_xy, old_yaw, near):
                 continue
         xy[i, 0], xy[i, 1], yaw[i], s[i], v[i] = \
             old_xy[i, 0], old_xy[i, 1], old_yaw[i], old_s[i], 0.0
@@ -341,10 +358,32 @@ def traffic_step(net, nbr, st, idm, rules, t, dt, u, ego_auto):
 
 
 @nb.njit(cache=True)
-def _touches(i, xy, yaw, hl, hw, old_xy, old_yaw):
-    """Row ``i``'s footprint overlaps another (rows before ``i`` at their new, rows
-    after it at their old pose)."""
+def _near_index(xy, old_xy, hl, hw):
+    """Rows sorted by their old x, for :func:`_touches`: ``(order, xs, pad)`` with
+    ``pad`` the largest ``hl + hw`` plus the largest x move of this step [m]. Any
+    pose of row ``j`` this step (old, new, or a move undone) is within that move of
+    ``xs``, so two footprints that can overlap (centres closer than the sum of their
+    ``hl + hw``, the first test of :func:`box_overlap`) have ``|xs[j] - x_i| <= hl_i +
+    hw_i + pad``."""
+    order = np.argsort(old_xy[:, 0], kind="mergesort")
+    xs = old_xy[order, 0].copy()
+    pad = 0.0
     for j in range(xy.shape[0]):
+        pad = max(pad, abs(xy[j, 0] - old_xy[j, 0]))
+    return order, xs, pad + np.max(hl + hw) + 1e-6
+
+
+@nb.njit(cache=True)
+def _touches(i, xy, yaw, hl, hw, old_xy, old_yaw, near):
+    """Row ``i``'s footprint overlaps another (rows before ``i`` at their new, rows
+    after it at their old pose); ``near``: :func:`_near_index` (only rows in its x window
+    are tested: the same answer as testing all)."""
+    order, xs, pad = near
+    reach = hl[i] + hw[i] + pad
+    lo = np.searchsorted(xs, xy[i, 0] - reach, side="left")
+    hi = np.searchsorted(xs, xy[i, 0] + reach, side="right")
+    for q in range(lo, hi):
+        j = order[q]
         if j == i:
             continue
         jx, jy, jh = (xy[j, 0], xy[j, 1], yaw[j]) if j < i else \

@@ -109,6 +109,7 @@ class World:
             nbr = self._pool_nbr.get(self.map_index)  # (a pool map keeps its neighbours)
             self._nbr = lane_neighbours(self._map.lanes) if nbr is None else nbr
             self._trig = heading_trig(self._map.lanes.hdg)
+            self._net = agenttable.net_tuple(self._map.lanes)
             self._nbr_of = self._map.lanes
             if self.map_index >= 0:
                 self._pool_nbr[self.map_index] = self._nbr
@@ -131,7 +132,7 @@ class World:
         auto = ego_action is None
         u = self.rng.random((len(st["v"]), n_randoms(ROUTE_LEN)))
         acc, gap, pulling = traffic_step(
-            agenttable.net_tuple(net), self._nbr, self._trig, agenttable.state_tuple(st),
+            self._net, self._nbr, self._trig, agenttable.state_tuple(st),
             st["idm"], agenttable.rules_tuple(cfg["traffic"], net.lane_width), self.time, dt,
             u, auto)
         e = len(st["v"]) - 1
@@ -157,11 +158,12 @@ class World:
         st["yaw"][e], st["v"][e] = nyaw, nv
         self._steer = steer
         self._localise(u[e, 0])
-        for i in np.flatnonzero(st["stuck"][:-1]):
-            spawn.respawn(self._map, st, int(i), self.rng)
+        if st["stuck"][:-1].any():
+            for i in np.flatnonzero(st["stuck"][:-1]):
+                spawn.respawn(self._map, st, int(i), self.rng)
         rate = cfg["traffic"]["pull_out_rate"]
         if rate > 0:
-            n = int(st["parked"][:-1].sum())
+            n = int(np.count_nonzero(st["parked"][:-1]))
             for _ in range(self.rng.poisson(rate * dt * n) if n else 0):
                 spawn.pull_out(self._map, st, self.config, self.rng, ROUTE_LEN)
         rate = cfg["traffic"]["pull_in_rate"]

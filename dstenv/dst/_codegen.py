@@ -25,6 +25,11 @@ row (16 cells per AVX-512 register). What makes it vectorisable, and why:
   read from one buffer and allocated in another: ~25 % faster at 256 x 256, where
   the update is bound by memory). ``fused_row`` (two buffers) serves bands of rows
   in threads.
+* One loop over the row's cells, not stages. On AVX2 (16 ymm registers) the loop
+  spills ~120 vectors per 8 cells, but staging it through an L1 block scratch
+  (steps 2-6, then the combination in two or three groups of outputs, then BetP;
+  spills down to ~70) measured 0-13 % slower on an AVX2 EPYC (Zen 3), and changed
+  last bits (other FMA contractions): the spills are not what bounds it there.
 * float32 arithmetic with fused multiply-add (``fastmath={'contract'}`` only: no
   reassociation, so results are deterministic); agreement with the float64
   reference stays below 1e-6.

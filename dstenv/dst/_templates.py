@@ -23,18 +23,21 @@ SOURCES = '''
 def row_sources(i, h, w, warp_on, geo, src):  # pragma: no cover - compiled
     """Spec step 1 for row i: src[j] = flat index of the previous cell that cell (i, j)
     comes from, by the float64 formula of reference.source_cells (no fastmath here, so
-    both pick the same cells); cells from outside read the vacuous pad h * w + j."""
+    both pick the same cells); cells from outside read the vacuous pad h * w + j.
+    Integers pass through int32 (exact: the plane arrays stay far below 2^31 cells)
+    because AVX2 converts between float64 and int32 vectors but not int64 ones: with
+    int64 the loop is scalarised and costs ~1/4 of a 256 x 256 update."""
     ct, st, dx, dy, cell = geo[0], geo[1], geo[2], geo[3], geo[4]
     i0, j0 = h // 2, w // 2
     inv = 1.0 / cell
     x = (i0 - i) * cell
     for j in range(w):
         if warp_on:
-            y = (j0 - j) * cell
+            y = np.int32(j0 - j) * cell
             si = np.floor(i0 - (ct * x - st * y + dx) * inv + 0.5)
             sj = np.floor(j0 - (st * x + ct * y + dy) * inv + 0.5)
             inside = (si >= 0) & (si < h) & (sj >= 0) & (sj < w)
-            src[j] = np.int64(si) * w + np.int64(sj) if inside else h * w + j
+            src[j] = np.int32(si * w + sj) if inside else np.int32(h * w + j)
         else:
             src[j] = i * w + j
 '''

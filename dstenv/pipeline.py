@@ -19,7 +19,9 @@ restricted to a front camera's field of view (``camera_fov``, the rest
 :data:`~dstenv.frame.IGNORE_INDEX` as on KITTI) and KITTI's moving rule
 (``moving_rule = "displacement"``: moving when it moved more than
 10 cm between fused frames, i.e. a speed above
-``0.1 m / fused period``).
+``0.1 m / fused period``) and KITTI's labels at the rim of road users
+(``object_edges = "ignore"``: occupied cells just outside a box are ignored, not
+labelled by the ground under them).
 
 The world source is pluggable (:data:`WORLD_SOURCES`): ``"city"`` is dstenv's own
 :class:`dstenv.sim.World`, ``"highway"`` a highway-env scene
@@ -44,15 +46,17 @@ from dstenv.frame import IGNORE_INDEX, Frame
 from dstenv.grid import GridSpec
 from dstenv.sensing.config import gis_is_exact
 from dstenv.sensing.gis import MapError, gis_grid
-from dstenv.sensing.labels import label_grid, visible_mask
+from dstenv.sensing.labels import ignore_object_edges, label_grid, visible_mask
 from dstenv.sim.types import Agents, WorldMap
 
-__all__ = ["WORLD_SOURCES", "MOVING_RULES", "WorldSource", "default_config", "camera_mask",
-           "Pipeline", "SOURCE_SECTION", "FRAME_SECTION", "PROTOCOL_SECTION"]
+__all__ = ["WORLD_SOURCES", "MOVING_RULES", "OBJECT_EDGES", "WorldSource", "default_config",
+           "camera_mask", "Pipeline", "SOURCE_SECTION", "FRAME_SECTION", "PROTOCOL_SECTION"]
 
 #: ``protocol.moving_rule`` values: the agent's speed against ``labels.moving_threshold``,
 #: or KITTI's 10 cm displacement between fused frames.
 MOVING_RULES: tuple[str, ...] = ("speed", "displacement")
+#: ``protocol.object_edges`` values (:func:`~dstenv.sensing.labels.ignore_object_edges`).
+OBJECT_EDGES: tuple[str, ...] = ("map", "ignore")
 #: KITTI's moving rule: displacement between two fused frames [m].
 KITTI_DISPLACEMENT: float = 0.10
 
@@ -131,6 +135,11 @@ def _protocol_defaults() -> dict[str, Any]:
         # view (KITTI's left colour camera: 81), the rest ignored (255); 0: all cells
         "camera_fov": 0.0,
         "moving_rule": "speed",  # "speed" (labels.moving_threshold) or "displacement"
+        # occupied cells just outside a road user's box (its hits in cells whose centre
+        # the box misses): "map" labels them by the ground under them, "ignore" leaves
+        # them ignored as KITTI's converter without a map does
+        # (dstenv.sensing.labels.ignore_object_edges)
+        "object_edges": "map",
     }
 
 
@@ -157,6 +166,7 @@ PROTOCOL_SECTION = Section(_protocol_defaults, {
     "update_every": between(1, 1000, "steps"),
     "camera_fov": between(0.0, 180.0, "deg", hi_open=True),
     "moving_rule": one_of(*MOVING_RULES),
+    "object_edges": one_of(*OBJECT_EDGES),
 })
 #: The ``frame`` section: optional outputs of every :class:`Frame`.
 FRAME_SECTION = Section(_frame_defaults, {})
@@ -323,6 +333,8 @@ class Pipeline:
         labels = None
         if cfg["frame"]["labels"]:
             labels = label_grid(w.map, agents, pose, spec, self.moving_threshold)
+            if cfg["protocol"]["object_edges"] == "ignore":
+                ignore_object_edges(labels, sensor, IGNORE_INDEX)
             if self.camera is not None:
                 labels[~self.camera] = IGNORE_INDEX
         extras: dict[str, np.ndarray] = {}

@@ -142,3 +142,22 @@ def test_hdl64_pipeline_is_deterministic_and_sees_through_kittis_road():
     assert fa.extras["lidar_points"].shape == (64 * 514, 4)
     shares = np.bincount(fa.sensor.ravel(), minlength=3) / fa.sensor.size
     assert shares[1] > 0.2 and shares[2] > 0.0
+
+
+def test_protocol_object_edges_ignores_the_occupied_rim_of_road_users():
+    from dstenv.sensing.labels import ignore_object_edges
+
+    base = Pipeline(CITY)
+    rim = Pipeline({**CITY, "protocol": {"object_edges": "ignore"}})
+    changed = 0
+    for seed in (5, 6):
+        a, b = base.reset(seed=seed), rim.reset(seed=seed)
+        for _ in range(8):
+            a, b = base.step(), rim.step()
+            np.testing.assert_array_equal(a.pignistic, b.pignistic)  # labels only
+            want = a.labels.copy()
+            changed += ignore_object_edges(want, a.sensor, 255)
+            np.testing.assert_array_equal(b.labels, want)
+    assert changed > 0  # the rule met some rims in these drives
+    with pytest.raises(ConfigError, match="protocol.object_edges"):
+        Pipeline({**CITY, "protocol": {"object_edges": "dilate"}})

@@ -23,7 +23,8 @@ from dstenv.grid import GridSpec
 from dstenv.sensing.gis import _check_pose, _lookup
 from dstenv.sim.types import Agents, MapClass, WorldMap
 
-__all__ = ["label_grid", "visible_mask", "MAP_TO_CLASS", "GROUND_CLEARANCE"]
+__all__ = ["label_grid", "visible_mask", "ignore_object_edges", "MAP_TO_CLASS",
+           "GROUND_CLEARANCE"]
 
 #: clutter whose bottom is lower than this stands on the ground and is labelled [m]
 GROUND_CLEARANCE: float = 0.3
@@ -36,6 +37,7 @@ _MOVING = CLASSES.index("moving")
 _SKIP = 255  # _paint_boxes: a box that is not painted
 # a numpy scalar: comparing an array with the IntEnum member itself is ~10x slower
 _UNKNOWN = np.uint8(SensorState.UNKNOWN)
+_OCCUPIED = np.uint8(SensorState.OCCUPIED)
 
 #: ``(4,) uint8``: :class:`MapClass` code -> class index in ``CLASSES``.
 MAP_TO_CLASS: np.ndarray = np.zeros(len(MapClass), dtype=np.uint8)
@@ -103,6 +105,62 @@ def visible_mask(sensor: np.ndarray) -> np.ndarray:
         ``(H, W) bool``: true where the cell is free or occupied (not unknown).
     """
     return np.asarray(sensor) != _UNKNOWN
+
+
+def ignore_object_edges(labels: np.ndarray, sensor: np.ndarray, ignore: int) -> int:
+    """Label as ``ignore`` the occupied cells just outside a road user (in place).
+
+    A LIDAR return on a body's surface often falls in a cell whose centre lies
+    outside the body's box: :func:`label_grid` then gives that cell the class of the
+    ground under it (usually ``navigable``), though it holds the body's hits. KITTI's
+    converter without a map leaves such cells ignored (occupied, no box, no map
+    class: :mod:`dstenv.kitti.grids`), so a network trained on simulated labels
+    would learn to call the rim of every car blob ``navigable`` where KITTI never
+    asks. This rule makes the simulated labels ask what KITTI's ask: an occupied
+    cell that is not ``static`` / ``moving`` and has one of those among its 8
+    neighbours becomes ``ignore`` (``protocol.object_edges = "ignore"``).
+
+    Args:
+        labels: ``(H, W) uint8`` class indices (:func:`label_grid`), changed in place.
+        sensor: ``(H, W) uint8`` sensor grid of the same step (:class:`SensorState`).
+        ignore: the ignore index (:data:`dstenv.frame.IGNORE_INDEX`).
+
+    Returns:
+        The number of cells set to ``ignore``.
+    """
+    if labels.shape != sensor.shape:
+        raise ValueError(f"ignore_object_edges: labels {labels.shape} and sensor "
+                         f"{sensor.shape} differ in shape")
+    return int(_ignore_edges(labels, np.ascontiguousarray(sensor, dtype=np.uint8),
+                             np.uint8(ignore)))
+
+
+@numba.njit(cache=True)
+def _ignore_edges(labels, sensor, ignore):  # pragma: no cover - numba
+    """:func:`ignore_object_edges` (the object test reads the labels before any change:
+    the ignored cells are never objects themselves)."""
+    h, w = labels.shape
+    n = 0
+    for i in range(h):
+        for j in range(w):
+            lab = labels[i, j]
+            if sensor[i, j] != _OCCUPIED or lab == _STATIC or lab == _MOVING:
+                continue
+            hit = False
+            for di in range(-1, 2):
+                ii = i + di
+                if ii < 0 or ii >= h:
+                    continue
+                for dj in range(-1, 2):
+                    jj = j + dj
+                    if 0 <= jj < w:
+                        q = labels[ii, jj]
+                        if q == _STATIC or q == _MOVING:
+                            hit = True
+            if hit:
+                labels[i, j] = ignore
+                n += 1
+    return n
 
 
 def _f64(*arrays: np.ndarray) -> tuple[np.ndarray, ...]:

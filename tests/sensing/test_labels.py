@@ -102,3 +102,29 @@ def test_sensing_never_imports_gymnasium():
             names = [a.name for a in node.names] if isinstance(node, ast.Import) else \
                 [node.module or ""] if isinstance(node, ast.ImportFrom) else []
             assert not any(n.split(".")[0] in ("gymnasium", "gym") for n in names), path
+
+
+def test_ignore_object_edges_marks_the_occupied_rim_only():
+    from dstenv.sensing.labels import ignore_object_edges
+
+    nav, static, moving = (CLASSES.index(c) for c in ("navigable", "static", "moving"))
+    building = CLASSES.index("building")
+    labels = np.full((6, 7), nav, np.uint8)
+    labels[2:4, 2:4] = moving  # a car of 2 x 2 cells
+    labels[0, 6] = static  # a parked one in the corner
+    labels[5, :] = building
+    sensor = np.zeros((6, 7), np.uint8)  # unknown
+    sensor[1, 1:5] = 2  # occupied row above the car: (1,1)..(1,4) touch it
+    sensor[2, 4] = 2  # beside it
+    sensor[2, 2] = 2  # on the car itself: stays moving
+    sensor[0, 0] = 2  # occupied, far from any object: stays navigable
+    sensor[1, 5] = 2  # touches the corner car at (0, 6)
+    sensor[4, 1:5] = 1  # free below the car: stays navigable
+    sensor[5, 3] = 2  # a building hit: no object among its neighbours
+    want = labels.copy()
+    for i, j in [(1, 1), (1, 2), (1, 3), (1, 4), (2, 4), (1, 5)]:
+        want[i, j] = 255
+    assert ignore_object_edges(labels, sensor, 255) == 6
+    np.testing.assert_array_equal(labels, want)
+    with pytest.raises(ValueError, match="differ in shape"):
+        ignore_object_edges(labels, sensor[:3], 255)

@@ -110,3 +110,13 @@ def test_shipped_scenario_wins_over_a_folder_of_the_same_name(tmp_path, monkeypa
     (tmp_path / "dense.toml").write_text("[grid]\nheight = 40\n")
     assert scenario_path("./dense.toml") == Path("./dense.toml")
     assert build_config("./dense.toml")["grid"]["height"] == 40
+
+
+def test_free_form_table_rejects_a_scalar():
+    # data.overrides = {} by default: any keys, but it must be a table (a JSON string
+    # given to --set used to reach the benchmark and fail there with an AttributeError)
+    from dstenv.config import ConfigError, merge_config
+
+    assert merge_config({"o": {}}, {"o": {"x": {"y": 1}}}) == {"o": {"x": {"y": 1}}}
+    with pytest.raises(ConfigError, match=r"^bench\.o: expected a table .*got '\{\"p\": 1\}'"):
+        merge_config({"o": {}}, {"o": '{"p": 1}'}, "bench")

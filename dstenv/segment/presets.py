@@ -92,7 +92,6 @@ PAPER_PROTOCOL: dict[str, Any] = {
         "update_every": 10,  # [steps] fuse at 1 Hz; t-1 = the previous fused grid
         "camera_fov": 81.0,  # [deg] labels only in KITTI's left colour camera's view
         "moving_rule": "displacement",  # KITTI's rule: moved > 10 cm frame to frame
-        "object_edges": "ignore",  # KITTI's labels: a box's occupied rim is ignored
     },
 }
 
@@ -129,7 +128,7 @@ PRESETS: dict[str, dict[str, Any]] = {
             "stride": 5,
             "warmup": 5,
             "frames_per_shard": 32,
-            "overrides": {"gis": {"no_map_prob": 0.5}, "protocol": {"object_edges": "ignore"}},
+            "overrides": {"gis": {"no_map_prob": 0.5}},
         },
         "tune": {"episodes": 2, "budget": 4},
         "complete": {"params": {"length_m": 4.5, "width_m": 1.8}},
@@ -156,9 +155,7 @@ PRESETS: dict[str, dict[str, Any]] = {
             "stride": 10,
             "warmup": 10,
             "workers": 2,
-            # KITTI's labels at the rim of road users (protocol.object_edges)
-            "overrides": {"lidar": {"model": "hdl64"}, "gis": {"no_map_prob": 0.25},
-                          "protocol": {"object_edges": "ignore"}},
+            "overrides": {"lidar": {"model": "hdl64"}, "gis": {"no_map_prob": 0.25}},
         },
         "tune": {"episodes": 16, "budget": 60},
         "models": ["unet-light"],
@@ -186,7 +183,6 @@ PRESETS: dict[str, dict[str, Any]] = {
             "stride": 10,
             "warmup": 10,
             "workers": 8,
-            "overrides": {"protocol": {"object_edges": "ignore"}},
         },
         "tune": {"episodes": 32, "budget": 120},
         "models": ["fcn8s-vgg16", "unet-light", "unet-temporal"],

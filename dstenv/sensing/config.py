@@ -50,6 +50,10 @@ def default_hdl64_config() -> dict[str, Any]:
         "min_range": 2.0,  # [m] near blind zone: closer returns are discarded
         "range_noise": 0.02,  # [m] std of Gaussian range noise
         "dropout": 0.05,  # probability that a return is lost [-]
+        # returns on agents fade with range and incidence (dstenv.sensing.fading):
+        # P(detected) = Phi(ln(rho cos(incidence) (fade_range / r)^2) / fade_sigma)
+        "fade_range": 0.0,  # [m] unit reflectivity, head-on: detected half the time; 0: off
+        "fade_sigma": 1.0,  # [-] std of the natural log of a return's strength
         "intensity_noise": 0.03,  # std of additive reflectance noise [-]
         "spin_rate": 10.0,  # [Hz] one turn per LIDAR period; 0: no within-sweep skew
         "channel_seed": 64,  # seed of the fixed per-channel gain (a calibration table)
@@ -171,6 +175,8 @@ LIDAR = Section(default_lidar_config, {
         "min_range": between(0.0, 50.0, _M),
         "range_noise": between(0.0, 5.0, _M),
         "dropout": PROB,
+        "fade_range": between(0.0, 10_000.0, _M),
+        "fade_sigma": between(0.01, 10.0),
         "intensity_noise": between(0.0, 1.0),
         "spin_rate": between(0.0, 100.0, "Hz"),
         "channel_seed": between(0, 2**31 - 1),

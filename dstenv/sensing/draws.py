@@ -28,7 +28,7 @@ from numba.np.random._constants import (
 )
 
 __all__ = ["stream_keys", "beam_normal_pair", "beam_normal_words", "beam_normal_rest",
-           "beam_dropout"]
+           "beam_dropout", "beam_uniform"]
 
 _TO_DOUBLE = 1.0 / 9007199254740992.0  # 2**-53: NumPy's next_double
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)  # SplitMix64's increment
@@ -143,6 +143,13 @@ def _low_float(base, i, step):  # pragma: no cover - numba
     """NumPy's next_float (24 bits) from the low half of ``mix(base + (2 i + step) G)``."""
     w = _mix(base + (np.uint64(2) * i + step) * _GOLDEN) & np.uint64(0xFFFFFFFF)
     return float(np.int64(w >> np.uint64(8))) * _TO_FLOAT
+
+
+@numba.njit(cache=True, inline="always")
+def beam_uniform(key, k):  # pragma: no cover - numba
+    """Beam ``k``'s uniform in [0, 1) of stream ``key`` (53 bits of its first word, as
+    NumPy's next_double)."""
+    return float(_mix(key + np.uint64(k + 1) * _GOLDEN) >> np.uint64(11)) * _TO_DOUBLE
 
 
 @numba.njit(cache=True)

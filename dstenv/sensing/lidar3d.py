@@ -20,7 +20,9 @@ The kernels live in :mod:`dstenv.sensing.cast3d`, which tests each occluder only
 against the columns and channels that can reach it (same results, ~10x faster).
 
 Measurement. Slant range ``t / cos(elevation)`` with Gaussian noise, returns beyond
-``max_range`` or closer than ``min_range`` (the blind zone) discarded, dropout, and
+``max_range`` or closer than ``min_range`` (the blind zone) discarded, dropout,
+returns on agents that fade with range and incidence (:mod:`dstenv.sensing.fading`,
+``fade_range``, ``fade_sigma``; off by default), and
 a reflectance from the surface material times a fixed per-channel gain (a
 calibration table seeded by ``channel_seed``) with noise.
 
@@ -55,6 +57,7 @@ from dstenv.sensing.draws import (
     beam_normal_words,
     stream_keys,
 )
+from dstenv.sensing.fading import fade_returns
 from dstenv.sensing.ground import ground_config
 from dstenv.sim.types import Agents, MapClass, WorldMap
 
@@ -201,22 +204,27 @@ class Hdl64:
                     float(world_map.origin[0]), float(world_map.origin[1]),
                     float(world_map.resolution), float(world_map.kerb_height), ox, oy, ux, uy,
                     self.slope, mount, h_max, best, surf, idx)
-        return self._measure(best, surf, idx, rng)
+        return self._measure(best, surf, idx, rng, (boxes, ox, oy, ux, uy))
 
     def _measure(self, best: np.ndarray, surf: np.ndarray, idx: np.ndarray,
-                 rng: np.random.Generator) -> Cloud:
+                 rng: np.random.Generator, geometry: tuple) -> Cloud:
         c = self.config
         n = _count_returns(best)  # returns before noise, column-major
         # the sweep's whole use of ``rng``: stream keys of counter-based draws (draws.py:
         # NumPy's distributions; both noises from one word a beam, the dropout by its
-        # geometric gaps); three keys, the third unused, so that the caller's generator
-        # advances as it always did
-        k_noise, k_drop, _ = stream_keys(rng, 3)
+        # geometric gaps; the third for fading), drawn whether used or not, so that the
+        # caller's generator advances as it always did
+        k_noise, k_drop, k_fade = stream_keys(rng, 3)
         # the draws' one-word step alone (a loop that pipelines); the point pass scales
         # them and draws the ~1 % rejected ones (beam_normal_pair's values, two passes fewer)
         noisy = c["range_noise"] > 0 or c["intensity_noise"] > 0
         noise, inoise = beam_normal_words(k_noise, n if noisy else 0)
         keep = beam_dropout(k_drop, n, float(c["dropout"]))
+        if c["fade_range"] > 0:
+            boxes, ox, oy, ux, uy = geometry
+            fade_returns(keep, k_fade, best, surf, idx, boxes, _AGENT, float(REFLECTANCE[_AGENT]),
+                         ox, oy, ux, uy, self.slope, self._sec_el, float(c["fade_range"]),
+                         float(c["fade_sigma"]))
         pts = np.empty((n, 4), np.float32)
         out_ch = np.empty(n, np.int16)
         out_col = np.empty(n, np.int32)

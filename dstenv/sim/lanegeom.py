@@ -14,8 +14,8 @@ import functools
 import numba as nb
 import numpy as np
 
-__all__ = ["SPACING", "resample", "resample_each", "resample_many", "cut_polyline", "offset_polyline", "bezier",
-           "fillet_curve", "interp_row"]
+__all__ = ["SPACING", "resample", "resample_each", "resample_many", "cut_polyline",
+           "offset_polyline", "bezier", "fillet_curve", "interp_row"]
 
 SPACING = 0.5  # [m] largest distance between resampled lane points
 

@@ -23,7 +23,8 @@ import numpy as np
 from dstenv.sim.buildings import city_buildings
 from dstenv.sim.lanes import Control, NetworkBuilder
 from dstenv.sim.medians import draw_medians, median_box
-from dstenv.sim.raster import Surface, fill_polygons, fill_rect, fill_rects, fillet_corners
+from dstenv.sim.raster import (Surface, fill_polygons, fill_rect, fill_rects, fillet_corners,
+                               scratch_raster)
 from dstenv.sim.roads import RoadEdge, add_road_lanes
 from dstenv.sim.roundabout import (island_clutter, paint_roundabout, pick_roundabouts,
                                    ring_nodes)
@@ -176,7 +177,11 @@ def generate_city(cfg: dict[str, Any], traffic: dict[str, Any], rng: np.random.G
     res = cfg["resolution"]
     width, height = xs[-1] + margin, ys[-1] + margin
     shape = (int(np.ceil(height / res)), int(np.ceil(width / res)))
-    raster = np.full(shape, MapClass.INTERMEDIATE, np.uint8)
+    # a warped city's raster is re-sampled into a new one (draw_warp draws one exactly
+    # when the warp below is on): this one is scratch
+    warped = geo is not None and (cfg["shear_deg"] > 0 or cfg["bend_amplitude"] > 0)
+    raster = (scratch_raster(shape, MapClass.INTERMEDIATE) if warped
+              else np.full(shape, MapClass.INTERMEDIATE, np.uint8))
     surface = np.full(shape, Surface.YARD, np.uint8)
     org = (0.0, 0.0)
     for fx0, fx1, fy0, fy1 in faces:
@@ -196,8 +201,7 @@ def generate_city(cfg: dict[str, Any], traffic: dict[str, Any], rng: np.random.G
                   org, res, Surface.SIDEWALK)
     # a warp re-samples the rasters (a second rounding to cells): the road gets half a
     # cell more on each side first, so that no lane loses kerb clearance to rounding
-    pad = 0.5 * res if geo is not None and (cfg["shear_deg"] > 0 or cfg["bend_amplitude"] > 0) \
-        else 0.0
+    pad = 0.5 * res if warped else 0.0
     (iv, jv), (ih, jh) = np.nonzero(vseg), np.nonzero(hseg)
     roads = np.concatenate([
         np.stack([xs[iv] - hwx[iv] - pad, xs[iv] + hwx[iv] + pad, ys[jv] - hwy[jv],
@@ -229,6 +233,8 @@ def generate_city(cfg: dict[str, Any], traffic: dict[str, Any], rng: np.random.G
     buildings = city_buildings(list(faces) + [box for box, _ in strips],
                                [-1] * len(faces) + [side for _, side in strips], cfg, rng)
     drawn = draw_warp(cfg, (width, height), geo) if geo is not None else None
+    if drawn is None and warped:  # (not reached) the map keeps this raster: own it
+        raster = raster.copy()
     if drawn is None:
         for b in buildings:
             for r, v in ((raster, MapClass.BUILDING), (surface, Surface.BUILDING)):

@@ -74,6 +74,14 @@ def _neighbours(pts, hdg, start, npts, ds, length, kind):  # pragma: no cover - 
     n = start.shape[0]
     left, right, opp = np.full(n, -1), np.full(n, -1), np.full(n, -1)
     bl, br, bo = np.full(n, 1e9), np.full(n, 1e9), np.full(n, 1e9)
+    # bounding boxes: a lane whose box is over 4.8 m away has every point so (the
+    # rounded differences are monotone), so the cheap reject below rejects it anyway
+    box = np.empty((n, 4))
+    for b in range(n):
+        box[b, 0], box[b, 1], box[b, 2], box[b, 3] = np.inf, -np.inf, np.inf, -np.inf
+        for p in range(start[b], start[b] + npts[b]):
+            box[b, 0], box[b, 1] = min(box[b, 0], pts[p, 0]), max(box[b, 1], pts[p, 0])
+            box[b, 2], box[b, 3] = min(box[b, 2], pts[p, 1]), max(box[b, 3], pts[p, 1])
     for a in range(n):
         if kind[a] != _K_ROAD or length[a] < 4.0:
             continue
@@ -81,6 +89,10 @@ def _neighbours(pts, hdg, start, npts, ds, length, kind):  # pragma: no cover - 
         ch, sh = np.cos(h), np.sin(h)
         for b in range(n):
             if b == a or kind[b] != _K_ROAD:
+                continue
+            ex = max(box[b, 0] - x, x - box[b, 1], 0.0)
+            ey = max(box[b, 2] - y, y - box[b, 3], 0.0)
+            if ex ** 2 + ey ** 2 > 4.8 * 4.8:
                 continue
             # cheap reject: b's points all far from the middle of a
             p0 = start[b]

@@ -14,8 +14,8 @@ import functools
 import numba as nb
 import numpy as np
 
-__all__ = ["SPACING", "resample", "resample_many", "cut_polyline", "offset_polyline", "bezier",
-           "fillet_curve", "interp_row"]
+__all__ = ["SPACING", "resample", "resample_each", "resample_many", "cut_polyline",
+           "offset_polyline", "bezier", "fillet_curve", "interp_row"]
 
 SPACING = 0.5  # [m] largest distance between resampled lane points
 
@@ -96,6 +96,35 @@ def _resample_many(pts, ptr, spacing):  # pragma: no cover - numba
     for i in range(n_l):
         out[optr[i]:optr[i + 1]] = _resample(pts[ptr[i]:ptr[i + 1]], spacing)
     return out, optr
+
+
+def resample_each(pts: np.ndarray, ptr: np.ndarray, spacing: float = SPACING
+                  ) -> tuple[list[np.ndarray], int]:
+    """:func:`resample` of each line ``pts[ptr[i]:ptr[i + 1]]`` (``pts (P, 2) float64``,
+    ``ptr (L + 1,) int64``), repeated points allowed: ``(L arrays (M_i, 2) float64,
+    views of one array; the first line without two distinct points or -1)``."""
+    out, optr, bad = _resample_each(np.ascontiguousarray(pts, np.float64),
+                                    np.asarray(ptr, np.int64), float(spacing))
+    bounds = optr.tolist()
+    return [out[bounds[i]:bounds[i + 1]] for i in range(len(bounds) - 1)], int(bad)
+
+
+@nb.njit(cache=True)
+def _resample_each(pts, ptr, spacing):  # pragma: no cover - numba
+    n_l = ptr.shape[0] - 1
+    parts = []
+    optr = np.zeros(n_l + 1, np.int64)
+    bad = -1
+    for i in range(n_l):
+        r = _resample_distinct(pts[ptr[i]:ptr[i + 1]], spacing)
+        if r.shape[0] == 0 and bad < 0:
+            bad = i
+        parts.append(r)
+        optr[i + 1] = optr[i] + r.shape[0]
+    out = np.empty((optr[n_l], 2))
+    for i in range(n_l):
+        out[optr[i]:optr[i + 1]] = parts[i]
+    return out, optr, bad
 
 
 def cut_polyline(poly: np.ndarray, s0: float, s1: float) -> np.ndarray:

@@ -16,7 +16,7 @@ import numpy as np
 
 # the polyline kernels live in lanegeom; re-exported here, where lanes are built
 from dstenv.sim.lanegeom import (SPACING, bezier, cut_polyline, fillet_curve,  # noqa: F401
-                                 offset_polyline, resample)
+                                 offset_polyline, resample, resample_each)
 
 __all__ = ["LaneKind", "Control", "Turn", "LaneNetwork", "NetworkBuilder", "lane_pose",
            "project_on_lane", "resample", "offset_polyline", "cut_polyline", "bezier",
@@ -182,17 +182,38 @@ class NetworkBuilder:
     """Collects lane polylines and links, then packs them into a :class:`LaneNetwork`."""
 
     def __init__(self) -> None:
-        self.polys: list[np.ndarray] = []
+        self._polys: list[np.ndarray] = []  # resampled lanes
+        self._raw: list[np.ndarray] = []  # lanes added since, resampled at the next read
         self.attrs: list[tuple[int, int, int, int, bool]] = []  # kind, node, turn, group, right
         self.links: list[list[int]] = []
 
+    @property
+    def polys(self) -> list[np.ndarray]:
+        """The lanes' points, each ``(M, 2) float64`` resampled to :data:`SPACING`
+        (:func:`~dstenv.sim.lanegeom.resample`; lanes added since the last read are
+        resampled together, one kernel call instead of one per lane)."""
+        if self._raw:
+            raw, self._raw = self._raw, []
+            ptr = np.cumsum([0] + [len(p) for p in raw]).astype(np.int64)
+            out, bad = resample_each(np.concatenate(raw), ptr)
+            if bad >= 0:
+                raise ValueError(f"lane {len(self._polys) + bad}: lane polyline needs two "
+                                 "distinct points")
+            self._polys.extend(out)
+        return self._polys
+
+    @polys.setter
+    def polys(self, polys: list[np.ndarray]) -> None:
+        self._raw, self._polys = [], list(polys)
+
     def add(self, poly: np.ndarray, kind: LaneKind, node: int = -1, turn: Turn = Turn.STRAIGHT,
             group: int = 0, rightmost: bool = False) -> int:
-        """Add a lane (points in driving order) and return its id."""
-        self.polys.append(resample(poly))
+        """Add a lane (points in driving order) and return its id (a lane without two
+        distinct points raises ValueError at the next read of :attr:`polys`)."""
+        self._raw.append(np.asarray(poly, np.float64).reshape(-1, 2))
         self.attrs.append((int(kind), int(node), int(turn), int(group), bool(rightmost)))
         self.links.append([])
-        return len(self.polys) - 1
+        return len(self.attrs) - 1
 
     def link(self, a: int, b: int) -> None:
         """Allow lane ``b`` to follow lane ``a``."""

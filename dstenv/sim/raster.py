@@ -2,13 +2,18 @@
 
 from __future__ import annotations
 
+import threading
+
 import numba as nb
 import numpy as np
 
 from dstenv.sim.types import MapClass, WorldMap
 
 __all__ = ["fill_polygon", "fill_polygons", "fill_polygons_flat", "fill_rect", "fill_rects",
-           "fillet_corners", "lookup", "paint_where", "Surface", "surface_raster"]
+           "fillet_corners", "lookup", "paint_where", "scratch_raster", "Surface",
+           "surface_raster"]
+
+_SCRATCH = threading.local()  # per thread: the flat buffer behind scratch_raster
 
 
 class Surface:
@@ -21,6 +26,22 @@ class Surface:
     PARKING = 4
     CROSSWALK = 5
     VERGE = 6  # raised grass: roundabout islands and medians
+
+
+def scratch_raster(shape: tuple[int, int], value: int) -> np.ndarray:
+    """A ``shape`` uint8 raster filled with ``value``, in a buffer this thread reuses.
+
+    For a raster that lives only until the next call (the unwarped city, re-sampled
+    through the warp and dropped): a fresh one of a few MB costs a page fault every
+    4 KiB at each reset, a reused one only the fill. The next call overwrites it.
+    """
+    n = int(shape[0]) * int(shape[1])
+    buf = getattr(_SCRATCH, "buf", None)
+    if buf is None or buf.size < n:
+        buf = _SCRATCH.buf = np.empty(n + n // 4, np.uint8)  # headroom: maps vary in size
+    out = buf[:n].reshape(shape)
+    out.fill(value)
+    return out
 
 
 @nb.njit(cache=True)

@@ -152,6 +152,76 @@ def _source(q, u, v):  # pragma: no cover - numba
     return x2 - q[0] * np.sin(q[1] * y + q[2]), y
 
 
+#: Side of the source tiles whose uniformity :func:`_resample` tests [cells].
+TILE = 16
+#: Output columns of a group whose two ends :func:`_resample` evaluates first (a multiple
+#: of the exact-evaluation step, 16): the runs inside whose source footprint is one
+#: uniform class then need no exact evaluation.
+GROUP = 64
+
+
+@nb.njit(cache=True)
+def _tile_classes(src, tile):  # pragma: no cover - numba
+    """``(ceil(H / tile), ceil(W / tile)) int16``: the class of each ``tile x tile``
+    block of ``src (H, W) uint8`` when all its cells hold it, -1 when mixed (the
+    blocks of the last row / column are the cells that are left)."""
+    h, w = src.shape
+    th, tw = (h + tile - 1) // tile, (w + tile - 1) // tile
+    out = np.empty((th, tw), np.int16)
+    diff = np.empty(w, np.uint8)
+    for tr in range(th):
+        r0, r1 = tr * tile, min(tr * tile + tile, h)
+        first = src[r0]
+        diff[:] = 0
+        for r in range(r0 + 1, r1):  # rows against the tile row's first (vectorised)
+            row = src[r]
+            for c in range(w):
+                diff[c] |= row[c] ^ first[c]
+        for tc in range(tw):
+            c0, c1 = tc * tile, min(tc * tile + tile, w)
+            v = first[c0]
+            ok = True
+            for c in range(c0, c1):
+                if diff[c] != 0 or first[c] != v:
+                    ok = False
+                    break
+            out[tr, tc] = np.int16(v) if ok else np.int16(-1)
+    return out
+
+
+@nb.njit(cache=True)
+def _curvature(q):  # pragma: no cover - numba
+    """An upper bound of ``|d^2 x / du^2|`` and ``|d^2 y / du^2|`` of the inverse warp
+    along an output row [1/m]: from :func:`_source`, ``y'' = ay ky^2 m00^2 sin`` and
+    ``x'' = ax kx^2 y'^2 sin - ax kx y'' cos`` with ``|y'| <= |m10| + ay ky |m00|``."""
+    ypp = abs(q[3]) * q[4] * q[4] * q[6] * q[6]
+    yp = abs(q[8]) + abs(q[3]) * q[4] * abs(q[6])
+    xpp = abs(q[0]) * q[1] * q[1] * yp * yp + abs(q[0]) * q[1] * ypp
+    return max(xpp, ypp)
+
+
+@nb.njit(cache=True)
+def _uniform(tiles, tile, h, w, xa, ya, xb, yb, pad):  # pragma: no cover - numba
+    """The one class of every source cell that a group with exact ends ``(xa, ya)``,
+    ``(xb, yb)`` [cells] can take, ``pad`` [cells] being a bound of how far its
+    cells stray from the chord; -1 when unknown (mixed tiles or at the border),
+    -2 when all lie outside the source (the fill)."""
+    x_lo, x_hi = min(xa, xb) - pad, max(xa, xb) + pad
+    y_lo, y_hi = min(ya, yb) - pad, max(ya, yb) + pad
+    if x_hi < 0.0 or y_hi < 0.0 or x_lo >= w or y_lo >= h:
+        return -2
+    if x_lo < 0.0 or y_lo < 0.0 or x_hi >= w or y_hi >= h:
+        return -1
+    c0, c1 = int(x_lo) // tile, int(x_hi) // tile
+    r0, r1 = int(y_lo) // tile, int(y_hi) // tile
+    v = tiles[r0, c0]
+    for tr in range(r0, r1 + 1):
+        for tc in range(c0, c1 + 1):
+            if tiles[tr, tc] != v:
+                return -1
+    return v
+
+
 @nb.njit(cache=True)
 def _resample(src, out, q, res, fill, step):  # pragma: no cover - numba
     """Nearest-cell re-sampling; the inverse map is evaluated exactly every ``step``
@@ -159,39 +229,69 @@ def _resample(src, out, q, res, fill, step):  # pragma: no cover - numba
 
     Cells step in fixed point (1/65536 cell), so a run's positions are monotone
     between its ends: a run whose two ends fall inside the source is copied without
-    per-cell bounds tests. Flat unsigned indices (no negative-index wrap-around)."""
+    per-cell bounds tests. Flat unsigned indices (no negative-index wrap-around).
+
+    Shortcut, same cells: the ends of each group of :data:`GROUP` columns (run ends
+    too) are evaluated first. Every exact point between them stays within ``pad`` of
+    their chord (its sag under :func:`_curvature`, doubled, plus a cell for the
+    fixed-point steps), so when that widened chord lies inside uniform source tiles
+    (:func:`_tile_classes`) or wholly outside the source, all cells of the group
+    take that class whatever their exact positions, and the ``sin`` of the runs
+    inside are not needed. Other groups are stepped run by run as before, from the
+    same run ends computed with the same arithmetic."""
     h, w = src.shape
     n_r, n_c = out.shape
     a, b = src.ravel(), out.ravel()
     hu, wu, one = np.uint64(h), np.uint64(w), np.uint64(1)
+    tiles = _tile_classes(src, TILE)
+    group = max(GROUP // step, 1) * step
+    span = group * res  # chord sag L^2 / 8 max|g''| [m], doubled, in cells; + 1 cell
+    pad = 2.0 * span * span / 8.0 * _curvature(q) / res + 1.0
+    n_g = (n_c + group - 1) // group
+    gx, gy = np.empty(n_g + 1), np.empty(n_g + 1)
     for r in range(n_r):
         v = (r + 0.5) * res - q[11] - q[13]
-        xa, ya = _source(q, 0.5 * res - q[10] - q[12], v)
+        for k in range(n_g + 1):  # the group ends first: their sin pipeline
+            gx[k], gy[k] = _source(q, (min(k * group, n_c) + 0.5) * res - q[10] - q[12], v)
+        xa, ya = gx[0], gy[0]
         o_row = np.uint64(r * n_c)
-        for c0 in range(0, n_c, step):
-            c1 = min(c0 + step, n_c)
-            xb, yb = _source(q, (c1 + 0.5) * res - q[10] - q[12], v)
-            n = c1 - c0
-            xi, yi = np.int64(xa / res * 65536.0), np.int64(ya / res * 65536.0)
-            dx = np.int64((xb - xa) / res * 65536.0 / n)
-            dy = np.int64((yb - ya) / res * 65536.0 / n)
-            xa, ya = xb, yb
-            o = o_row + np.uint64(c0)
-            xl, yl = xi + (n - 1) * dx, yi + (n - 1) * dy
-            if (np.uint64(xi >> 16) < wu and np.uint64(yi >> 16) < hu
-                    and np.uint64(xl >> 16) < wu and np.uint64(yl >> 16) < hu):
-                for _ in range(n):
-                    b[o] = a[np.uint64((yi >> 16) * w + (xi >> 16))]
-                    o += one
-                    xi += dx
-                    yi += dy
-            else:
-                for _ in range(n):
-                    cc, rr = np.uint64(xi >> 16), np.uint64(yi >> 16)  # < 0: huge
-                    b[o] = a[rr * wu + cc] if rr < hu and cc < wu else fill
-                    o += one
-                    xi += dx
-                    yi += dy
+        for g0 in range(0, n_c, group):
+            g1 = min(g0 + group, n_c)
+            xg, yg = gx[g0 // group + 1], gy[g0 // group + 1]
+            cls = _uniform(tiles, TILE, h, w, xa / res, ya / res, xg / res, yg / res, pad)
+            if cls != -1:
+                val = fill if cls == -2 else np.uint8(cls)
+                for o in range(o_row + np.uint64(g0), o_row + np.uint64(g1)):
+                    b[o] = val
+                xa, ya = xg, yg
+                continue
+            for c0 in range(g0, g1, step):
+                c1 = min(c0 + step, n_c)
+                if c1 == g1:
+                    xb, yb = xg, yg
+                else:
+                    xb, yb = _source(q, (c1 + 0.5) * res - q[10] - q[12], v)
+                n = c1 - c0
+                xi, yi = np.int64(xa / res * 65536.0), np.int64(ya / res * 65536.0)
+                dx = np.int64((xb - xa) / res * 65536.0 / n)
+                dy = np.int64((yb - ya) / res * 65536.0 / n)
+                xa, ya = xb, yb
+                o = o_row + np.uint64(c0)
+                xl, yl = xi + (n - 1) * dx, yi + (n - 1) * dy
+                if (np.uint64(xi >> 16) < wu and np.uint64(yi >> 16) < hu
+                        and np.uint64(xl >> 16) < wu and np.uint64(yl >> 16) < hu):
+                    for _ in range(n):
+                        b[o] = a[np.uint64((yi >> 16) * w + (xi >> 16))]
+                        o += one
+                        xi += dx
+                        yi += dy
+                else:
+                    for _ in range(n):
+                        cc, rr = np.uint64(xi >> 16), np.uint64(yi >> 16)  # < 0: huge
+                        b[o] = a[rr * wu + cc] if rr < hu and cc < wu else fill
+                        o += one
+                        xi += dx
+                        yi += dy
 
 
 def draw_warp(cfg: dict[str, Any], size: tuple[float, float], rng: np.random.Generator

@@ -227,6 +227,30 @@ def test_resample_many_matches_one_by_one():
         assert np.hypot(*np.diff(got, axis=0).T).max() <= 0.5 + 1e-9
 
 
+def test_resample_each_matches_one_by_one_with_repeated_points():
+    # NetworkBuilder resamples its lanes in batches through resample_each (issue 16)
+    from dstenv.sim.lanegeom import resample, resample_each
+    from dstenv.sim.lanes import NetworkBuilder
+
+    rng = np.random.default_rng(9)
+    polys = [np.repeat(p, rng.integers(1, 3, len(p)), axis=0) for p in _polys(rng, 50)]
+    ptr = np.cumsum([0] + [len(p) for p in polys])
+    each, bad = resample_each(np.concatenate(polys), ptr)
+    assert bad == -1 and len(each) == len(polys)
+    for got, poly in zip(each, polys):
+        np.testing.assert_array_equal(got, resample(poly))
+    stuck = polys[:3] + [np.array([[1.0, 2.0], [1.0, 2.0]])] + polys[3:5]
+    ptr = np.cumsum([0] + [len(p) for p in stuck])
+    assert resample_each(np.concatenate(stuck), ptr)[1] == 3
+    builder = NetworkBuilder()
+    for p in stuck[:3]:
+        builder.add(p, 0)
+    assert [len(p) for p in builder.polys] == [len(resample(p)) for p in stuck[:3]]
+    builder.add(stuck[3], 0)
+    with pytest.raises(ValueError, match="lane 3: lane polyline needs two distinct points"):
+        builder.polys
+
+
 def test_fillet_corners_match_numpy():
     """The kerb fillets painted by ``raster.fillet_corners`` against its numpy version."""
     from dstenv.sim.raster import Surface, fillet_corners

@@ -9,6 +9,7 @@ lanes carry pedestrians. ``WorldMap.lanes`` holds a :class:`LaneNetwork`.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from enum import IntEnum
 
 import numba as nb
@@ -98,6 +99,12 @@ class LaneNetwork:
 
     def __len__(self) -> int:
         return int(self.start.shape[0])
+
+    @cached_property
+    def heading_trig(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(cos, sin)`` of :attr:`hdg`, ``(P,) float64`` each (:func:`heading_trig`),
+        computed at the first read and kept with the network (a pool map keeps them)."""
+        return heading_trig(self.hdg)
 
     def polyline(self, lane: int) -> np.ndarray:
         """Points of one lane: ``(K, 2) float64``."""

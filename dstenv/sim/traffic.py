@@ -71,7 +71,7 @@ def traffic_step(net, nbr, trig, st, idm, rules, t, dt, u, ego_auto):
             turn, group, vmax, succ_ptr, succ, conf_ptr, conf, node_control, node_phase)``.
         nbr: ``(left, right, oncoming)`` lanes beside each lane
             (:func:`dstenv.sim.lanechange.lane_neighbours`).
-        trig: ``(cos, sin)`` of ``hdg`` (:func:`dstenv.sim.lanes.heading_trig`).
+        trig: ``(cos, sin)`` of ``hdg`` (:attr:`dstenv.sim.lanes.LaneNetwork.heading_trig`).
         st: state arrays over B rows (ego last) ``(xy, yaw, v, hl, hw, akind, mobile,
             parked, route, s, lat, grant, req_t, stop_clock, halt, stuck, still,
             lat_goal, lc, hazard, park)`` (``lc``: lane-change state of

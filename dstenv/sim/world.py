@@ -14,8 +14,7 @@ from dstenv.sim import agenttable, pullin, spawn
 from dstenv.sim.citygen import generate_city
 from dstenv.sim.clutter import street_clutter
 from dstenv.sim.ego import bicycle_step, hits, pure_pursuit, pursuit_lookahead
-from dstenv.sim.lanes import (Control, LaneKind, LaneNetwork, Turn, heading_trig, lane_pose,
-                              project_on_lane)
+from dstenv.sim.lanes import Control, LaneKind, LaneNetwork, Turn, lane_pose, project_on_lane
 from dstenv.sim.lanechange import lane_neighbours
 from dstenv.sim.routing import choose_successor, route_point, signal_green
 from dstenv.sim.traffic import n_randoms, traffic_step
@@ -108,7 +107,6 @@ class World:
         if getattr(self, "_nbr_of", None) is not self._map.lanes:  # once per lane network
             nbr = self._pool_nbr.get(self.map_index)  # (a pool map keeps its neighbours)
             self._nbr = lane_neighbours(self._map.lanes) if nbr is None else nbr
-            self._trig = heading_trig(self._map.lanes.hdg)
             self._net = agenttable.net_tuple(self._map.lanes)
             self._nbr_of = self._map.lanes
             if self.map_index >= 0:
@@ -132,7 +130,7 @@ class World:
         auto = ego_action is None
         u = self.rng.random((len(st["v"]), n_randoms(ROUTE_LEN)))
         acc, gap, pulling = traffic_step(
-            self._net, self._nbr, self._trig, agenttable.state_tuple(st),
+            self._net, self._nbr, net.heading_trig, agenttable.state_tuple(st),
             st["idm"], agenttable.rules_tuple(cfg["traffic"], net.lane_width), self.time, dt,
             u, auto)
         e = len(st["v"]) - 1

@@ -28,8 +28,8 @@ from pathlib import Path
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--frames", type=int, default=160, help="frames of the short run (N)")
-    ap.add_argument("--repeat", type=int, default=3, help="timed runs per row")
-    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--repeat", type=int, default=3, help="timed pairs (N, 4 N frames) a row")
+    ap.add_argument("--workers", type=int, default=2, help="generation processes")
     ap.add_argument("--out", type=Path, help="also write the figures as JSON")
     args = ap.parse_args()
 

@@ -112,7 +112,7 @@ def _write_path_ms(config: dict[str, Any], n: int, tmp: Path) -> dict[str, float
     rest (HDF5 calls, label histogram, checks, file open and commit).
     """
     from dstenv.data.codec import encode_chunk, quantize_cells
-    from dstenv.data.format import GRID_FIELDS, PROB_FIELDS, QUANT_SCALE
+    from dstenv.data.format import FORMAT_VERSION, PROB_FIELDS, QUANT_SCALE, grid_fields
     from dstenv.data.generate import GenerateSpec
     from dstenv.data.shards import ShardWriter
     from dstenv.pipeline import Pipeline
@@ -162,7 +162,8 @@ def _write_path_ms(config: dict[str, Any], n: int, tmp: Path) -> dict[str, float
         probs = [quantize_cells(getattr(f, name), QUANT_SCALE, buf)
                  for name, buf in zip(PROB_FIELDS, bufs)]
         c1 = time.thread_time()
-        for a in (*probs, *(np.asarray(getattr(f, g), dt) for g, dt in GRID_FIELDS.items())):
+        grids = grid_fields(FORMAT_VERSION).items()  # those the writer stores
+        for a in (*probs, *(np.asarray(getattr(f, g), dt) for g, dt in grids)):
             encode_chunk(a, *codec)
         deflate_cpu += time.thread_time() - c1
         quant_cpu += c1 - c0

@@ -34,13 +34,17 @@ from collections.abc import Callable
 import numba as nb
 import numpy as np
 
+from dstenv.dst import SensorState
+
 __all__ = ["fletcher32", "encode_chunk", "quantize", "quantize_cells", "class_counts", "same_bytes",
-           "DIRECT_COMPRESSIONS", "DEFLATE_ENGINES"]
+           "observed_is", "DIRECT_COMPRESSIONS", "DEFLATE_ENGINES"]
 
 #: compressions whose chunks :func:`encode_chunk` can produce (lzf lives inside h5py only)
 DIRECT_COMPRESSIONS = ("gzip", None)
 #: deflate implementations for ``"gzip"`` chunks (see the module docstring)
 DEFLATE_ENGINES = ("isal", "zlib")
+# the sensor code of a cell not observed (a numpy scalar: IntEnum conversions are slow)
+_UNKNOWN = np.uint8(SensorState.UNKNOWN)
 
 
 def _deflate(engine: str) -> Callable[[bytes, int], bytes]:
@@ -272,3 +276,37 @@ def same_bytes(a: np.ndarray, b: np.ndarray) -> bool:
         return False
     return bool(_same(np.ascontiguousarray(a).reshape(-1).view(np.uint8),
                       np.ascontiguousarray(b).reshape(-1).view(np.uint8)))
+
+
+@nb.njit(cache=True, nogil=True)
+def _observed_is(visible: np.ndarray, sensor: np.ndarray, unknown: np.uint8) -> bool:
+    # branch-free ORs of mismatches into 64 lanes, so that LLVM vectorises the loop (an
+    # early exit, or one accumulator, kept it scalar: 2.5-10x slower on 256 x 256)
+    n = visible.shape[0]
+    m = n - n % 64
+    lanes = np.zeros(64, np.uint8)
+    for b in range(0, m, 64):
+        for k in range(64):
+            lanes[k] |= visible[b + k] ^ np.uint8(sensor[b + k] != unknown)
+    bad = np.uint8(0)
+    for k in range(64):
+        bad |= lanes[k]
+    for i in range(m, n):
+        bad |= visible[i] ^ np.uint8(sensor[i] != unknown)
+    return bad == 0
+
+
+def observed_is(visible: np.ndarray, sensor: np.ndarray) -> bool:
+    """Whether a ``(H, W)`` visibility grid is exactly
+    :func:`dstenv.sensing.visible_mask` of ``sensor`` (one pass, no temporaries: the
+    writer's check before it leaves ``visible`` out of a format-3 shard)."""
+    v = np.ascontiguousarray(visible).reshape(-1)
+    s = np.ascontiguousarray(sensor).reshape(-1)
+    if v.shape != s.shape:
+        return False
+    if v.dtype != np.bool_:  # as bool: any nonzero is observed
+        v = v != 0
+    if s.dtype != np.uint8:
+        s = s.astype(np.int64)
+        return bool(np.array_equal(v, s != int(_UNKNOWN)))
+    return bool(_observed_is(v.view(np.uint8), s, _UNKNOWN))

@@ -15,13 +15,15 @@ from dstenv.dst.frame import CLASSES, NUM_CLASSES, NUM_SETS
 __all__ = [
     "FORMAT", "FORMAT_VERSION", "READ_VERSIONS", "QUANT_SCALE", "QUANT_MAX_ERROR", "N_CLASSES",
     "N_MASSES", "FRAME_FIELDS", "ShardError", "class_names", "partial_path", "prob_shape",
+    "grid_fields", "DERIVED_FIELDS",
 ]
 
 FORMAT = "dstenv-shard"
-#: written by this dstenv: 2 stores probabilities cell-major ``(N, H, W, 5)``
-FORMAT_VERSION = 2
-#: read by this dstenv: 1 stored them as planes ``(N, 5, H, W)`` (otherwise the same)
-READ_VERSIONS = (1, 2)
+#: written by this dstenv: 3 derives ``visible`` from ``sensor`` instead of storing it
+FORMAT_VERSION = 3
+#: read by this dstenv: 2 stored ``visible``; 1 also stored probabilities as planes
+#: ``(N, 5, H, W)`` instead of cell-major ``(N, H, W, 5)`` (otherwise the same)
+READ_VERSIONS = (1, 2, 3)
 #: uint8 quantisation: ``q = rint(QUANT_SCALE * p)``.
 QUANT_SCALE = 255
 #: Largest absolute error of a dequantised probability.
@@ -32,8 +34,12 @@ BUFFER_BYTES = 32 << 20
 N_CLASSES = NUM_CLASSES  # 5
 N_MASSES = NUM_SETS  # 32
 
-# per-frame datasets by trailing shape: (H, W) grids, (5, H, W) probabilities, scalars
+# per-frame datasets by trailing shape: (H, W) grids, (5, H, W) probabilities, scalars;
+# GRID_FIELDS are the grids a reader returns, grid_fields(version) those stored
 GRID_FIELDS = {"labels": np.uint8, "visible": np.bool_, "sensor": np.uint8, "gis": np.uint8}
+#: grids that format 3 computes from another one instead of storing:
+#: ``visible = sensor != 0`` (:func:`dstenv.sensing.visible_mask`, its one definition)
+DERIVED_FIELDS = {"visible": "sensor"}
 PROB_FIELDS = ("pignistic", "pignistic_prev")
 SCALAR_FIELDS = {"time": np.float64, "seed": np.int64, "step": np.int64}
 #: the small per-frame records (64 frames per chunk, written once per shard)
@@ -48,6 +54,23 @@ def prob_shape(version: int, h: int, w: int) -> tuple[int, int, int]:
     """Stored shape of one frame of ``pignistic`` / ``pignistic_prev`` in a shard of
     format ``version``: ``(H, W, 5)`` from version 2, ``(5, H, W)`` before."""
     return (h, w, N_CLASSES) if version >= 2 else (N_CLASSES, h, w)
+
+
+def grid_fields(version: int) -> dict[str, Any]:
+    """The ``(N, H, W)`` grid datasets a shard of format ``version`` stores, with dtypes
+    (from version 3 without :data:`DERIVED_FIELDS`)."""
+    if version < 3:
+        return dict(GRID_FIELDS)
+    return {k: v for k, v in GRID_FIELDS.items() if k not in DERIVED_FIELDS}
+
+
+def derive(name: str, source: np.ndarray) -> np.ndarray:
+    """A derived grid (:data:`DERIVED_FIELDS`) from its source grid, ``(..., H, W)``."""
+    if name != "visible":
+        raise KeyError(f"no derived field {name!r}")
+    from dstenv.sensing.labels import visible_mask
+
+    return visible_mask(source)
 
 
 class ShardError(ValueError):

@@ -11,8 +11,8 @@ import h5py
 import numpy as np
 
 from dstenv.data.format import (
-    FORMAT, FRAME_FIELDS, GRID_FIELDS, N_CLASSES, N_MASSES, PROB_FIELDS, READ_VERSIONS,
-    SCALAR_FIELDS, ShardError, prob_shape, short_error,
+    DERIVED_FIELDS, FORMAT, FRAME_FIELDS, N_CLASSES, N_MASSES, PROB_FIELDS, READ_VERSIONS,
+    SCALAR_FIELDS, ShardError, derive, grid_fields, prob_shape, short_error,
 )
 from dstenv.frame import Frame
 
@@ -89,7 +89,7 @@ class ShardReader:
         self.format_version = int(a["format_version"])
         expected = {
             **{k: (n, *prob_shape(self.format_version, h, w)) for k in PROB_FIELDS},
-            **{k: (n, h, w) for k in GRID_FIELDS},
+            **{k: (n, h, w) for k in grid_fields(self.format_version)},
             "ego_pose": (n, 3), **{k: (n,) for k in SCALAR_FIELDS},
             "class_counts": (n, N_CLASSES),
         }
@@ -134,7 +134,11 @@ class ShardReader:
         if not self._file:
             raise ValueError(f"{self.path}: reader is closed")
         out: dict[str, np.ndarray] = {}
+        names = list(names)
+        later = [n for n in names if n in DERIVED_FIELDS] if self.format_version >= 3 else []
         for name in names:
+            if name in later:
+                continue
             if name not in self._file:
                 raise KeyError(f"{self.path}: no dataset {name!r}")
             try:
@@ -145,7 +149,11 @@ class ShardReader:
             if name in PROB_FIELDS and self.format_version >= 2:
                 value = np.moveaxis(value, -1, 0)  # cell-major on disk: a (5, H, W) view
             out[name] = value if stored else self.dequantise(name, value)
-        return out
+        for name in later:  # format 3: computed from a stored grid (read once)
+            src = DERIVED_FIELDS[name]
+            source = out[src] if src in out else self.get(index, [src])[src]
+            out[name] = derive(name, source)
+        return {n: out[n] for n in names}
 
     def dequantise(self, name: str, value: np.ndarray) -> np.ndarray:
         """A stored array of dataset ``name`` as read by :meth:`get` (probabilities:

@@ -1,6 +1,6 @@
 """Shard files: HDF5 containers of labelled frames, readable with ``h5py`` alone.
 
-Format (``format = "dstenv-shard"``, ``format_version = 2``)
+Format (``format = "dstenv-shard"``, ``format_version = 3``)
 ------------------------------------------------------------
 One shard holds ``N`` :class:`dstenv.frame.Frame` records of one grid shape
 ``(H, W)``. Every per-frame dataset has ``N`` as its first axis; grids are chunked
@@ -22,7 +22,9 @@ dataset              shape, dtype            meaning (axes: :mod:`dstenv.grid`)
                                              side by side)
 ``pignistic_prev``   (N, H, W, 5) as above   BetP at t-1 (the paper's FCN input is both)
 ``labels``           (N, H, W) uint8         class index, or 255 (``IGNORE_INDEX``)
-``visible``          (N, H, W) bool          cell observed by this sweep
+``visible``          (N, H, W) bool          cell observed by this sweep: not
+                                             stored from version 3, read as
+                                             ``sensor != 0`` (see below)
 ``sensor``           (N, H, W) uint8         0 unknown, 1 free, 2 occupied
 ``gis``              (N, H, W) uint8         0 none, 1 building, 2 road, 3 intermediate
 ``ego_pose``         (N, 3) float64          world ``(x [m], y [m], yaw [rad])``
@@ -34,9 +36,16 @@ dataset              shape, dtype            meaning (axes: :mod:`dstenv.grid`)
                                              :mod:`dstenv.dst`), never quantised
 ===================  ======================  =========================================
 
-Version 1 (dstenv before this layout) stored ``pignistic`` and ``pignistic_prev`` as
-planes, ``(N, 5, H, W)``; everything else is the same. :class:`ShardReader` reads both
-and returns ``(5, H, W)`` either way. Cell-major bytes deflate ~35 % smaller and
+Version 3 does not store ``visible``: it is by definition the cells whose sensor state
+is not unknown (:func:`dstenv.sensing.visible_mask`), and :meth:`ShardReader.get`
+derives it from ``sensor`` (with h5py alone: ``f["sensor"][i] != 0``). The writer
+refuses a frame whose ``visible`` is anything else, so nothing is lost. Leaving out
+the redundant chunk saves ~0.05 ms of the write path per 256 x 256 frame (its deflate,
+checksum and chunk write; ``docs/throughput.md``) and ~1.9 KB. Version 2 stored it,
+and version 1 (dstenv before this layout) also stored ``pignistic`` and
+``pignistic_prev`` as planes, ``(N, 5, H, W)``; everything else is the same.
+:class:`ShardReader` reads all three and returns ``visible`` and ``(5, H, W)``
+probabilities either way. Cell-major bytes deflate ~35 % smaller and
 ~25 % faster (the classes of a cell are correlated); the writer quantises straight
 into the cell-major order in one vectorised pass (:func:`dstenv.data.codec.quantize_cells`,
 ~0.04 ms more per cached 256 x 256 grid than plane order, less than deflate saves;

@@ -16,14 +16,14 @@ import numpy as np
 
 from dstenv import __version__
 from dstenv.data.codec import (
-    DEFLATE_ENGINES, DIRECT_COMPRESSIONS, class_counts, encode_chunk, quantize_cells,
-    same_bytes,
+    DEFLATE_ENGINES, DIRECT_COMPRESSIONS, class_counts, encode_chunk, observed_is,
+    quantize_cells, same_bytes,
 )
 from dstenv.io import fsync_dir
 from dstenv.data.format import (
     BUFFER_BYTES, BUFFER_FRAMES, FORMAT, FORMAT_VERSION, GRID_FIELDS, N_CLASSES, N_MASSES,
     PROB_FIELDS, QUANT_SCALE, RECORD_FIELDS, SCALAR_FIELDS, class_names, encode_attr,
-    partial_path, prob_shape, short_error,
+    partial_path, prob_shape, short_error, grid_fields, DERIVED_FIELDS,
 )
 from dstenv.frame import IGNORE_INDEX, Frame
 
@@ -139,7 +139,7 @@ class ShardWriter:
         prob_dtype = np.uint8 if self.quantize else np.float32
         specs: dict[str, tuple[tuple[int, ...], Any]] = {
             **{k: (prob_shape(FORMAT_VERSION, h, w), prob_dtype) for k in PROB_FIELDS},
-            **{k: ((h, w), dt) for k, dt in GRID_FIELDS.items()},
+            **{k: ((h, w), dt) for k, dt in grid_fields(FORMAT_VERSION).items()},
             "ego_pose": ((3,), np.float64),
             **{k: ((), dt) for k, dt in SCALAR_FIELDS.items()},
             "class_counts": ((N_CLASSES,), np.int64),
@@ -260,6 +260,14 @@ class ShardWriter:
         for name, dtype in GRID_FIELDS.items():
             a = np.asarray(getattr(frame, name))
             _expect(self.path, name, a, (h, w))
+            if name in DERIVED_FIELDS:  # not stored: it must be what readers derive
+                if not observed_is(a, np.asarray(getattr(frame, DERIVED_FIELDS[name]))):
+                    raise ValueError(
+                        f"{self.path}: frame {self.n_frames}: {name} is not "
+                        f"{DERIVED_FIELDS[name]} != 0 (unknown); shards of format "
+                        f"{FORMAT_VERSION} derive it from {DERIVED_FIELDS[name]}: build it "
+                        f"with dstenv.sensing.visible_mask(sensor)")
+                continue
             # encoded in add() on this thread: no copy; h5py's path and the codec
             # threads read them later, so they get a copy
             out[name] = a.astype(dtype, copy=not self._direct or self._threads > 0)

@@ -205,9 +205,11 @@ def remove_buildings(world_map: WorldMap, drop: np.ndarray) -> np.ndarray:
 
 def _check_pose(pose: np.ndarray, where: str) -> tuple[float, float, float]:
     p = np.asarray(pose, dtype=np.float64)
-    if p.shape != (3,) or not np.all(np.isfinite(p)):
-        raise ValueError(f"{where}: pose must be a finite (3,) array (x, y, yaw), got {pose!r}")
-    return float(p[0]), float(p[1]), float(p[2])
+    if p.shape == (3,):
+        x, y, yaw = p.tolist()  # Python floats: the finite test without numpy's overhead
+        if math.isfinite(x) and math.isfinite(y) and math.isfinite(yaw):
+            return x, y, yaw
+    raise ValueError(f"{where}: pose must be a finite (3,) array (x, y, yaw), got {pose!r}")
 
 
 @numba.njit(cache=True)

@@ -21,7 +21,7 @@ import numpy as np
 from dstenv.dst import CLASSES, SensorState
 from dstenv.grid import GridSpec
 from dstenv.sensing.gis import _check_pose, _lookup
-from dstenv.sim.types import Agents, MapClass, WorldMap
+from dstenv.sim.types import Agents, MapClass, Obstacles, WorldMap
 
 __all__ = ["label_grid", "visible_mask", "ignore_object_edges", "MAP_TO_CLASS",
            "GROUND_CLEARANCE"]
@@ -84,8 +84,7 @@ def label_grid(
     obs = world_map.obstacles
     if len(obs):
         reach = 0.75 * spec.cell_size * max(spec.shape) + 10.0  # > half diagonal + box size
-        cls = np.where(obs.z_min < GROUND_CLEARANCE, _NONNAV, _SKIP).astype(np.uint8)
-        _paint_boxes(out, *_f64(obs.xy, obs.yaw, obs.length, obs.width), cls,
+        _paint_boxes(out, *_clutter(obs),
                      px, py, yaw, c, s, reach, float(spec.cell_size), np.uint8(_MOVING))
     if len(agents):
         cls = np.where(np.asarray(agents.speed) > moving_threshold, _MOVING, _STATIC)
@@ -161,6 +160,22 @@ def _ignore_edges(labels, sensor, ignore):  # pragma: no cover - numba
                 labels[i, j] = ignore
                 n += 1
     return n
+
+
+# the last map's clutter as _paint_boxes takes it (a map's obstacles do not change)
+_CLUTTER: list[tuple[Obstacles, tuple[np.ndarray, ...]]] = []
+
+
+def _clutter(obs: Obstacles) -> tuple[np.ndarray, ...]:
+    """``(xy, yaw, length, width, cls)`` of street clutter for :func:`_paint_boxes`:
+    float64 arrays and the class painted (``_SKIP`` above the ground), kept for the
+    last ``Obstacles`` seen (a label grid per frame of one map: ~10 us a frame)."""
+    if _CLUTTER and _CLUTTER[0][0] is obs:
+        return _CLUTTER[0][1]
+    cls = np.where(obs.z_min < GROUND_CLEARANCE, _NONNAV, _SKIP).astype(np.uint8)
+    arrays = (*_f64(obs.xy, obs.yaw, obs.length, obs.width), cls)
+    _CLUTTER[:] = [(obs, arrays)]
+    return arrays
 
 
 def _f64(*arrays: np.ndarray) -> tuple[np.ndarray, ...]:

@@ -22,10 +22,13 @@ def make_frame(rng: np.random.Generator, h: int = 12, w: int = 10, masses: bool 
     if masses:
         m = rng.random((32, h, w)).astype(np.float32)
         m /= m.sum(axis=0, keepdims=True)
+    pign, prev = probs(), probs()
+    rng.random((h, w))  # (the draw of a random visibility grid, before format 3)
+    sensor = rng.integers(0, 3, size=(h, w)).astype(np.uint8)
     return Frame(
-        pignistic=probs(), pignistic_prev=probs(), labels=labels,
-        visible=rng.random((h, w)) < 0.5,
-        sensor=rng.integers(0, 3, size=(h, w)).astype(np.uint8),
+        pignistic=pign, pignistic_prev=prev, labels=labels,
+        visible=sensor != 0,  # what the pipeline gives and format-3 readers derive
+        sensor=sensor,
         gis=rng.integers(0, 4, size=(h, w)).astype(np.uint8),
         ego_pose=rng.normal(size=3), time=0.1 * step, seed=seed, step=step, masses=m,
     )
@@ -66,7 +69,7 @@ class FakePipeline:
         p /= p.sum(axis=0)
         return Frame(pignistic=p, pignistic_prev=p[::-1].copy(),
                      labels=rng.integers(0, 5, (self.h, self.w)).astype(np.uint8),
-                     visible=rng.random((self.h, self.w)) < 0.5,
+                     visible=np.zeros((self.h, self.w), bool),  # sensor != 0
                      sensor=np.zeros((self.h, self.w), np.uint8),
                      gis=np.ones((self.h, self.w), np.uint8),
                      ego_pose=np.array([self.t, 0.0, 0.0]), time=0.1 * self.t, seed=self.seed,

@@ -53,7 +53,8 @@ def test_quantised_error_bound(tmp_path, frames, shard_attrs):
     one.pignistic[:, 0, 0] = [0.5, 0.25, 0.125, 0.125, 0.0]
     _write(tmp_path / "h.h5", [one], shard_attrs, quantize=True)
     with h5py.File(tmp_path / "h.h5") as f:  # h5py alone reads the shard
-        assert f.attrs["format_version"] == 2  # probabilities cell-major: (N, H, W, 5)
+        assert f.attrs["format_version"] == 3  # probabilities cell-major: (N, H, W, 5)
+        assert "visible" not in f  # format 3: readers derive it (sensor != 0)
         assert f["pignistic"].shape == (1, 12, 10, 5)
         assert f["pignistic"][0, 0, 0].tolist() == [128, 64, 32, 32, 0]
         assert f.attrs["prob_scale"] == 255
@@ -169,13 +170,13 @@ def test_many_flushes_store_exactly_the_frames(tmp_path, make_frame, shard_attrs
     frames = [make_frame(rng, step=i) for i in range(37)]
     path = _write(tmp_path / "m.h5", frames, shard_attrs, compression=compression)
     with h5py.File(path) as f:
-        for name in ("pignistic", "labels", "visible", "ego_pose", "step", "class_counts"):
+        for name in ("pignistic", "labels", "sensor", "ego_pose", "step", "class_counts"):
             assert f[name].shape[0] == 37, name
         assert f["labels"].id.get_num_chunks() == 37  # nothing stored past the end
         np.testing.assert_array_equal(f["step"][:], np.arange(37))
         np.testing.assert_array_equal(f["ego_pose"][:], np.stack([x.ego_pose for x in frames]))
         np.testing.assert_array_equal(f["labels"][:], np.stack([x.labels for x in frames]))
-        np.testing.assert_array_equal(f["visible"][:], np.stack([x.visible for x in frames]))
+        np.testing.assert_array_equal(f["sensor"][:] != 0, np.stack([x.visible for x in frames]))
         counts = np.stack([np.bincount(x.labels.ravel(), minlength=256)[:5] for x in frames])
         np.testing.assert_array_equal(f["class_counts"][:], counts)
     with ShardReader(path) as r:
@@ -203,33 +204,60 @@ def test_writer_does_not_keep_views_of_the_callers_arrays(tmp_path, make_frame, 
                 assert not np.all(r[i].ego_pose == -1.0)
 
 
-def test_reads_format_version_1(tmp_path, frames, shard_attrs):
-    # version 1 stored the probabilities as planes (N, 5, H, W): rewrite a shard that way
-    # with h5py alone; the reader must give the same frames
+def test_reads_format_versions_1_and_2(tmp_path, frames, shard_attrs):
+    # version 2 stored `visible`; version 1 also stored the probabilities as planes
+    # (N, 5, H, W): rewrite a shard those ways with h5py alone; the reader must give
+    # the same frames
     for quantize in (True, False):
-        path = _write(tmp_path / f"v2-{quantize}.h5", frames, shard_attrs, quantize=quantize)
-        old = tmp_path / f"v1-{quantize}.h5"
-        with h5py.File(path) as src, h5py.File(old, "w") as dst:
-            for key, value in src.attrs.items():
-                dst.attrs[key] = value
-            dst.attrs["format_version"] = 1
-            for name in src:
-                data = src[name][()]
-                if name in ("pignistic", "pignistic_prev"):
-                    data = np.ascontiguousarray(data.transpose(0, 3, 1, 2))
-                dst.create_dataset(name, data=data, fletcher32=True)
-        with ShardReader(path) as new, ShardReader(old) as r:
-            assert r.format_version == 1 and new.format_version == 2
-            for i in range(len(frames)):
-                a, b = new[i], r[i]
-                for name in ("pignistic", "pignistic_prev", "labels", "ego_pose"):
-                    np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
-                assert a.pignistic.shape == (5, 12, 10) and a.pignistic.flags.c_contiguous
-                stored = r.get(i, ["pignistic"], stored=True)["pignistic"]
-                np.testing.assert_array_equal(
-                    stored, new.get(i, ["pignistic"], stored=True)["pignistic"])
-        with h5py.File(old, "r+") as f:
-            f.attrs["format_version"] = 3
-        with pytest.raises(ShardError, match="format_version 3 is not supported "
-                                             r"\(this dstenv reads 1, 2\)"):
-            ShardReader(old)
+        path = _write(tmp_path / f"v3-{quantize}.h5", frames, shard_attrs, quantize=quantize)
+        for version in (1, 2):
+            old = tmp_path / f"v{version}-{quantize}.h5"
+            with h5py.File(path) as src, h5py.File(old, "w") as dst:
+                for key, value in src.attrs.items():
+                    dst.attrs[key] = value
+                dst.attrs["format_version"] = version
+                for name in src:
+                    data = src[name][()]
+                    if name in ("pignistic", "pignistic_prev") and version == 1:
+                        data = np.ascontiguousarray(data.transpose(0, 3, 1, 2))
+                    dst.create_dataset(name, data=data, fletcher32=True)
+                # stored by versions 1-2: here deliberately not sensor != 0, so that a
+                # reader which derived it instead of reading it would fail
+                dst.create_dataset("visible", data=src["sensor"][()] == 1, fletcher32=True)
+            with ShardReader(path) as new, ShardReader(old) as r:
+                assert r.format_version == version and new.format_version == 3
+                for i in range(len(frames)):
+                    a, b = new[i], r[i]
+                    for name in ("pignistic", "pignistic_prev", "labels", "sensor", "ego_pose"):
+                        np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+                    np.testing.assert_array_equal(a.visible, frames[i].visible)
+                    np.testing.assert_array_equal(b.visible, frames[i].sensor == 1)
+                    assert a.pignistic.shape == (5, 12, 10) and a.pignistic.flags.c_contiguous
+                    stored = r.get(i, ["pignistic"], stored=True)["pignistic"]
+                    np.testing.assert_array_equal(
+                        stored, new.get(i, ["pignistic"], stored=True)["pignistic"])
+            if version == 2:  # a version-2 shard without `visible` is invalid
+                with h5py.File(old, "r+") as f:
+                    del f["visible"]
+                with pytest.raises(ShardError, match="dataset 'visible' missing"):
+                    ShardReader(old)
+        with h5py.File(path, "r+") as f:
+            f.attrs["format_version"] = 4
+        with pytest.raises(ShardError, match="format_version 4 is not supported "
+                                             r"\(this dstenv reads 1, 2, 3\)"):
+            ShardReader(path)
+
+
+def test_format_3_derives_visible_and_the_writer_refuses_another(tmp_path, frames,
+                                                                 shard_attrs):
+    path = _write(tmp_path / "v.h5", frames, shard_attrs)
+    with ShardReader(path) as r:
+        got = r.get(1, ["visible", "labels"])  # derived without asking for `sensor`
+        assert list(got) == ["visible", "labels"] and got["visible"].dtype == bool
+        np.testing.assert_array_equal(got["visible"], frames[1].sensor != 0)
+        r.verify()
+    bad = frames[2]
+    bad.visible = ~bad.visible
+    with pytest.raises(ValueError, match=r"b\.h5: frame 0: visible is not sensor != 0"):
+        _write(tmp_path / "b.h5", [bad], shard_attrs)
+    assert not (tmp_path / "b.h5").exists()

@@ -188,3 +188,27 @@ def test_ground_walk_jumps_land_where_the_cell_walk_does():
     assert (s0 == 1).sum() > 1000 and (s0 == 0).sum() > 1000  # kerbs and road both hit
     assert np.array_equal(s0, s1) and np.array_equal(i0, i1)
     assert np.allclose(b0, b1, rtol=0, atol=1e-9)
+
+
+def test_raised_distance_is_the_chessboard_distance_less_one_capped():
+    """Against brute force: min over raised cells of max(|di|, |dj|), less one, clipped
+    to [0, 255]; rasters of one row or column, none raised, and one with a raised cell
+    farther than the cap (the int16 passes cap at 256)."""
+    rng = np.random.default_rng(7)
+    cases = [(rng.random(shape) < dens).astype(np.uint8) * 3
+             for shape in ((1, 1), (1, 9), (9, 1), (2, 2), (23, 31), (64, 48))
+             for dens in (0.0, 0.01, 0.1, 0.6)]
+    far = np.zeros((3, 600), np.uint8)
+    far[1, 0] = 3
+    cases.append(far)
+    for raster in cases:
+        got = raised_distance(raster, 3)
+        ii, jj = np.nonzero(raster == 3)
+        if len(ii) == 0:
+            want = np.full(raster.shape, 255, np.uint8)
+        else:
+            gi, gj = np.indices(raster.shape)
+            cheb = np.maximum(np.abs(gi[..., None] - ii), np.abs(gj[..., None] - jj)).min(axis=-1)
+            want = np.clip(cheb - 1, 0, 255).astype(np.uint8)
+        np.testing.assert_array_equal(got, want, err_msg=str(raster.shape))
+    assert raised_distance(far, 3)[1, 300] == 255 and raised_distance(far, 3)[1, 200] == 199

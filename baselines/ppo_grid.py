@@ -9,6 +9,9 @@ steering, target speed, next junction, "route": the route ahead}``
 * ``grid-cnn``: :class:`GridCNN`, three small strided convolutions for the grid
   (84 x 84 -> 6 x 6), concatenated with the flat ``ego`` and ``route`` vectors,
   then one linear layer (cheap on a 2-core CPU);
+* ``route-cnn``: :class:`route_features.RouteGridCNN`, ``grid-cnn`` plus a 1-D CNN
+  over the grid read along (and across) the observation's route, where a driver
+  looks for what is in its way;
 * ``combined``: stable-baselines3's own ``MultiInputPolicy`` extractor (NatureCNN on
   the grid), out of the box.
 
@@ -52,14 +55,15 @@ from torch import nn
 from rl_common import EnvArgs, atomic_write_bytes, atomic_write_text, machine_info, make_env, opt
 from rl_common import parse_args, to_argv
 
-EXTRACTORS = ("grid-cnn", "combined")
+EXTRACTORS = ("grid-cnn", "route-cnn", "combined")
 
 
 @dataclass
 class Args(EnvArgs):
     """Train PPO on a DSTGrid env."""
 
-    extractor: str = opt("grid-cnn", "grid-cnn (small CNN + vectors) | combined (SB3's "
+    extractor: str = opt("grid-cnn", "grid-cnn (small CNN + vectors) | route-cnn (grid-cnn "
+                                     "+ the grid read along the route) | combined (SB3's "
                                      "MultiInputPolicy extractor, NatureCNN)")
     features_dim: int = opt(128, "size of the extracted feature vector")
     total_timesteps: int = opt(100_000, "environment steps over all envs (the budget)")
@@ -209,6 +213,21 @@ def build_model(args: Args, env: VecEnv | gym.Env) -> PPO:
         policy_kwargs: dict[str, Any] = {"features_extractor_class": GridCNN,
                                          "features_extractor_kwargs":
                                              {"features_dim": args.features_dim}}
+    elif args.extractor == "route-cnn":
+        from route_features import RouteGridCNN
+
+        probe = make_env(args, train_config(args))  # the grid and route geometry
+        try:
+            cfg = probe.unwrapped.config
+        finally:
+            probe.close()
+        policy = "MultiInputPolicy"
+        policy_kwargs = {"features_extractor_class": RouteGridCNN,
+                         "features_extractor_kwargs": {
+                             "features_dim": args.features_dim,
+                             "cell_size": float(cfg["grid"]["cell_size"]),
+                             "route_scale": float(cfg["observation"]["route_points"]
+                                                  * cfg["observation"]["route_spacing"])}}
     else:
         policy = "MultiInputPolicy" if dict_obs else "CnnPolicy"
         policy_kwargs = ({"features_extractor_kwargs": {"cnn_output_dim": args.features_dim}}

@@ -22,9 +22,9 @@ from dstenv.scenario_files import tomllib
 
 ROOT = Path(__file__).resolve().parents[1]
 PYPROJECT = tomllib.loads((ROOT / "pyproject.toml").read_text())
-FIRST_PARTY = {"dstenv", "tests", "baselines", "scenarios", "conftest", "shared_data", "rl_common",
-               "fcn_dst", "evaluate", "ppo_grid", "random_policy", "rule_based", "curves",
-               "imitation"}
+# the scripts in baselines/ import their siblings by module name
+FIRST_PARTY = {"dstenv", "tests", "baselines", "scenarios", "conftest", "shared_data",
+               *(p.stem for p in (ROOT / "baselines").rglob("*.py"))}
 
 
 def _canonical(name: str) -> str:

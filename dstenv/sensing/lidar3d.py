@@ -379,10 +379,9 @@ def _clutter_table(world_map: WorldMap) -> np.ndarray:
 
 
 def _building_table(world_map: WorldMap) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Edges ``(E, 4)`` (``x0, y0, x1, y1``: each polygon closed, zero-length edges
-    dropped), per-building ``starts (B+1,)``, circles ``(B, 3)`` (centre = vertex mean,
-    radius to the farthest vertex) and heights. Vectorised over all vertices at once
-    (~7x faster than per building; the same arrays bit for bit)."""
+    """Edges ``(E, 4)`` (``x0, y0, x1, y1``; polygons closed, zero-length edges dropped),
+    ``starts (B+1,)``, circles ``(B, 3)`` (vertex mean, farthest vertex) and heights;
+    vectorised over all vertices (~7x faster than per building, the same arrays)."""
     polys = [np.asarray(p, dtype=np.float64) for p in world_map.buildings]
     heights = np.asarray(world_map.building_heights, np.float64)
     if not polys:
@@ -399,4 +398,4 @@ def _building_table(world_map: WorldMap) -> tuple[np.ndarray, np.ndarray, np.nda
     np.cumsum(np.bincount(owner[keep], minlength=len(polys)), out=starts[1:])
     centre = np.stack([p.mean(axis=0) for p in polys])  # numpy's own sum order per polygon
     radius = np.maximum.reduceat(np.hypot(*(pts - centre[owner]).T), first)
-    return (np.ascontiguousarray(e[keep]), starts, np.column_stack([centre, radius]), heights)
+    return np.ascontiguousarray(e[keep]), starts, np.column_stack([centre, radius]), heights

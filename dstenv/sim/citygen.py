@@ -177,9 +177,10 @@ def generate_city(cfg: dict[str, Any], traffic: dict[str, Any], rng: np.random.G
     res = cfg["resolution"]
     width, height = xs[-1] + margin, ys[-1] + margin
     shape = (int(np.ceil(height / res)), int(np.ceil(width / res)))
-    # a warped city's raster is re-sampled into a new one (draw_warp draws one exactly
-    # when the warp below is on): this one is scratch
-    warped = geo is not None and (cfg["shear_deg"] > 0 or cfg["bend_amplitude"] > 0)
+    # the warp (None: straight streets) is drawn here, geo's next draws either way; a
+    # warped city's raster is re-sampled into a new one, so this one is scratch
+    drawn = draw_warp(cfg, (width, height), geo) if geo is not None else None
+    warped = drawn is not None
     raster = (scratch_raster(shape, MapClass.INTERMEDIATE) if warped
               else np.full(shape, MapClass.INTERMEDIATE, np.uint8))
     surface = np.full(shape, Surface.YARD, np.uint8)
@@ -232,9 +233,6 @@ def generate_city(cfg: dict[str, Any], traffic: dict[str, Any], rng: np.random.G
     fill_rects(surface, spots, org, res, Surface.PARKING)
     buildings = city_buildings(list(faces) + [box for box, _ in strips],
                                [-1] * len(faces) + [side for _, side in strips], cfg, rng)
-    drawn = draw_warp(cfg, (width, height), geo) if geo is not None else None
-    if drawn is None and warped:  # (not reached) the map keeps this raster: own it
-        raster = raster.copy()
     if drawn is None:
         for b in buildings:
             for r, v in ((raster, MapClass.BUILDING), (surface, Surface.BUILDING)):

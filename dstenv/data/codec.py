@@ -306,7 +306,8 @@ def observed_is(visible: np.ndarray, sensor: np.ndarray) -> bool:
         return False
     if v.dtype != np.bool_:  # as bool: any nonzero is observed
         v = v != 0
-    if s.dtype != np.uint8:
-        s = s.astype(np.int64)
-        return bool(np.array_equal(v, s != int(_UNKNOWN)))
+    if s.dtype != np.uint8:  # not the kernel's dtype: the one definition itself
+        from dstenv.sensing.labels import visible_mask
+
+        return bool(np.array_equal(v, visible_mask(s)))
     return bool(_observed_is(v.view(np.uint8), s, _UNKNOWN))

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from dstenv.data.codec import (
-    class_counts, encode_chunk, fletcher32, quantize, quantize_cells,
+    class_counts, encode_chunk, fletcher32, observed_is, quantize, quantize_cells,
 )
 from dstenv.data.shards import ShardReader, ShardWriter
 
@@ -137,3 +137,20 @@ def test_quantize_cells_is_the_cell_major_quantisation(shape):
         quantize_cells(p, 255)
     with pytest.raises(ValueError, match=r"needs a \(5, H, W\) grid"):
         quantize_cells(p[:4], 255)
+
+
+def test_observed_is_visible_mask_for_every_dtype_and_size():
+    from dstenv.sensing import visible_mask
+
+    rng = np.random.default_rng(3)
+    for shape in ((1, 1), (7, 9), (64, 64), (65, 63)):  # below, at and around 64 lanes
+        sensor = rng.integers(0, 3, shape).astype(np.uint8)
+        vis = visible_mask(sensor)
+        assert observed_is(vis, sensor) and observed_is(vis.astype(np.uint8) * 7, sensor)
+        assert observed_is(vis, sensor.astype(np.int64))  # the non-kernel dtype
+        for k in (0, sensor.size - 1):  # a flip at either end of the kernel's lanes
+            bad = vis.copy().reshape(-1)
+            bad[k] ^= True
+            bad = bad.reshape(shape)
+            assert not observed_is(bad, sensor) and not observed_is(bad, sensor.astype(np.int64))
+    assert not observed_is(np.ones((4, 4), bool), np.ones((4, 5), np.uint8))

@@ -216,11 +216,8 @@ def build_model(args: Args, env: VecEnv | gym.Env) -> PPO:
     elif args.extractor == "route-cnn":
         from route_features import RouteGridCNN
 
-        probe = make_env(args, train_config(args))  # the grid and route geometry
-        try:
-            cfg = probe.unwrapped.config
-        finally:
-            probe.close()
+        # the grid and route geometry, from the env's own config
+        cfg = env.get_attr("config")[0] if isinstance(env, VecEnv) else env.unwrapped.config
         policy = "MultiInputPolicy"
         policy_kwargs = {"features_extractor_class": RouteGridCNN,
                          "features_extractor_kwargs": {

@@ -21,8 +21,8 @@ import json
 import sys
 from collections import Counter
 from pathlib import Path
+from typing import Any
 
-import gymnasium as gym
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "baselines"))
@@ -64,28 +64,26 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=10_000)
     ap.add_argument("--out", required=True)
     args = ap.parse_args()
-    env = gym.make("DSTGrid-Occluded-v0", config=CONFIG, max_episode_steps=200)
+    from evaluate import PPOPolicy
+    from rl_common import EnvArgs, make_env
+    from rule_based import GridRuleDriver
+
+    # the env and the policies exactly as baselines/evaluate.py builds them
+    env_args = EnvArgs(env_config=json.dumps(CONFIG), max_episode_steps=200)
     if args.policy == "grid":
-        from rule_based import GridRuleDriver
-
-        driver, model = GridRuleDriver(), None
+        policy: Any = GridRuleDriver()
+        env = make_env(env_args)
     else:
-        from ppo_grid import load
-
-        driver, (model, _) = None, load(args.policy, env)
+        policy = PPOPolicy(args.policy)  # deterministic, as evaluate.py's default
+        env = policy.make_env(env_args)
     jd = EGO_FEATURES.index("junction_dist")
     crashes, outcomes = [], Counter()
     for seed in range(args.seed, args.seed + args.episodes):
         obs, info = env.reset(seed=seed)
-        if driver is not None:
-            driver.reset(env, seed)
+        policy.reset(env, seed)
         speeds = []
         while True:
-            if driver is not None:
-                a = driver.act(obs, info)
-            else:
-                a = int(model.predict(obs, deterministic=True)[0])
-            obs, _, term, trunc, info = env.step(a)
+            obs, _, term, trunc, info = env.step(policy.act(obs, info))
             w = env.unwrapped.pipeline.world
             speeds.append(float(w.ego_speed))
             if term or trunc:

@@ -41,7 +41,8 @@ is not unknown (:func:`dstenv.sensing.visible_mask`), and :meth:`ShardReader.get
 derives it from ``sensor`` (with h5py alone: ``f["sensor"][i] != 0``). The writer
 refuses a frame whose ``visible`` is anything else, so nothing is lost. Leaving out
 the redundant chunk saves ~0.05 ms of the write path per 256 x 256 frame (its deflate,
-checksum and chunk write; ``docs/throughput.md``) and ~1.9 KB. Version 2 stored it,
+checksum and chunk write; ``docs/throughput.md``) and ~2 KB (38,943 -> 36,930 B a
+frame on the default city, ``docs/write_path.py``). Version 2 stored it,
 and version 1 (dstenv before this layout) also stored ``pignistic`` and
 ``pignistic_prev`` as planes, ``(N, 5, H, W)``; everything else is the same.
 :class:`ShardReader` reads all three and returns ``visible`` and ``(5, H, W)``

@@ -35,6 +35,7 @@ import csv
 import io
 import json
 import shlex
+import shutil
 import sys
 import time
 from dataclasses import asdict, dataclass
@@ -49,7 +50,7 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.logger import configure
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
-from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv
+from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv, VecNormalize
 from torch import nn
 
 from rl_common import EnvArgs, atomic_write_bytes, atomic_write_text, machine_info, make_env, opt
@@ -80,6 +81,9 @@ class Args(EnvArgs):
     gae_lambda: float = opt(0.95, "GAE lambda")
     clip_range: float = opt(0.2, "PPO clip range")
     ent_coef: float = opt(0.01, "entropy bonus")
+    norm_reward: bool = opt(False, "scale rewards by a running std of the discounted "
+                                   "return (SB3 VecNormalize, observations untouched); the "
+                                   "logged episodes keep the env's own rewards")
     vf_coef: float = opt(0.5, "value loss weight")
     torch_threads: int = opt(1, "torch CPU threads (envs use the other cores)")
     warm_start: str = opt("", "'' (none) | grid: DAgger from the grid rule driver before "
@@ -89,6 +93,8 @@ class Args(EnvArgs):
     warm_start_epochs: int = opt(3, "epochs of the supervised fit after each round")
     checkpoint_every: int = opt(10_000, "save the model every this many steps; 0 = at "
                                         "the end only")
+    keep_checkpoints: bool = opt(False, "keep every checkpoint as model_<steps>.pt (+ .json) "
+                                        "beside model.pt, which each one overwrites")
     tensorboard: bool = opt(False, "also log to tensorboard (needs the tensorboard extra)")
     out: str = opt("runs/ppo_grid", "output directory")
     verbose: int = opt(1, "0: quiet, 1: stable-baselines3 log table on stdout")
@@ -176,6 +182,10 @@ class TrainingLog(BaseCallback):
         if every > 0 and self.num_timesteps - self._last_ckpt >= every:
             self._last_ckpt = self.num_timesteps
             save(self.model, self.out, self.args, self.elapsed, self.warm)
+            if self.args.keep_checkpoints:
+                steps = self.offset + self.num_timesteps
+                for ext in (".pt", ".json"):
+                    shutil.copyfile(self.out / f"model{ext}", self.out / f"model_{steps}{ext}")
         return True
 
     @property
@@ -339,11 +349,16 @@ def warm_start(args: Args, model: PPO, env: VecEnv, log: TrainingLog) -> dict[st
 def train(args: Args) -> tuple[PPO, dict[str, Any]]:
     """Train PPO as ``args`` says; returns the model and the ``model.json`` content."""
     if args.warm_start:
+        if args.norm_reward:
+            raise ValueError("--norm-reward with --warm-start: the warm start fits the value "
+                             "head to the env's own returns; use one of the two")
         warm_start_steps_per_round(args)  # bad flags fail before any env is built
     torch.set_num_threads(args.torch_threads)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     env = make_vec_env(args)
+    if args.norm_reward:
+        env = VecNormalize(env, norm_obs=False, norm_reward=True, gamma=args.gamma)
     try:
         model = build_model(args, env)
         formats = ["stdout", "csv"] if args.verbose else ["csv"]

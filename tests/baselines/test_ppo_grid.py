@@ -114,3 +114,33 @@ def test_subprocess_envs_train(tmp_path, env_flags: list[str]) -> None:
                           "32", "--batch-size", "32", "--n-epochs", "1", "--total-timesteps",
                           "64", "--verbose", "0", "--out", str(tmp_path)])
     assert meta["timesteps"] == 64 and (tmp_path / "model.pt").is_file()
+
+
+def test_norm_reward_scales_the_update_not_the_log(trained: dict, tmp_path) -> None:
+    """--norm-reward: same episodes as run "a" (one rollout, same seed), the env's own
+    returns in the log, other weights (the update saw scaled rewards); with
+    --keep-checkpoints every checkpoint stays beside model.pt."""
+    from conftest import SMALL_CONFIG
+
+    out_a, _ = trained["a"]
+    flags = ["--env-config", json.dumps(SMALL_CONFIG), "--max-episode-steps", "30"]
+    meta = ppo_grid.main([*TINY, *flags, "--seed", "0", "--norm-reward", "--keep-checkpoints",
+                          "--checkpoint-every", "32", "--out", str(tmp_path)])
+    assert meta["args"]["norm_reward"] is True
+    assert (tmp_path / "episodes.csv").read_text().splitlines()[1:] != []
+    log_a = [r.split(",")[3:] for r in (out_a / "episodes.csv").read_text().splitlines()]
+    log_n = [r.split(",")[3:] for r in (tmp_path / "episodes.csv").read_text().splitlines()]
+    assert log_n == log_a  # returns, lengths and outcomes unscaled
+    pa = torch.load(out_a / "model.pt", weights_only=True)
+    pn = torch.load(tmp_path / "model.pt", weights_only=True)
+    assert not all(torch.equal(pa[k], pn[k]) for k in pa)
+    # both saved during the one rollout, before its update: the same weights
+    k32, k64 = (torch.load(tmp_path / f"model_{n}.pt", weights_only=True) for n in (32, 64))
+    assert all(torch.equal(k32[k], k64[k]) for k in k64)
+    assert [json.loads((tmp_path / f"model_{n}.json").read_text())["timesteps"]
+            for n in (32, 64)] == [32, 64]
+
+
+def test_norm_reward_refuses_a_warm_start(tmp_path) -> None:
+    with pytest.raises(ValueError, match="--norm-reward with --warm-start"):
+        ppo_grid.main([*TINY, "--norm-reward", "--warm-start", "grid", "--out", str(tmp_path)])

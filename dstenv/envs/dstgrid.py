@@ -88,7 +88,10 @@ class DSTGridEnv(gym.Env):
     ``info["rewards"]``: ``progress`` (per metre along the route), ``speed``
     (``min(v / target_speed, 1)`` per step), ``collision`` and ``off_road`` (once,
     negative), ``hard_brake`` (per step decelerating harder than
-    ``hard_brake_threshold``), ``arrived`` (once, scenes with a destination).
+    ``hard_brake_threshold``), ``arrived`` (once, scenes with a destination),
+    ``junction_speed`` (per step, the speed above ``junction_speed_limit`` while the
+    next junction on the route is within ``junction_range`` and not green; off by
+    default: a shaping term that states the rule driver's junction rule).
 
     ## Starting State
 
@@ -298,6 +301,7 @@ class DSTGridEnv(gym.Env):
             raise RuntimeError("DSTGridEnv.step: call reset() first")
         w = self._world
         repeat, held = self.config["action"]["repeat"], self._action.held(action)
+        rcfg = self.config["reward"]
         terms: dict[str, float] = {}
         terminated = False
         for k in range(repeat):  # the action once, then held (meta-actions: IDLE)
@@ -311,10 +315,13 @@ class DSTGridEnv(gym.Env):
             else:  # forward displacement when the world has no route
                 progress = relative_pose(prev_pose, self._frame.ego_pose)[0]
             arrived = bool(getattr(w, "route_done", False))
+            junction, green = float("inf"), False
+            if rcfg["junction_speed"] != 0.0 and hasattr(w, "next_junction"):
+                junction, _, green = w.next_junction()
             out = StepOutcome(float(progress), float(w.ego_speed),
                               (prev_speed - w.ego_speed) / dt, bool(w.collision),
-                              bool(w.off_road), arrived)
-            for name, value in reward_terms(out, self.config["reward"]).items():
+                              bool(w.off_road), arrived, float(junction), bool(green))
+            for name, value in reward_terms(out, rcfg).items():
                 terms[name] = terms.get(name, 0.0) + value
             terminated = out.collision or out.off_road or arrived
             self._accel = (w.ego_speed - prev_speed) / dt

@@ -26,6 +26,12 @@ def default_reward_config() -> dict[str, Any]:
         "hard_brake": -0.5,  # [-] per step with deceleration above the threshold
         "hard_brake_threshold": 2.5,  # [m/s^2] deceleration above comfort counts as hard
         "arrived": 1.0,  # [-] once, on reaching the end of the route (scenes that have one)
+        # [-] per step, times (speed - junction_speed_limit) / target_speed where positive,
+        # while the next junction on the route is within junction_range and no green
+        # signal lets the ego through (0: off, the default)
+        "junction_speed": 0.0,
+        "junction_speed_limit": 4.5,  # [m/s]
+        "junction_range": 20.0,  # [m] route distance to the junction's entry (0 inside it)
     }
 
 
@@ -39,6 +45,9 @@ class StepOutcome:
         speed: ego speed after the step [m/s].
         decel: deceleration over the step, ``(v_prev - v) / dt`` [m/s^2].
         collision, off_road, arrived: ego flags after the step.
+        junction_dist: route distance to the next junction's entry after the step [m]
+            (0 inside one, ``inf`` when the route holds none or it is not known).
+        junction_green: whether a green signal lets the ego through that junction.
     """
 
     progress: float
@@ -47,6 +56,8 @@ class StepOutcome:
     collision: bool
     off_road: bool
     arrived: bool = False
+    junction_dist: float = float("inf")
+    junction_green: bool = False
 
 
 def reward_terms(out: StepOutcome, cfg: dict[str, Any]) -> dict[str, float]:
@@ -57,11 +68,14 @@ def reward_terms(out: StepOutcome, cfg: dict[str, Any]) -> dict[str, float]:
         cfg: the ``reward`` section.
 
     Returns:
-        ``{"progress", "speed", "collision", "off_road", "hard_brake", "arrived"}``
-        -> float.
+        ``{"progress", "speed", "collision", "off_road", "hard_brake", "arrived",
+        "junction_speed"}`` -> float.
     """
     target = cfg["target_speed"]
     speed_frac = min(max(out.speed, 0.0) / target, 1.0) if target > 0 else 0.0
+    over = 0.0
+    if out.junction_dist <= cfg["junction_range"] and not out.junction_green:
+        over = max(out.speed - cfg["junction_speed_limit"], 0.0) / target
     return {
         "progress": cfg["progress"] * out.progress,
         "speed": cfg["speed"] * speed_frac,
@@ -69,6 +83,7 @@ def reward_terms(out: StepOutcome, cfg: dict[str, Any]) -> dict[str, float]:
         "off_road": cfg["off_road"] * float(out.off_road),
         "hard_brake": cfg["hard_brake"] * float(out.decel > cfg["hard_brake_threshold"]),
         "arrived": cfg["arrived"] * float(out.arrived),
+        "junction_speed": cfg["junction_speed"] * over,
     }
 
 
@@ -77,7 +92,9 @@ _W = between(-1e3, 1e3)  # a reward weight: finite and not absurd
 #: The ``reward`` section of the env configuration.
 SECTION = Section(default_reward_config, {
     "progress": _W, "speed": _W, "collision": _W, "off_road": _W, "hard_brake": _W,
-    "arrived": _W,
+    "arrived": _W, "junction_speed": _W,
+    "junction_speed_limit": between(0.0, 60.0, "m/s"),
+    "junction_range": between(0.0, 1e3, "m"),
     "target_speed": between(0.0, 60.0, "m/s", lo_open=True),
     "hard_brake_threshold": between(0.0, 20.0, "m/s^2"),
 })

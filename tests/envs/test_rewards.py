@@ -51,3 +51,50 @@ def test_slower_meta_action_brakes_comfortably():
     env.close()
     assert max(speeds) > 6.0 and speeds[-1] < max(speeds) - 3.0  # it did slow down
     assert all(b == 0.0 for b in brakes)
+
+
+def test_junction_speed_term_is_off_by_default():
+    cfg = default_reward_config()
+    t = reward_terms(StepOutcome(0.9, 9.0, 0.0, False, False, junction_dist=5.0), cfg)
+    assert t["junction_speed"] == 0.0
+
+
+def test_junction_speed_term_hand_computed():
+    cfg = {**default_reward_config(), "junction_speed": -0.5}
+    near = StepOutcome(0.9, 9.0, 0.0, False, False, junction_dist=12.0)
+    assert reward_terms(near, cfg)["junction_speed"] == pytest.approx(-0.25)  # -0.5 * 4.5 / 9
+    inside = StepOutcome(0.9, 6.3, 0.0, False, False, junction_dist=0.0)
+    assert reward_terms(inside, cfg)["junction_speed"] == pytest.approx(-0.1)  # -0.5 * 1.8 / 9
+    slow = StepOutcome(0.9, 4.0, 0.0, False, False, junction_dist=12.0)
+    far = StepOutcome(0.9, 9.0, 0.0, False, False, junction_dist=20.5)
+    green = StepOutcome(0.9, 9.0, 0.0, False, False, junction_dist=3.0, junction_green=True)
+    none = StepOutcome(0.9, 9.0, 0.0, False, False)  # no junction on the route
+    for out in (slow, far, green, none):
+        assert reward_terms(out, cfg)["junction_speed"] == 0.0
+
+
+def test_junction_speed_term_in_the_env():
+    """The env feeds the world's next junction to the term: a fast approach pays it,
+    and exactly where the world says the ego is within range of a non-green junction."""
+    import gymnasium as gym
+
+    import dstenv  # noqa: F401
+    from .conftest import SMALL_CITY
+
+    reward = {"junction_speed": -1.0, "junction_speed_limit": 2.0, "junction_range": 30.0}
+    env = gym.make("DSTGrid-v0", config={**SMALL_CITY, "reward": reward})
+    env.reset(seed=4)
+    world = env.unwrapped.pipeline.world
+    paid = 0
+    for _ in range(80):
+        _, _, terminated, truncated, info = env.step(2)  # FASTER
+        dist, _, green = world.next_junction()
+        want = 0.0
+        if dist <= 30.0 and not green:
+            want = -max(world.ego_speed - 2.0, 0.0) / 9.0
+        assert info["rewards"]["junction_speed"] == pytest.approx(want, abs=1e-9)
+        paid += want < 0
+        if terminated or truncated:
+            break
+    env.close()
+    assert paid > 0

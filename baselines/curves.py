@@ -14,13 +14,12 @@ as a horizontal line. Run::
 from __future__ import annotations
 
 import csv
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from rl_common import opt, parse_args
+from rl_common import cli, opt, parse_args
 
 RATES = ("success", "collision", "off_road")
 
@@ -102,9 +101,11 @@ def plot(args: Args) -> Path:
 
 
 def main(argv: list[str] | None = None) -> Path:
-    """Command-line entry point; returns the PNG path."""
-    return plot(parse_args(Args, argv))
+    """Command-line entry point; prints and returns the PNG path."""
+    path = plot(parse_args(Args, argv))
+    print(path)
+    return path
 
 
 if __name__ == "__main__":
-    print(main(sys.argv[1:]))
+    cli(main)

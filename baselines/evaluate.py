@@ -33,7 +33,7 @@ import numpy as np
 
 from random_policy import RandomPolicy
 from rl_common import EnvArgs, EpisodeResult, atomic_write_text, evaluate_policy, machine_info
-from rl_common import make_env, opt, parse_args, summarize, write_results_csv
+from rl_common import cli, make_env, opt, parse_args, summarize, write_results_csv
 from rule_based import DRIVERS, reference_driver
 
 BEGIN, END = "<!-- results:begin -->", "<!-- results:end -->"
@@ -212,4 +212,4 @@ def main(argv: list[str] | None = None) -> str:
 
 
 if __name__ == "__main__":
-    main()
+    cli(main)

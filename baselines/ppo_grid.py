@@ -36,7 +36,6 @@ import io
 import json
 import shlex
 import shutil
-import sys
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -54,7 +53,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv,
 from torch import nn
 
 from rl_common import EnvArgs, atomic_write_bytes, atomic_write_text, machine_info, make_env, opt
-from rl_common import parse_args, to_argv
+from rl_common import cli, parse_args, to_argv
 
 EXTRACTORS = ("grid-cnn", "route-cnn", "combined")
 
@@ -210,6 +209,8 @@ def make_vec_env(args: Args) -> VecEnv:
         return make_env(args, train_config(args), monitor=True)
 
     cls = SubprocVecEnv if args.vec_env == "subproc" and args.n_envs > 1 else DummyVecEnv
+    if cls is SubprocVecEnv:  # a config error in a worker would only say "connection reset"
+        thunk().close()
     return cls([thunk] * args.n_envs)
 
 
@@ -386,4 +387,4 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
 
 
 if __name__ == "__main__":
-    main(sys.argv[1:])
+    cli(main)

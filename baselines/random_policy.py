@@ -8,14 +8,13 @@ episode seed, so a seed replays the same episode. Run::
 
 from __future__ import annotations
 
-import sys
 from dataclasses import dataclass
 from typing import Any
 
 import gymnasium as gym
 
 from rl_common import EnvArgs, EpisodeResult, evaluate_policy, make_env, opt, parse_args
-from rl_common import report_run
+from rl_common import cli, report_run
 
 
 @dataclass
@@ -58,4 +57,4 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
 
 
 if __name__ == "__main__":
-    main(sys.argv[1:])
+    cli(main)

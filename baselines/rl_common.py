@@ -23,6 +23,7 @@ import dataclasses
 import json
 import os
 import platform
+import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -38,13 +39,26 @@ __all__ = [
     "opt", "parse_args", "to_argv", "EnvArgs", "env_config", "make_env", "Policy",
     "EpisodeResult", "run_episode", "summarize", "report_run",
     "evaluate_policy", "write_results_csv",
-    "atomic_write_bytes", "atomic_write_text", "machine_info",
+    "atomic_write_bytes", "atomic_write_text", "machine_info", "cli",
 ]
 
 T = TypeVar("T")
 
 
 # -- arguments -----------------------------------------------------------------------------
+def cli(main: Callable[[list[str]], Any], argv: Sequence[str] | None = None) -> None:
+    """Run a script's ``main(argv)`` as a command: an expected error (bad flag value,
+    config error, missing or unreadable file) is one line on stderr and exit status 2,
+    as with ``dstenv``; anything else is a bug and keeps its traceback."""
+    from dstenv.cli import one_line
+
+    try:
+        main(list(sys.argv[1:] if argv is None else argv))
+    except (ValueError, OSError, MemoryError) as exc:  # ConfigError is a ValueError
+        print(f"{Path(sys.argv[0]).name}: error: {one_line(exc)}", file=sys.stderr)
+        raise SystemExit(2) from None
+
+
 def opt(default: Any, help: str) -> Any:  # noqa: A002  (argparse's word)
     """A dataclass field with a help text (lists get a default factory)."""
     if isinstance(default, list):

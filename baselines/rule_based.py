@@ -19,7 +19,6 @@ Run::
 
 from __future__ import annotations
 
-import sys
 from dataclasses import dataclass
 from typing import Any
 
@@ -27,7 +26,7 @@ import gymnasium as gym
 import numpy as np
 
 from rl_common import EnvArgs, EpisodeResult, evaluate_policy, make_env, opt, parse_args
-from rl_common import report_run
+from rl_common import cli, report_run
 
 DRIVERS = ("grid", "autopilot", "constant")
 #: ``--env-config`` the autopilot driver adds: the world's own driver.
@@ -208,4 +207,4 @@ def main(argv: list[str] | None = None) -> dict[str, float]:
 
 
 if __name__ == "__main__":
-    main(sys.argv[1:])
+    cli(main)

@@ -87,11 +87,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 143 if terminated else 130
     except (CLIError, ConfigError, FileNotFoundError, PermissionError, ValueError,
             OSError, MemoryError) as exc:
-        print(f"dstenv {args.command}: error: {_one_line(exc)}", file=sys.stderr)
+        print(f"dstenv {args.command}: error: {one_line(exc)}", file=sys.stderr)
         return 2
 
 
-def _one_line(exc: BaseException) -> str:
+def one_line(exc: BaseException) -> str:
+    """The one-line message of an expected error (also the baselines' scripts')."""
     if isinstance(exc, MemoryError):
         return "out of memory; use a smaller grid, fewer frames per shard or fewer workers"
     if isinstance(exc, OSError) and exc.filename and exc.strerror:

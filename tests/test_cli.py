@@ -80,5 +80,5 @@ def test_worker_tracebacks_become_one_line(capsys, monkeypatch):
 
     msg = ("Caught ValueError in DataLoader worker process 0.\nOriginal Traceback (most recent "
            "call last):\n  File \"x.py\", line 1, in f\n    g()\nValueError: shard.h5: bad chunk\n")
-    assert cli._one_line(ValueError(msg)) == ("Caught ValueError in DataLoader worker process "
+    assert cli.one_line(ValueError(msg)) == ("Caught ValueError in DataLoader worker process "
                                               "0. ValueError: shard.h5: bad chunk")

@@ -4,12 +4,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 import gymnasium as gym
 import pytest
 
 from rl_common import (EnvArgs, EpisodeResult, atomic_write_text,
                        env_config, make_env, opt, parse_args, summarize, to_argv)
+
+BASELINES = Path(__file__).resolve().parents[2] / "baselines"
 
 
 @dataclass
@@ -83,3 +86,30 @@ def test_atomic_write_leaves_no_temp_file(tmp_path) -> None:
     atomic_write_text(target, "two")
     assert target.read_text() == "two"
     assert [p.name for p in target.parent.iterdir()] == ["out.txt"]
+
+
+@pytest.mark.parametrize("script, argv, message", [
+    ("ppo_grid.py", ["--extractor", "nope"], "--extractor: expected one of"),
+    ("ppo_grid.py", ["--env-config", '{"reward": {"collison": 1}}'],
+     "config.reward.collison: unknown key"),
+    ("evaluate.py", ["--policies", "--checkpoints", "no-such.pt"],
+     "--checkpoints: no such file"),
+    ("rule_based.py", ["--driver", "bogus"], "--driver: expected one of"),
+    ("random_policy.py", ["--env-config", "[1]"], "--env-config: expected a JSON object"),
+    ("curves.py", ["--runs", "no-such-run", "--out", "c.png"], "no-such-run"),
+])
+def test_scripts_report_bad_input_in_one_line(tmp_path, script, argv, message) -> None:
+    """Each baseline script turns an expected error into one line and exit status 2,
+    as ``dstenv`` does; nothing is written."""
+    import subprocess
+    import sys
+
+    proc = subprocess.run([sys.executable, str(BASELINES / script), *argv, "--out",
+                           str(tmp_path / "out")] if script == "ppo_grid.py" else
+                          [sys.executable, str(BASELINES / script), *argv],
+                          cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 2, proc.stderr
+    assert len(lines) == 1 and lines[0].startswith(f"{script}: error: ")
+    assert message in lines[0]
+    assert not (tmp_path / "out" / "model.pt").exists() and not (tmp_path / "c.png").exists()

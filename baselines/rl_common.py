@@ -50,11 +50,11 @@ def cli(main: Callable[[list[str]], Any], argv: Sequence[str] | None = None) -> 
     """Run a script's ``main(argv)`` as a command: an expected error (bad flag value,
     config error, missing or unreadable file) is one line on stderr and exit status 2,
     as with ``dstenv``; anything else is a bug and keeps its traceback."""
-    from dstenv.cli import one_line
+    from dstenv.cli import EXPECTED_ERRORS, one_line
 
     try:
         main(list(sys.argv[1:] if argv is None else argv))
-    except (ValueError, OSError, MemoryError) as exc:  # ConfigError is a ValueError
+    except EXPECTED_ERRORS as exc:
         print(f"{Path(sys.argv[0]).name}: error: {one_line(exc)}", file=sys.stderr)
         raise SystemExit(2) from None
 

@@ -21,7 +21,7 @@ import sys
 from collections.abc import Sequence
 
 from dstenv import __version__
-from dstenv.config import CLIError, ConfigError
+from dstenv.config import CLIError
 
 __all__ = ["COMMANDS", "CLIError", "build_parser", "main"]
 
@@ -70,6 +70,11 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     return parser
 
 
+#: errors a command reports as one line (``ConfigError`` is a ``ValueError``; missing
+#: files, permissions and a full disk are ``OSError``s); anything else is a bug
+EXPECTED_ERRORS: tuple[type[BaseException], ...] = (CLIError, ValueError, OSError, MemoryError)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``dstenv`` console script; returns the exit status."""
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -85,8 +90,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"dstenv: {'terminated' if terminated else 'interrupted'}; finished work is kept, "
               "rerun the same command to resume", file=sys.stderr)
         return 143 if terminated else 130
-    except (CLIError, ConfigError, FileNotFoundError, PermissionError, ValueError,
-            OSError, MemoryError) as exc:
+    except EXPECTED_ERRORS as exc:
         print(f"dstenv {args.command}: error: {one_line(exc)}", file=sys.stderr)
         return 2
 

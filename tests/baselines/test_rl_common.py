@@ -89,8 +89,8 @@ def test_atomic_write_leaves_no_temp_file(tmp_path) -> None:
 
 
 @pytest.mark.parametrize("script, argv, message", [
-    ("ppo_grid.py", ["--extractor", "nope"], "--extractor: expected one of"),
-    ("ppo_grid.py", ["--env-config", '{"reward": {"collison": 1}}'],
+    ("ppo_grid.py", ["--extractor", "nope", "--out", "out"], "--extractor: expected one of"),
+    ("ppo_grid.py", ["--env-config", '{"reward": {"collison": 1}}', "--out", "out"],
      "config.reward.collison: unknown key"),
     ("evaluate.py", ["--policies", "--checkpoints", "no-such.pt"],
      "--checkpoints: no such file"),
@@ -104,10 +104,8 @@ def test_scripts_report_bad_input_in_one_line(tmp_path, script, argv, message) -
     import subprocess
     import sys
 
-    proc = subprocess.run([sys.executable, str(BASELINES / script), *argv, "--out",
-                           str(tmp_path / "out")] if script == "ppo_grid.py" else
-                          [sys.executable, str(BASELINES / script), *argv],
-                          cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    proc = subprocess.run([sys.executable, str(BASELINES / script), *argv], cwd=tmp_path,
+                          capture_output=True, text=True, timeout=120)
     lines = proc.stderr.strip().splitlines()
     assert proc.returncode == 2, proc.stderr
     assert len(lines) == 1 and lines[0].startswith(f"{script}: error: ")

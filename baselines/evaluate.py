@@ -51,6 +51,9 @@ class Args(EnvArgs):
     episodes: int = opt(50, "episodes per policy, one per seed")
     seed: int = opt(10_000, "first evaluation seed (episode k uses seed + k)")
     deterministic: bool = opt(True, "PPO: take the most likely action")
+    temperature: float = opt(0.0, "PPO: sample from softmax(logits / T) with T > 0 "
+                                  "(seeded per episode; overrides --deterministic); "
+                                  "0 = off")
     readme: str = opt("baselines/README.md", "Markdown file whose results block "
                                              "--write-readme replaces")
     write_readme: bool = opt(False, "replace the results block of --readme (else print only)")
@@ -61,7 +64,10 @@ class Args(EnvArgs):
 class PPOPolicy:
     """A trained PPO policy: ``model.pt`` (state_dict) and its ``model.json`` sidecar."""
 
-    def __init__(self, path: str | Path, deterministic: bool = True) -> None:
+    def __init__(self, path: str | Path, deterministic: bool = True,
+                 temperature: float = 0.0) -> None:
+        if not temperature >= 0.0:
+            raise ValueError(f"--temperature: {temperature} must be >= 0 (0 = off)")
         self.path = Path(path)
         if not self.path.is_file():
             raise FileNotFoundError(f"--checkpoints: no such file {self.path}")
@@ -70,9 +76,12 @@ class PPOPolicy:
             raise FileNotFoundError(f"{self.path}: missing its sidecar {sidecar.name}")
         self.meta: dict[str, Any] = json.loads(sidecar.read_text())
         self.deterministic = deterministic
+        self.temperature = float(temperature)
         a = self.meta["args"]
-        self.name = f"PPO {a['extractor']} ({self.path.stem})"
+        self.name = f"PPO {a['extractor']} ({self.path.stem})" + (
+            f" T={self.temperature:g}" if self.temperature > 0 else "")
         self.model: Any = None
+        self.rng = np.random.default_rng(0)
 
     def make_env(self, args: EnvArgs) -> gym.Env:
         """The evaluation env; the policy is rebuilt on its spaces."""
@@ -87,9 +96,26 @@ class PPOPolicy:
         return env
 
     def reset(self, env: gym.Env, seed: int) -> None:
-        pass
+        self.rng = np.random.default_rng(seed)  # sampled actions repeat per seed
+
+    def probabilities(self, obs: Any) -> np.ndarray:
+        """softmax(logits / T) of a ``Discrete(n)`` policy: shape (n,)."""
+        import torch
+
+        with torch.no_grad():
+            tensor, _ = self.model.policy.obs_to_tensor(obs)
+            dist = self.model.policy.get_distribution(tensor).distribution
+            if not isinstance(dist, torch.distributions.Categorical):
+                raise ValueError(f"--temperature needs a Discrete action space, "
+                                 f"{self.path} has {self.meta.get('action_space')}")
+            logits = dist.logits[0].double().numpy() / self.temperature
+        p = np.exp(logits - logits.max())
+        return p / p.sum()
 
     def act(self, obs: Any, info: dict[str, Any]) -> Any:
+        if self.temperature > 0:
+            p = self.probabilities(obs)
+            return int(self.rng.choice(len(p), p=p))
         action, _ = self.model.predict(obs, deterministic=self.deterministic)
         return int(action) if np.ndim(action) == 0 else action
 
@@ -178,7 +204,7 @@ def run(args: Args, command: str) -> str:
             policy, env = _reference(name, args)
             meta = None
         else:
-            policy = PPOPolicy(path, args.deterministic)
+            policy = PPOPolicy(path, args.deterministic, args.temperature)
             env, meta = policy.make_env(args), policy.meta
             if meta["args"]["env_id"] != args.env_id:
                 print(f"warning: {path} was trained on {meta['args']['env_id']}, "

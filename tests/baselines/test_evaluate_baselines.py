@@ -43,3 +43,39 @@ def test_saved_model_loads_and_evaluates(tmp_path, env_flags: list[str]) -> None
     strip = lambda b: [ln for ln in b.splitlines() if ln.startswith("| ")]  # noqa: E731
     assert strip(again) == strip(block)
     assert again in readme.read_text() and readme.read_text().startswith("# kept")
+
+
+def test_temperature_sampling_is_seeded_and_sharpens(tmp_path, env_flags: list[str]) -> None:
+    import numpy as np
+    import pytest
+    from rl_common import make_env, parse_args
+
+    out = tmp_path / "ppo"
+    ppo_grid.main([*env_flags, "--n-envs", "1", "--vec-env", "dummy", "--n-steps", "32",
+                   "--batch-size", "32", "--n-epochs", "1", "--total-timesteps", "32",
+                   "--map-pool", "2", "--verbose", "0", "--out", str(out)])
+    args = parse_args(evaluate.Args, env_flags)
+    hot = evaluate.PPOPolicy(out / "model.pt", temperature=1.0)
+    cold = evaluate.PPOPolicy(out / "model.pt", temperature=0.05)
+    env = hot.make_env(args)
+    cold.model = hot.model
+    obs, _ = env.reset(seed=3)
+    p1, p_cold = hot.probabilities(obs), cold.probabilities(obs)
+    # T = 1 is the policy's own distribution; small T concentrates it on the argmax
+    import torch
+    with torch.no_grad():
+        tensor, _ = hot.model.policy.obs_to_tensor(obs)
+        own = hot.model.policy.get_distribution(tensor).distribution.probs[0].numpy()
+    assert p1.shape == (env.action_space.n,) and np.isclose(p1.sum(), 1.0)
+    np.testing.assert_allclose(p1, own, rtol=1e-5, atol=1e-7)
+    assert np.argmax(p_cold) == np.argmax(p1) and p_cold.max() >= p1.max()
+    # the same seed gives the same sampled actions
+    picks = []
+    for _ in range(2):
+        hot.reset(env, 7)
+        picks.append([hot.act(obs, {}) for _ in range(20)])
+    assert picks[0] == picks[1]
+    env.close()
+    assert hot.name.endswith("T=1")
+    with pytest.raises(ValueError, match="--temperature"):
+        evaluate.PPOPolicy(out / "model.pt", temperature=-1.0)

@@ -86,8 +86,9 @@ class PPOPolicy:
     def make_env(self, args: EnvArgs) -> gym.Env:
         """The evaluation env; the policy is rebuilt on its spaces."""
         from ppo_grid import load
+        from residual import wrap
 
-        env = make_env(args)
+        env = make_env(args, wrap=lambda e: wrap(e, self.meta["args"].get("residual", "")))
         try:
             self.model, self.meta = load(self.path, env)
         except Exception:

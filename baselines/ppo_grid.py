@@ -85,6 +85,11 @@ class Args(EnvArgs):
                                    "logged episodes keep the env's own rewards")
     vf_coef: float = opt(0.5, "value loss weight")
     torch_threads: int = opt(1, "torch CPU threads (envs use the other cores)")
+    residual: str = opt("", "'' (none) | grid: PPO on top of the grid rule driver "
+                            "(residual.py): action 0 takes the rule driver's action, "
+                            "k >= 1 the env's action k - 1")
+    residual_p_rule: float = opt(0.9, "--residual grid: the fresh policy's probability "
+                                      "of action 0 (the rule driver)")
     warm_start: str = opt("", "'' (none) | grid: DAgger from the grid rule driver before "
                               "PPO (imitation.py); its env steps count in the budget")
     warm_start_steps: int = opt(24_000, "env steps of the warm start (all rounds and envs)")
@@ -205,8 +210,11 @@ def make_vec_env(args: Args) -> VecEnv:
     if args.vec_env not in ("subproc", "dummy"):
         raise ValueError(f"--vec-env: expected subproc or dummy, got {args.vec_env!r}")
 
+    from residual import wrap
+
     def thunk() -> gym.Env:
-        return make_env(args, train_config(args), monitor=True)
+        return make_env(args, train_config(args), monitor=True,
+                        wrap=lambda e: wrap(e, args.residual))
 
     cls = SubprocVecEnv if args.vec_env == "subproc" and args.n_envs > 1 else DummyVecEnv
     if cls is SubprocVecEnv:  # a config error in a worker would only say "connection reset"
@@ -242,11 +250,16 @@ def build_model(args: Args, env: VecEnv | gym.Env) -> PPO:
                          if dict_obs else {"features_extractor_kwargs":
                                            {"features_dim": args.features_dim}})
     tb = str(Path(args.out) / "tb") if args.tensorboard else None
-    return PPO(policy, env, learning_rate=args.learning_rate, n_steps=args.n_steps,
+    model = PPO(policy, env, learning_rate=args.learning_rate, n_steps=args.n_steps,
                batch_size=args.batch_size, n_epochs=args.n_epochs, gamma=args.gamma,
                gae_lambda=args.gae_lambda, clip_range=args.clip_range, ent_coef=args.ent_coef,
                vf_coef=args.vf_coef, policy_kwargs=policy_kwargs, seed=args.seed,
                device="cpu", verbose=0, tensorboard_log=tb)
+    if args.residual:
+        from residual import prefer_rule
+
+        prefer_rule(model, args.residual_p_rule)
+    return model
 
 
 def save(model: PPO, out: Path, args: Args, wall_s: float,
@@ -349,6 +362,9 @@ def warm_start(args: Args, model: PPO, env: VecEnv, log: TrainingLog) -> dict[st
 
 def train(args: Args) -> tuple[PPO, dict[str, Any]]:
     """Train PPO as ``args`` says; returns the model and the ``model.json`` content."""
+    if args.residual and args.warm_start:
+        raise ValueError("--residual with --warm-start: the residual policy starts as the "
+                         "rule driver already; use one of the two")
     if args.warm_start:
         if args.norm_reward:
             raise ValueError("--norm-reward with --warm-start: the warm start fits the value "

@@ -142,8 +142,8 @@ def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def make_env(args: EnvArgs, overrides: dict[str, Any] | None = None, monitor: bool = False
-             ) -> gym.Env:
+def make_env(args: EnvArgs, overrides: dict[str, Any] | None = None, monitor: bool = False,
+             wrap: Callable[[gym.Env], gym.Env] | None = None) -> gym.Env:
     """Build one environment with ``gym.make`` (registered id, its default observation).
 
     Args:
@@ -153,11 +153,14 @@ def make_env(args: EnvArgs, overrides: dict[str, Any] | None = None, monitor: bo
         monitor: wrap with stable-baselines3's ``Monitor`` (episode statistics with
             ``is_success``, ``collision``, ``off_road`` and ``route_progress`` in
             ``info["episode"]``).
+        wrap: applied to the env before ``Monitor`` (e.g. :func:`residual.wrap`).
     """
     kwargs: dict[str, Any] = {"config": env_config(args, overrides)}
     if args.max_episode_steps > 0:
         kwargs["max_episode_steps"] = args.max_episode_steps
     env = gym.make(args.env_id, **kwargs)
+    if wrap is not None:
+        env = wrap(env)
     if monitor:
         from stable_baselines3.common.monitor import Monitor
 

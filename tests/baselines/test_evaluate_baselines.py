@@ -48,7 +48,7 @@ def test_saved_model_loads_and_evaluates(tmp_path, env_flags: list[str]) -> None
 def test_temperature_sampling_is_seeded_and_sharpens(tmp_path, env_flags: list[str]) -> None:
     import numpy as np
     import pytest
-    from rl_common import make_env, parse_args
+    from rl_common import parse_args
 
     out = tmp_path / "ppo"
     ppo_grid.main([*env_flags, "--n-envs", "1", "--vec-env", "dummy", "--n-steps", "32",

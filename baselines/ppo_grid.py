@@ -15,6 +15,10 @@ steering, target speed, next junction, "route": the route ahead}``
 * ``combined``: stable-baselines3's own ``MultiInputPolicy`` extractor (NatureCNN on
   the grid), out of the box.
 
+With ``--residual grid`` the policy drives on top of the grid rule driver
+(:mod:`residual`): one more action, ``0`` = the rule driver's, and the fresh policy
+starts as the rule driver.
+
 Training uses several envs in parallel (``--n-envs``, ``SubprocVecEnv``) drawing
 their episodes from a pool of maps (``--map-pool``, the env's ``world.map.pool``);
 evaluation (``evaluate.py``) runs on fresh maps of held-out seeds. The budget is a

@@ -98,19 +98,24 @@ class GridRuleDriver:
         return np.stack([np.interp(d, s, pts[:, 0]), np.interp(d, s, pts[:, 1])], 1), d
 
     def _obstacle_distance(self, grid: np.ndarray, path: np.ndarray, dist: np.ndarray) -> float:
-        """Route distance [m] to the first occupied cell near the route (inf: none)."""
+        """Route distance [m] to the first path point with an occupied cell more than 2 m
+        ahead of the ego (not its own footprint) within ``corridor`` m (inf: none).
+
+        Only the cells of a window around each path point can be that close, so those
+        are tested: ``(M, K)`` distances instead of path points x occupied cells."""
         occ = (grid[2].astype(np.float32) + grid[3]) / 255.0 > self.occupied
-        i0, j0 = self.shape[0] // 2, self.shape[1] // 2
-        rows, cols = np.nonzero(occ)
-        if len(rows) == 0:
-            return float("inf")
-        cells = np.stack([(i0 - rows) * self.cell, (j0 - cols) * self.cell], 1)
-        ahead = cells[:, 0] > 2.0  # not the ego's own footprint
-        cells = cells[ahead]
-        if len(cells) == 0:
-            return float("inf")
-        d2 = ((path[:, None, :] - cells[None, :, :]) ** 2).sum(-1)  # (M, N)
-        near = (d2 < self.corridor ** 2).any(1)
+        h, w = self.shape
+        i0, j0 = h // 2, w // 2
+        k = int(np.ceil(self.corridor / self.cell)) + 1
+        di, dj = np.meshgrid(np.arange(-k, k + 1), np.arange(-k, k + 1), indexing="ij")
+        rows = np.rint(i0 - path[:, 0] / self.cell).astype(np.int64)[:, None] + di.ravel()
+        cols = np.rint(j0 - path[:, 1] / self.cell).astype(np.int64)[:, None] + dj.ravel()
+        inside = (rows >= 0) & (rows < h) & (cols >= 0) & (cols < w)
+        r, c = np.where(inside, rows, 0), np.where(inside, cols, 0)
+        cx, cy = (i0 - r) * self.cell, (j0 - c) * self.cell
+        d2 = (path[:, 0:1] - cx) ** 2 + (path[:, 1:2] - cy) ** 2  # (M, K)
+        hit = inside & occ[r, c] & (cx > 2.0) & (d2 < self.corridor ** 2)
+        near = hit.any(1)
         return float(dist[np.argmax(near)]) if near.any() else float("inf")
 
     def _bend_ahead(self, path: np.ndarray, dist: np.ndarray) -> bool:

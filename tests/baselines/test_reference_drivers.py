@@ -96,3 +96,37 @@ def test_rule_based_main(env_flags: list[str]) -> None:
                          "--constant-action", "7"])
     with pytest.raises(ValueError, match="--driver"):
         rule_based.main([*env_flags, "--driver", "pilot"])
+
+
+def test_obstacle_distance_window_equals_the_brute_force_search() -> None:
+    """The windowed search gives the distance of testing every occupied cell."""
+    import numpy as np
+
+    from rule_based import GridRuleDriver
+
+    def brute(d: GridRuleDriver, grid: np.ndarray, path: np.ndarray, dist: np.ndarray) -> float:
+        occ = (grid[2].astype(np.float32) + grid[3]) / 255.0 > d.occupied
+        rows, cols = np.nonzero(occ)
+        cells = np.stack([(d.shape[0] // 2 - rows) * d.cell, (d.shape[1] // 2 - cols) * d.cell], 1)
+        cells = cells[cells[:, 0] > 2.0]
+        if len(cells) == 0:
+            return float("inf")
+        near = (((path[:, None, :] - cells[None]) ** 2).sum(-1) < d.corridor ** 2).any(1)
+        return float(dist[np.argmax(near)]) if near.any() else float("inf")
+
+    rng = np.random.default_rng(0)
+    found = 0
+    for _ in range(400):
+        d = GridRuleDriver(corridor=float(rng.choice([0.7, 1.4, 2.3])))
+        d.cell, d.shape = float(rng.choice([1.0, 0.5, 0.33])), (84, 84)
+        grid = np.zeros((4, 84, 84), np.uint8)
+        m = rng.random((84, 84)) < rng.choice([0.002, 0.02, 0.1])
+        grid[2][m], grid[3][m] = rng.integers(60, 256, m.sum()), rng.integers(0, 120, m.sum())
+        n = int(rng.integers(2, 120))
+        heading = np.cumsum(rng.normal(0.0, 0.05, n))
+        path = np.cumsum(np.stack([np.cos(heading), np.sin(heading)], 1), 0) * rng.uniform(0.2, 1.5)
+        dist = np.arange(n) * 0.5
+        got = d._obstacle_distance(grid, path, dist)
+        assert got == brute(d, grid, path, dist)
+        found += np.isfinite(got)
+    assert 50 < found < 390  # both outcomes are exercised

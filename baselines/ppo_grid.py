@@ -376,12 +376,12 @@ def train(args: Args) -> tuple[PPO, dict[str, Any]]:
         warm_start_steps_per_round(args)  # bad flags fail before any env is built
     torch.set_num_threads(args.torch_threads)
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     env = make_vec_env(args)
     if args.norm_reward:
         env = VecNormalize(env, norm_obs=False, norm_reward=True, gamma=args.gamma)
     try:
         model = build_model(args, env)
+        out.mkdir(parents=True, exist_ok=True)  # after the flags' checks: none left empty
         formats = ["stdout", "csv"] if args.verbose else ["csv"]
         model.set_logger(configure(str(out), formats + (["tensorboard"] if args.tensorboard
                                                         else [])))

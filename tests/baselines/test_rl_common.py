@@ -90,6 +90,9 @@ def test_atomic_write_leaves_no_temp_file(tmp_path) -> None:
 
 @pytest.mark.parametrize("script, argv, message", [
     ("ppo_grid.py", ["--extractor", "nope", "--out", "out"], "--extractor: expected one of"),
+    ("ppo_grid.py", ["--residual", "pilot", "--out", "out"], "--residual: expected"),
+    ("ppo_grid.py", ["--residual", "grid", "--residual-p-rule", "1", "--out", "out"],
+     "--residual-p-rule: 1.0 must be in (0, 1)"),
     ("ppo_grid.py", ["--env-config", '{"reward": {"collison": 1}}', "--out", "out"],
      "config.reward.collison: unknown key"),
     ("evaluate.py", ["--policies", "--checkpoints", "no-such.pt"],
@@ -110,4 +113,5 @@ def test_scripts_report_bad_input_in_one_line(tmp_path, script, argv, message) -
     assert proc.returncode == 2, proc.stderr
     assert len(lines) == 1 and lines[0].startswith(f"{script}: error: ")
     assert message in lines[0]
-    assert not (tmp_path / "out" / "model.pt").exists() and not (tmp_path / "c.png").exists()
+    # not even an empty output folder
+    assert not (tmp_path / "out").exists() and not (tmp_path / "c.png").exists()

@@ -101,6 +101,7 @@ def run_benchmark(
     command: str | None = None,
     checkpoints: Sequence[str | Path] = (),
     split: str = "test",
+    dst_rows: Sequence[Any] = (),
 ) -> dict[str, Any]:
     """Run the whole benchmark and write its report into ``out``.
 
@@ -116,6 +117,8 @@ def run_benchmark(
         checkpoints: trained networks (``dstenv train``) scored besides ``models``; on
             evaluation-only data (module docstring) the only learned segmenters.
         split: the split scored (``"test"``; a KITTI conversion may use another name).
+        dst_rows: more :class:`~dstenv.segment.segmenters.DSTSegmenter` rows with fixed
+            parameters (:func:`~dstenv.segment.plan.plan_segmenters`).
 
     Returns:
         The JSON-compatible results (also in ``out/results.json``).
@@ -152,7 +155,7 @@ def run_benchmark(
                           int(cfg["score_from_step"]))
     timings["replay_test_s"] = time.perf_counter() - t
     plan = plan_segmenters(cfg, drives, datasets, checkpoints, device, out, progress, log,
-                           timings)
+                           timings, dst_rows)
     t = time.perf_counter()
     example_keys = report.example_keys(drives.episodes, cfg["examples"])
     scores = score(plan.segmenters, drives.episodes, drives.generation_params,

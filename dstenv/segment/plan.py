@@ -108,10 +108,8 @@ def _refilter_check(episodes: list[Episode], params: DSTParams) -> str | None:
     return None
 
 
-def _from_step(ep: Episode, first: int) -> Episode | None:
-    """``ep`` scored only at source steps ``>= first`` (its history kept)."""
-    steps = ep.steps if ep.stored_steps is None else ep.stored_steps
-    keep = steps >= first
+def _subset(ep: Episode, keep: Any) -> Episode | None:
+    """``ep`` scored only at the frames ``keep`` marks (its history kept)."""
     if keep.all():
         return ep
     if not keep.any():
@@ -120,6 +118,21 @@ def _from_step(ep: Episode, first: int) -> Episode | None:
                    ep.visible[keep], ep.cell_size, ep.episode,
                    None if ep.stored_x is None else ep.stored_x[keep], ep.history, ep.period,
                    None if ep.stored_steps is None else ep.stored_steps[keep])
+
+
+def _source_steps(ep: Episode) -> Any:
+    return ep.steps if ep.stored_steps is None else ep.stored_steps
+
+
+def _from_step(ep: Episode, first: int) -> Episode | None:
+    """``ep`` scored only at source steps ``>= first`` (its history kept)."""
+    return _subset(ep, _source_steps(ep) >= first)
+
+
+def steps_before(ep: Episode, stop: int) -> Episode | None:
+    """``ep`` scored only at source steps ``< stop`` (``None`` if it has none there): the
+    labelled frames a real drive lends to fine-tuning and tuning, never scored."""
+    return _subset(ep, _source_steps(ep) < stop)
 
 
 def split_drives(test_ds: Any, no_train: bool, progress: bool,
@@ -259,7 +272,8 @@ def _dst_rows(cfg: Mapping[str, Any], drives: Drives, train: Callable[[], list[E
 def plan_segmenters(cfg: Mapping[str, Any], drives: Drives, datasets: Mapping[str, Any],
                     checkpoints: Sequence[str | Path], device: torch.device, out: Path,
                     progress: bool, log: Callable[[str], None],
-                    timings: dict[str, float]) -> Plan:
+                    timings: dict[str, float],
+                    dst_rows: Sequence[DSTSegmenter] = ()) -> Plan:
     """Every segmenter of a benchmark configuration (module docstring).
 
     Args:
@@ -271,6 +285,8 @@ def plan_segmenters(cfg: Mapping[str, Any], drives: Drives, datasets: Mapping[st
         out: output directory (``models/``, ``curve/``).
         progress, log: tqdm bars, one-line messages.
         timings: receives stage durations [s].
+        dst_rows: more DST rows with fixed parameters (e.g. tuned on a real drive's
+            fine-tuning frames); each needs the drives' filter history.
     """
     from dstenv.segment.evaluate import load_checkpoints
 
@@ -288,6 +304,11 @@ def plan_segmenters(cfg: Mapping[str, Any], drives: Drives, datasets: Mapping[st
         return cache[0]
 
     _dst_rows(cfg, drives, train_eps, plan, progress, log, timings)
+    for seg in dst_rows:
+        if drives.refilter_reason and seg.params != drives.generation_params:
+            plan.unscored[seg.label] = drives.refilter_reason
+        else:
+            plan.add(seg, "dst")
     if not drives.evaluation_only:
         from dstenv.segment.netplan import plan_networks
 

@@ -11,8 +11,11 @@ observed cells accumulated) and scores, with the same
 * every network of the simulated run, trained only on simulated data;
 * with ``finetune_frames = N > 0``: the best simulated network (without ``--osm``:
   the best ``no-map`` network when the run trained one) fine-tuned
-  (``train.init``) on the labelled frames ``0 .. N-1`` of each sequence. Only
-  frames from step ``N + gap`` on are then scored, for every row, so no fine-tuning
+  (``train.init``) on the labelled frames ``0 .. N-1`` of each sequence, and
+  ``dst-tuned (real frames)``: the DST parameters searched on the same frames
+  (:func:`~dstenv.segment.tune.tune_dst_params`, the simulated run's budget, seed
+  and scope), the non-learned counterpart of the fine-tuning. Only frames from
+  step ``N + gap`` on are then scored, for every row, so no fine-tuning or tuning
   frame (nor its immediate neighbours) is a test frame; the filter still runs
   over the earlier scans, as it would on a car.
 """
@@ -23,7 +26,10 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-__all__ = ["real_benchmark", "sim_checkpoints"]
+__all__ = ["real_benchmark", "sim_checkpoints", "tune_on_real", "REAL_TUNED"]
+
+#: label of the DST row tuned on the real fine-tuning frames
+REAL_TUNED = "dst-tuned (real frames)"
 
 
 def sim_checkpoints(results: Mapping[str, Any]) -> dict[str, Path]:
@@ -78,6 +84,45 @@ def _finetune(sim: Mapping[str, Any], ckpts: Mapping[str, Path], data: Path, fra
     return out / "last.pt"
 
 
+def tune_on_real(data: Path, frames: int, tune: Mapping[str, Any], progress: bool = False,
+                 log: Callable[[str], None] = print) -> Any:
+    """``dst-tuned (real frames)``: DST parameters searched on the labelled frames
+    ``0 .. frames - 1`` of each converted drive in ``data`` (the filter runs over
+    every scan before them).
+
+    Args:
+        tune: ``budget``, ``seed`` and ``scope`` of the search (a benchmark's ``tune``).
+
+    Returns:
+        A :class:`~dstenv.segment.segmenters.DSTSegmenter` labelled :data:`REAL_TUNED`
+        whose ``describe()`` holds the search trace.
+
+    Raises:
+        ValueError: no converted frame before ``frames``, or drives whose stored
+            scans cannot be re-filtered exactly.
+    """
+    from dstenv.data import ShardDataset
+    from dstenv.segment.plan import split_drives, steps_before
+    from dstenv.segment.segmenters import DSTSegmenter
+    from dstenv.segment.tune import tune_dst_params
+
+    drives = split_drives(ShardDataset(data, split="test", inputs="fcn10"), True, progress,
+                          log)
+    if drives.refilter_reason:
+        raise ValueError(f"{data}: cannot tune DST on the real frames: "
+                         f"{drives.refilter_reason}")
+    episodes = [e for e in (steps_before(ep, frames) for ep in drives.episodes)
+                if e is not None]
+    if not episodes:
+        raise ValueError(f"finetune_frames {frames}: no converted frame before it")
+    best, trace = tune_dst_params(episodes, budget=int(tune["budget"]), seed=int(tune["seed"]),
+                                  progress=progress, scope=str(tune["scope"]))
+    trace["frames"] = sum(len(ep.steps) for ep in episodes)
+    log(f"{REAL_TUNED}: mIoU ({trace['scope']}) on {trace['frames']} real frames "
+        f"{trace['start_miou']:.3f} (default) -> {trace['best_miou']:.3f}")
+    return DSTSegmenter(best, "dst-tuned", REAL_TUNED, info={"tuning": trace})
+
+
 def real_benchmark(
     sim: Mapping[str, Any],
     out: Path,
@@ -123,13 +168,16 @@ def real_benchmark(
     else:
         cfg["complete"]["enabled"] = False
     labelled = [(f"{k} (sim only)", p) for k, p in ckpts.items()]
+    dst_rows = []
     if finetune_frames > 0:
         cfg["score_from_step"] = finetune_frames + gap
         tuned = _finetune(sim, ckpts, data, finetune_frames, finetune_epochs,
                           kdir / "finetune", osm is None, progress, log)
         labelled.append((f"fine-tuned on {finetune_frames} real frames/sequence", tuned))
+        dst_rows.append(tune_on_real(data, finetune_frames, sim["config"]["tune"], progress,
+                                     log))
     res = run_benchmark(cfg, kdir, data_dir=data, progress=progress, log=log,
-                        command=None, checkpoints=labelled)
+                        command=None, checkpoints=labelled, dst_rows=dst_rows)
     res["real"] = {"root": str(root), "sequences": list(sequences), "osm": osm,
                    "finetune_frames": finetune_frames, "gap": gap,
                    "scored_from_step": cfg["score_from_step"]}

@@ -147,3 +147,43 @@ def test_real_sample_smoke(real_root, sim_checkpoint, tmp_path):
     assert len({v["all"]["cells"] for v in segs.values()}) == 1
     # real moving cars are found by the DST filter
     assert segs["dst (default)"]["all"]["iou"]["moving"] > 0.1
+
+
+def test_dst_tuned_on_the_real_fine_tuning_frames_is_scored_only_after_them(kitti_root,
+                                                                             tmp_path):
+    """``dstenv benchmark --kitti --finetune-frames N``'s ``dst-tuned (real frames)``: DST
+    parameters searched on frames 0 .. N-1 of the real drive, scored on the later ones."""
+    from dstenv.data import ShardDataset
+    from dstenv.dst import DSTParams
+    from dstenv.segment.benchmark import run_benchmark
+    from dstenv.segment.plan import split_drives, steps_before
+    from dstenv.segment.real import REAL_TUNED, tune_on_real
+    from dstenv.segment.tune import score_params, scope_masks
+
+    ds = _convert(kitti_root, tmp_path / "ds", "--stride", "1")
+    drives = split_drives(ShardDataset(ds, split="test", inputs="fcn10"), True, False,
+                          lambda m: None)
+    (ep,) = drives.episodes
+    early = steps_before(ep, 3)
+    assert early.steps.tolist() == [0, 1, 2] and len(early.labels) == 3
+    assert steps_before(ep, 100) is ep and steps_before(ep, 0) is None
+
+    seg = tune_on_real(ds, 3, {"budget": 4, "seed": 0, "scope": "observed"}, log=lambda m: None)
+    trace = seg.info["tuning"]
+    assert seg.label == REAL_TUNED and trace["frames"] == 3 and len(trace["evaluations"]) == 4
+    assert seg.params == DSTParams.from_dict(trace["best_params"])
+    # the search's figure is the tuned DST's mIoU on those three frames, recomputed
+    assert trace["best_miou"] == pytest.approx(
+        score_params([early], seg.params, masks=scope_masks([early], "observed")))
+    assert trace["best_miou"] >= trace["start_miou"]
+    with pytest.raises(ValueError, match="finetune_frames 0: no converted frame"):
+        tune_on_real(ds, 0, {"budget": 2, "seed": 0, "scope": "observed"}, log=lambda m: None)
+
+    cfg = {"score_from_step": 3, "models": [], "device": "cpu", "examples": 1,
+           "eval_batch_size": 2, "tune": {"enabled": False}, "complete": {"enabled": False}}
+    res = run_benchmark(cfg, tmp_path / "b", data_dir=ds, progress=False, log=lambda m: None,
+                        dst_rows=[seg])
+    row = res["segmenters"][REAL_TUNED]
+    assert row["kind"] == "dst" and row["describe"]["params"] == seg.params.to_dict()
+    assert row["describe"]["tuning"]["frames"] == 3
+    assert res["data"]["test_frames"] == 3  # frames 3, 4, 5: none of the tuning frames

@@ -9,9 +9,10 @@ observed cells accumulated) and scores, with the same
 * ``dst-tuned`` and ``dst-complete`` with the parameters the simulated run tuned
   on its training maps (never on real frames);
 * every network of the simulated run, trained only on simulated data;
-* with ``finetune_frames = N > 0``: the best simulated network (without ``--osm``:
-  the best ``no-map`` network when the run trained one) fine-tuned
-  (``train.init``) on the labelled frames ``0 .. N-1`` of each sequence, and
+* with ``finetune_frames = N > 0``: a simulated network fine-tuned (``train.init``)
+  on the labelled frames ``0 .. N-1`` of each sequence, starting from the one with
+  the best mIoU on those same frames (:func:`start_scores`; with or without map
+  input, whichever reads these real drives best), and
   ``dst-tuned (real frames)``: the DST parameters searched on the same frames
   (:func:`~dstenv.segment.tune.tune_dst_params`, the simulated run's budget, seed
   and scope), the non-learned counterpart of the fine-tuning. Only frames from
@@ -26,7 +27,7 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-__all__ = ["real_benchmark", "sim_checkpoints", "tune_on_real", "REAL_TUNED"]
+__all__ = ["real_benchmark", "sim_checkpoints", "start_scores", "tune_on_real", "REAL_TUNED"]
 
 #: label of the DST row tuned on the real fine-tuning frames
 REAL_TUNED = "dst-tuned (real frames)"
@@ -57,31 +58,53 @@ def _convert(root: str, sequences: Sequence[str], osm: str | None, data: Path) -
         raise CLIError(f"--kitti {root}: converting sequences {','.join(sequences)} failed")
 
 
-def _finetune(sim: Mapping[str, Any], ckpts: Mapping[str, Path], data: Path, frames: int,
-              epochs: int, out: Path, no_map: bool, progress: bool,
-              log: Callable[[str], None]) -> Path:
+def start_scores(ckpts: Mapping[str, Path], ds: Any, picked: Sequence[int]
+                 ) -> dict[str, float]:
+    """Each simulated network's mIoU over the labelled cells of the fine-tuning frames
+    ``picked`` of ``ds`` (classes present in their labels): how the fine-tuning's
+    starting point is chosen, on those frames alone."""
+    import numpy as np
+    import torch
+
+    from dstenv.segment.evaluate import load_checkpoints
+    from dstenv.segment.metrics import confusion_matrix, mean_iou
+
+    samples = [ds[k] for k in picked]
+    x = torch.stack([s["x"] for s in samples])
+    y = torch.stack([s["labels"] for s in samples])
+    out = {}
+    for label, path in ckpts.items():
+        (seg,) = load_checkpoints([path], int(x.shape[1]))
+        with torch.no_grad():
+            pred = torch.cat([seg.predict(x[i:i + 4]) for i in range(0, len(x), 4)])
+        miou = mean_iou(confusion_matrix(pred, y, 5))
+        out[label] = float(miou) if np.isfinite(miou) else -1.0
+    return out
+
+
+def _finetune(ckpts: Mapping[str, Path], data: Path, frames: int, epochs: int, out: Path,
+              progress: bool, log: Callable[[str], None]) -> tuple[Path, dict[str, Any]]:
     import torch
 
     from dstenv.data import ShardDataset
     from dstenv.segment.shardindex import split_index
-    from dstenv.segment.results import HEADLINE
     from dstenv.segment.train import train
 
-    learned = {k: v for k, v in sim["segmenters"].items() if k in ckpts}
-    if no_map and any(" no-map" in k for k in learned):  # real drives without a map
-        learned = {k: v for k, v in learned.items() if " no-map" in k}
-    best = max(learned, key=lambda k: learned[k][HEADLINE]["miou"] or -1.0)
     ds = ShardDataset(data, split="test", inputs="fcn10")
     index, _ = split_index(ds.files)
     picked = [k for k, fr in enumerate(index) if fr["step"] < frames]
     if not picked:
         raise ValueError(f"finetune_frames {frames}: no converted frame before it")
+    scores = start_scores(ckpts, ds, picked)
+    best = max(scores, key=scores.__getitem__)  # ties: the first (the simulated run's order)
+    log(f"fine-tuning start: {best} (mIoU on the {len(picked)} fine-tuning frames: "
+        + ", ".join(f"{k} {v:.3f}" for k, v in scores.items()) + ")")
     spec = torch.load(ckpts[best], map_location="cpu", weights_only=True)["spec"]
     cfg = {"init": str(ckpts[best]), "model": spec["model"], "model_kwargs": spec["model_kwargs"],
            "epochs": epochs, "batch_size": 4, "lr": 1e-4, "device": "cpu"}
     log(f"fine-tuning {best} on {len(picked)} real frames")
     train(cfg, torch.utils.data.Subset(ds, picked), None, out, progress=progress, log=log)
-    return out / "last.pt"
+    return out / "last.pt", {"start": best, "start_miou": scores}
 
 
 def tune_on_real(data: Path, frames: int, tune: Mapping[str, Any], progress: bool = False,
@@ -169,10 +192,11 @@ def real_benchmark(
         cfg["complete"]["enabled"] = False
     labelled = [(f"{k} (sim only)", p) for k, p in ckpts.items()]
     dst_rows = []
+    start: dict[str, Any] = {}
     if finetune_frames > 0:
         cfg["score_from_step"] = finetune_frames + gap
-        tuned = _finetune(sim, ckpts, data, finetune_frames, finetune_epochs,
-                          kdir / "finetune", osm is None, progress, log)
+        tuned, start = _finetune(ckpts, data, finetune_frames, finetune_epochs,
+                                 kdir / "finetune", progress, log)
         labelled.append((f"fine-tuned on {finetune_frames} real frames/sequence", tuned))
         dst_rows.append(tune_on_real(data, finetune_frames, sim["config"]["tune"], progress,
                                      log))
@@ -180,5 +204,6 @@ def real_benchmark(
                         command=None, checkpoints=labelled, dst_rows=dst_rows)
     res["real"] = {"root": str(root), "sequences": list(sequences), "osm": osm,
                    "finetune_frames": finetune_frames, "gap": gap,
+                   "finetune_start": start if finetune_frames > 0 else None,
                    "scored_from_step": cfg["score_from_step"]}
     return res

@@ -187,3 +187,24 @@ def test_dst_tuned_on_the_real_fine_tuning_frames_is_scored_only_after_them(kitt
     assert row["kind"] == "dst" and row["describe"]["params"] == seg.params.to_dict()
     assert row["describe"]["tuning"]["frames"] == 3
     assert res["data"]["test_frames"] == 3  # frames 3, 4, 5: none of the tuning frames
+
+
+def test_fine_tuning_starts_from_the_network_that_reads_its_frames_best(kitti_root,
+                                                                         sim_checkpoint,
+                                                                         tmp_path):
+    import torch
+
+    from dstenv.data import ShardDataset
+    from dstenv.segment.checkpoint import load_segmenter
+    from dstenv.segment.metrics import confusion_matrix, mean_iou
+    from dstenv.segment.real import start_scores
+
+    ds = ShardDataset(_convert(kitti_root, tmp_path / "ds", "--stride", "1"), split="test",
+                      inputs="fcn10")
+    scores = start_scores({"a": sim_checkpoint, "b": sim_checkpoint}, ds, [0, 1, 2])
+    seg = load_segmenter(sim_checkpoint, "cpu")
+    samples = [ds[k] for k in (0, 1, 2)]
+    pred = seg.predict(torch.stack([s["x"] for s in samples]))
+    cm = confusion_matrix(pred, np.stack([s["labels"].numpy() for s in samples]), 5)
+    assert scores == {"a": pytest.approx(mean_iou(cm)), "b": pytest.approx(mean_iou(cm))}
+    assert 0.0 <= scores["a"] <= 1.0

@@ -3,7 +3,8 @@
 Every policy drives one episode per seed ``--seed .. --seed + --episodes - 1`` of
 the same registered env with its default observation (same worlds, same traffic,
 a fresh map per seed, none of them a training map): ``random``
-(:mod:`random_policy`), ``grid`` (the grid-aware rule driver), ``autopilot``
+(:mod:`random_policy`), ``grid`` (the grid-aware rule driver), ``grid-tuned`` (the
+same with its parameters tuned on validation seeds), ``autopilot``
 (privileged) and ``constant`` (:mod:`rule_based`), and each trained PPO checkpoint
 given with ``--checkpoints`` (``model.pt`` state_dicts from :mod:`ppo_grid`, with
 their ``model.json`` sidecars; only tensors are loaded). Reported per policy:
@@ -45,7 +46,8 @@ class Args(EnvArgs):
     """Evaluate drivers on fixed seeds and write the results table."""
 
     policies: list[str] = opt(["random", "grid", "autopilot", "constant"],
-                              "reference drivers: random | grid | autopilot | constant")
+                              "reference drivers: random | grid | grid-tuned | autopilot | "
+                              "constant")
     checkpoints: list[str] = opt([], "PPO model.pt files from ppo_grid.py")
     constant_action: int = opt(2, "action of the constant driver (city: 2 = FASTER)")
     episodes: int = opt(50, "episodes per policy, one per seed")

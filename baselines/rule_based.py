@@ -5,6 +5,9 @@
   env config): it slows for bends and junctions, stops for a red light and for
   obstacles the grid shows on its route. Not privileged: what it cannot see (cars
   hidden behind a corner building) surprises it as much as a learner.
+* ``grid-tuned``: the same driver with :data:`TUNED_PARAMS`, its parameters searched
+  on validation seeds by ``tune_rule.py``: the strongest non-learned perception
+  driver, the one a learned driver has to beat.
 * ``autopilot``: the world's own autopilot drives (the env's ``action.type =
   "autopilot"``): route following, IDM car following, right of way at junctions
   and crosswalks, all from the simulator's ground truth, so hidden cross traffic is
@@ -28,7 +31,12 @@ import numpy as np
 from rl_common import EnvArgs, EpisodeResult, evaluate_policy, make_env, opt, parse_args
 from rl_common import cli, report_run
 
-DRIVERS = ("grid", "autopilot", "constant")
+DRIVERS = ("grid", "grid-tuned", "autopilot", "constant")
+#: :class:`GridRuleDriver` parameters chosen on the validation seeds 20000-20049 in PPO's
+#: config (collision -30, off-road -10, ``action.repeat = 3``, 200 decisions) by
+#: ``tune_rule.py``: the ``best`` row of ``benchmarks/search/rule-driver.json`` (a test
+#: checks that they agree). The others keep their defaults.
+TUNED_PARAMS: dict[str, float] = {"junction_range": 30.0, "corridor": 1.4, "margin": 6.0}
 #: ``--env-config`` the autopilot driver adds: the world's own driver.
 AUTOPILOT_CONFIG: dict[str, Any] = {"action": {"type": "autopilot"}}
 
@@ -37,7 +45,7 @@ AUTOPILOT_CONFIG: dict[str, Any] = {"action": {"type": "autopilot"}}
 class Args(EnvArgs):
     """Run a rule-based driver on a DSTGrid env."""
 
-    driver: str = opt("grid", "grid | autopilot | constant")
+    driver: str = opt("grid", "grid | grid-tuned | autopilot | constant")
     constant_action: int = opt(2, "the action of the constant driver (2 = FASTER)")
     episodes: int = opt(10, "episodes, one per seed")
     seed: int = opt(10_000, "first seed (episode k uses seed + k)")
@@ -184,6 +192,10 @@ def reference_driver(name: str, args: EnvArgs, constant_action: int = 2) -> tupl
     """A reference driver by name and the env it drives."""
     if name == "grid":
         return GridRuleDriver(), make_env(args)
+    if name == "grid-tuned":
+        driver = GridRuleDriver(**TUNED_PARAMS)
+        driver.name = "rule-based (grid, tuned)"
+        return driver, make_env(args)
     if name == "autopilot":
         return AutopilotPolicy(), make_env(args, AUTOPILOT_CONFIG)
     if name == "constant":

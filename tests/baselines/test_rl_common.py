@@ -98,6 +98,8 @@ def test_atomic_write_leaves_no_temp_file(tmp_path) -> None:
     ("evaluate.py", ["--policies", "--checkpoints", "no-such.pt"],
      "--checkpoints: no such file"),
     ("rule_based.py", ["--driver", "bogus"], "--driver: expected one of"),
+    ("tune_rule.py", ["--grid", '{"x": [1]}', "--out", "out/s.json"],
+     "--grid: unknown parameter 'x'"),
     ("random_policy.py", ["--env-config", "[1]"], "--env-config: expected a JSON object"),
     ("curves.py", ["--runs", "no-such-run", "--out", "c.png"], "no-such-run"),
 ])

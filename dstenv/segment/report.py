@@ -160,6 +160,28 @@ def _goal_lines(goal: dict[str, Any] | None, real: dict[str, Any] | None) -> lis
     return lines
 
 
+def _real_lines(results: dict[str, Any]) -> list[str]:
+    """What ``--kitti --finetune-frames N`` learned from the real frames it did not score."""
+    real = results.get("real") or {}
+    start = real.get("finetune_start")
+    if not real.get("finetune_frames") or not start:
+        return []
+    n = real["finetune_frames"]
+    cands = ", ".join(f"{k} {v:.3f}" for k, v in start["start_miou"].items())
+    lines = [f"Frames 0-{n - 1} of each sequence are labelled training frames, scored by no "
+             f"row (every row is scored from step {real.get('scored_from_step')} on): the "
+             f"fine-tuning starts from {start['start']}, the simulated network with the best "
+             f"mIoU on them ({cands})."]
+    tuned = next((r for r in results.get("segmenters", {}).values()
+                  if "frames" in r.get("describe", {}).get("tuning", {})), None)
+    if tuned is not None:
+        t = tuned["describe"]["tuning"]
+        lines[0] += (f" `{tuned['describe']['label']}` searched the DST parameters on "
+                     f"them ({t['budget']} sets, {t['scope']} cells: mIoU "
+                     f"{t['start_miou']:.3f} with the defaults, {t['best_miou']:.3f} tuned).")
+    return lines + [""]
+
+
 def markdown_table(results: dict[str, Any]) -> str:
     """The report: headline (observed) table, objects, visible, amodal, goal.
 
@@ -175,6 +197,7 @@ def markdown_table(results: dict[str, Any]) -> str:
                  f"{data.get('grid_shape', '?')} cells of {data.get('cell_size', '?')} m. DST "
                  "from the stored BetP (or the filter re-run over the stored inputs), networks "
                  "from the given checkpoints.", ""]
+        lines += _real_lines(results)
     else:
         lines = [f"# Segmenter benchmark ({results.get('preset') or 'custom'} preset)", ""]
         if data:

@@ -136,3 +136,28 @@ def test_paper_protocol_names_missing_pipeline_keys():
     else:
         with pytest.raises(ConfigError, match=r"protocol.*\(1 Hz fusion.*issue 13"):
             protocol_overrides("paper")
+
+
+def test_kitti_section_says_which_frames_trained_what(tmp_path) -> None:
+    """With ``--finetune-frames`` the KITTI section names the fine-tuning's starting
+    network, every candidate's mIoU on those frames and the real-frame DST search."""
+    from pathlib import Path
+
+    committed = Path(__file__).resolve().parents[2] / "benchmarks" / "results" / "cpu"
+    kitti = json.loads((committed / "results.json").read_text())["kitti"]
+    md = report.markdown_table({**kitti, "command": None})
+    start = kitti["real"]["finetune_start"]
+    tuning = kitti["segmenters"]["dst-tuned (real frames)"]["describe"]["tuning"]
+    assert start["start"] == max(start["start_miou"], key=start["start_miou"].get)
+    line = next(x for x in md.splitlines() if x.startswith("Frames 0-9 of each sequence"))
+    assert f"starts from {start['start']}" in line
+    for name, miou in start["start_miou"].items():
+        assert f"{name} {miou:.3f}" in line
+    assert f"({tuning['budget']} sets, observed cells: mIoU {tuning['start_miou']:.3f}" in line
+    assert f"scored from step {kitti['real']['scored_from_step']} on" in line
+    assert tuning["frames"] == 10 and kitti["real"]["scored_from_step"] == 20
+    # without fine-tuning frames there is no such line
+    plain = {**kitti, "real": {**kitti["real"], "finetune_frames": 0}, "command": None}
+    assert "Frames 0-" not in report.markdown_table(plain)
+    # the committed results.md is what the code writes for this section
+    assert line in (committed / "results.md").read_text()

@@ -100,6 +100,7 @@ def test_atomic_write_leaves_no_temp_file(tmp_path) -> None:
     ("rule_based.py", ["--driver", "bogus"], "--driver: expected one of"),
     ("tune_rule.py", ["--grid", '{"x": [1]}', "--out", "out/s.json"],
      "--grid: unknown parameter 'x'"),
+    ("compare.py", ["--a", "nope.csv", "--b", "out/b.csv"], "nope.csv: no such file"),
     ("random_policy.py", ["--env-config", "[1]"], "--env-config: expected a JSON object"),
     ("curves.py", ["--runs", "no-such-run", "--out", "c.png"], "no-such-run"),
 ])

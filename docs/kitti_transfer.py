@@ -10,7 +10,9 @@ simulated test split and its converted KITTI frames) and writes the figures that
 For the cells labelled moving and visible in the current sweep, on KITTI and on the
 simulated test drives without a map (the KITTI sample has none), it reports the mean
 network input (BetP at t and t-1, classes in CLASSES order) and the share of those
-cells the network gives to each class; the same for the static cells; and, for the
+cells the network gives to each class, and, split by the class the network gives
+them, the same means and how often DST's own argmax is moving there; the same for
+the static cells; and, for the
 simulated drives, which labels the cells with strong moving evidence
 (BetP(moving) > 0.45) carry: DST's moving false alarms on clutter and facades.
 The figure zooms on two KITTI frames: inputs, visible labels and the predictions of
@@ -47,7 +49,7 @@ def cell_stats(seg, ds: ShardDataset, keep) -> dict:
     """Mean inputs and prediction shares on visible moving and static cells."""
     out = {}
     for name, c in (("moving", MOVING), ("static", STATIC)):
-        out[name] = {"feat": [], "pred": np.zeros(N)}
+        out[name] = {"feat": [], "pred": np.zeros(N), "called": []}
     frames = 0
     for k in range(len(ds)):
         s = ds[k]
@@ -60,6 +62,7 @@ def cell_stats(seg, ds: ShardDataset, keep) -> dict:
             m = (lab == c) & vis
             out[name]["feat"].append(s["x"][:, m].numpy().T)
             out[name]["pred"] += np.bincount(p[m], minlength=N)
+            out[name]["called"].append(p[m])
     res: dict = {"frames": frames}
     for name, st in out.items():
         f = np.concatenate(st["feat"]) if st["feat"] else np.zeros((0, 2 * N))
@@ -69,8 +72,24 @@ def cell_stats(seg, ds: ShardDataset, keep) -> dict:
             "mean_betp_t_prev": _r(f[:, N:].mean(0)) if len(f) else None,
             "predicted_share": dict(zip(CLASSES, np.round(st["pred"] / max(1, st["pred"].sum()),
                                                           3).tolist())),
+            "by_prediction": by_prediction(f, np.concatenate(st["called"]) if st["called"]
+                                           else np.zeros(0, np.int64)),
         }
     return res
+
+
+def by_prediction(feat: np.ndarray, called: np.ndarray) -> dict:
+    """Per class the network called the cells: how many, their mean BetP at t and t-1,
+    and the share whose BetP at t has its argmax on moving (what DST would say)."""
+    out = {}
+    for c, name in enumerate(CLASSES):
+        m = called == c
+        if m.any():
+            out[name] = {"cells": int(m.sum()), "mean_betp_t": _r(feat[m, :N].mean(0)),
+                         "mean_betp_t_prev": _r(feat[m, N:].mean(0)),
+                         "dst_argmax_moving": round(float((feat[m, :N].argmax(1)
+                                                           == MOVING).mean()), 3)}
+    return out
 
 
 def moving_evidence_labels(ds: ShardDataset, step: int = 2) -> dict:

@@ -119,3 +119,24 @@ def test_full_fcn8s_forward_backward():
     logits = model(x)
     assert logits.shape == (1, 5, 64, 64)
     logits.sum().backward()
+
+
+def test_betp_skip_starts_from_dst_and_learns_its_weight():
+    """With the head zeroed, a betp_skip model predicts DST's argmax of BetP at t; the
+    skip weight is a trained parameter; without the option the parameters are as before."""
+    torch.manual_seed(0)
+    plain = build_model("unet-light", base=8, depth=2)
+    model = build_model("unet-light", base=8, depth=2, betp_skip=1.0)
+    assert set(model.state_dict()) - set(plain.state_dict()) == {"betp_weight"}
+    head = model.head[-1]
+    torch.nn.init.zeros_(head.weight)
+    torch.nn.init.zeros_(head.bias)
+    betp = torch.rand(2, 5, 21, 19)
+    betp = betp / betp.sum(1, keepdim=True)
+    x = torch.cat([betp, torch.rand(2, 5, 21, 19)], 1)
+    assert torch.equal(model.predict(x), betp.argmax(1))  # odd size: padded, cropped
+    loss = model(x).logsumexp(1).mean()
+    loss.backward()
+    assert model.betp_weight.grad is not None and model.betp_weight.grad != 0
+    with pytest.raises(ValueError, match="betp_skip must be >= 0"):
+        build_model("unet-light", betp_skip=-1.0)

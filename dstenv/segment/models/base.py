@@ -45,14 +45,24 @@ class SegmentationModel(nn.Module):
         decoder: module taking that list and returning ``(B, C_dec, H', W')``.
         head: module mapping the decoder output to ``(B, num_classes, H', W')``.
 
+        betp_skip: ``w0 > 0`` adds ``w * log(max(BetP_t, 1e-3))`` to the logits, ``w`` a
+            learned scalar starting at ``w0``, BetP_t the input's first ``num_classes``
+            channels: the network starts from DST's argmax and learns corrections on top
+            of it (0, the default: no skip, no extra parameter).
+
     Shapes: ``x (B, C_in, H, W) float32`` -> logits ``(B, num_classes, H, W)``.
     """
 
-    def __init__(self, encoder: nn.Module, decoder: nn.Module, head: nn.Module) -> None:
+    def __init__(self, encoder: nn.Module, decoder: nn.Module, head: nn.Module,
+                 betp_skip: float = 0.0) -> None:
         super().__init__()
         self.encoder = encoder
         self.decoder = decoder
         self.head = head
+        if not betp_skip >= 0.0:
+            raise ValueError(f"betp_skip must be >= 0, got {betp_skip!r}")
+        if betp_skip > 0:
+            self.betp_weight = nn.Parameter(torch.tensor(float(betp_skip)))
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         h, w = x.shape[-2:]
@@ -64,6 +74,9 @@ class SegmentationModel(nn.Module):
         logits = self.head(self.decoder(self.encoder(x)))
         if logits.shape[-2:] != x.shape[-2:]:
             logits = F.interpolate(logits, size=x.shape[-2:], mode="bilinear", align_corners=False)
+        if hasattr(self, "betp_weight"):
+            c = logits.shape[1]
+            logits = logits + self.betp_weight * torch.log(x[:, :c].clamp_min(1e-3))
         return logits[..., :h, :w]
 
     @torch.no_grad()

@@ -104,11 +104,14 @@ def unet_light(
     base: int = 16,
     depth: int = 3,
     dropout: float = 0.1,
+    betp_skip: float = 0.0,
 ) -> SegmentationModel:
-    """Light U-Net (``unet-light``, ~0.48 M parameters): trains on a CPU."""
+    """Light U-Net (``unet-light``, ~0.48 M parameters): trains on a CPU.
+
+    ``betp_skip > 0``: logits on top of DST's (:class:`SegmentationModel`)."""
     enc = UNetEncoder(in_channels, base, depth)
     return SegmentationModel(
-        enc, UNetDecoder(enc.channels), SegmentationHead(base, num_classes, dropout)
+        enc, UNetDecoder(enc.channels), SegmentationHead(base, num_classes, dropout), betp_skip
     )
 
 

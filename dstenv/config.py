@@ -330,8 +330,8 @@ def merge_config(
 def _check_type(default: Any, value: Any, path: str) -> Any:
     if isinstance(default, Mapping):  # a free-form table ({} by default): any keys
         if not isinstance(value, Mapping):
-            raise ConfigError(f"{path}: expected a table (a TOML inline table, or one "
-                              f"setting per key below it), got {value!r}")
+            raise ConfigError(f"{path}: expected a table (a TOML inline table, a JSON "
+                              f"object, or one setting per key below it), got {value!r}")
         return copy.deepcopy(value)
     if default is None:
         return copy.deepcopy(value)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from pathlib import Path
 from typing import Any
@@ -19,7 +20,9 @@ PAPER_FREQUENCIES = {"static": 0.0009, "moving": 0.0026}
 
 
 def parse_set(items: list[str]) -> dict[str, Any]:
-    """``["world.n_cars=10", "lidar.fov=180.0"]`` -> nested overrides (TOML values).
+    """``["world.n_cars=10", "lidar.fov=180.0"]`` -> nested overrides (TOML values; a
+    value that is no TOML but a JSON object or array, as ``results.json`` prints them,
+    is read as JSON; anything else is a string).
 
     Raises:
         CLIError: an item without ``=`` or an empty key.
@@ -35,12 +38,22 @@ def parse_set(items: list[str]) -> dict[str, Any]:
         try:
             value = tomllib.loads(f"v = {text}")["v"]
         except tomllib.TOMLDecodeError:
-            value = text  # a bare word is a string
+            value = _json_or_word(text)
         node = out
         for p in parts[:-1]:
             node = node.setdefault(p, {})
         node[parts[-1]] = value
     return out
+
+
+def _json_or_word(text: str) -> Any:
+    """A JSON object or array, else the text itself (a bare word is a string)."""
+    if text.lstrip().startswith(("{", "[")):
+        try:
+            return json.loads(text)
+        except json.JSONDecodeError:
+            pass
+    return text
 
 
 def _grid(text: str) -> tuple[int, int]:

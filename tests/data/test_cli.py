@@ -20,6 +20,20 @@ def test_parse_set():
         parse_set(["world.cars"])
 
 
+def test_parse_set_reads_json_objects_and_arrays_as_results_json_prints_them():
+    assert parse_set(['model_kwargs={"unet-light": {"betp_skip": 1.0}}',
+                      "model_kwargs.fcn={base=8}", 'search.values=[0.25, 0.5]',
+                      'tune.params={"alpha": 0.5, "delta_inc": 0.4}']) == {
+        "model_kwargs": {"unet-light": {"betp_skip": 1.0}, "fcn": {"base": 8}},
+        "search": {"values": [0.25, 0.5]}, "tune": {"params": {"alpha": 0.5, "delta_inc": 0.4}}}
+    # neither TOML nor JSON: the text itself, which the config check then refuses by key
+    assert parse_set(["a.b={oops"]) == {"a": {"b": "{oops"}}
+    from dstenv.config import ConfigError, merge_config
+
+    with pytest.raises(ConfigError, match="model_kwargs: expected a table .* a JSON object"):
+        merge_config({"model_kwargs": {}}, parse_set(["model_kwargs={oops"]), "benchmark")
+
+
 def test_info_prints_paper_reference(tmp_path, capsys, fake_pipeline):
     spec = GenerateSpec(config={"grid": {"height": 8, "width": 6, "cell_size": 0.5}}, frames=10,
                         frames_per_shard=4, episode_length=5, stride=2, warmup=0)

@@ -14,8 +14,9 @@ configuration's result, so that the choice can be checked and redone::
 
 Selection: the highest success rate minus collision rate on the validation seeds
 (ties: fewer collisions, then the first in grid order). Parameters not in ``--grid``
-keep their defaults. The chosen set is :data:`rule_based.TUNED_PARAMS` (a test
-checks that it is the best row of the committed search file).
+keep their defaults. :data:`rule_based.TUNED_PARAMS` is the best row of the second
+stage (``benchmarks/search/rule-driver-stage2.json``: the defaults and the first
+stage's five best on 200 more seeds, ``--grid`` given as a list); a test checks it.
 """
 
 from __future__ import annotations
@@ -50,10 +51,15 @@ class Args(EnvArgs):
     out: str = opt("", "write the search (every configuration and the choice) as JSON")
 
 
+def parameter_defaults() -> dict[str, Any]:
+    """The tunable parameters and their defaults: :class:`GridRuleDriver`'s keywords."""
+    return {k: p.default for k, p in inspect.signature(GridRuleDriver.__init__).parameters.items()
+            if k != "self"}
+
+
 def parameter_names() -> tuple[str, ...]:
-    """The tunable parameters: the keyword arguments of :class:`GridRuleDriver`."""
-    return tuple(p for p in inspect.signature(GridRuleDriver.__init__).parameters
-                 if p != "self")
+    """The tunable parameters' names."""
+    return tuple(parameter_defaults())
 
 
 def parse_grid(text: str) -> list[dict[str, float]]:
@@ -147,9 +153,7 @@ def run(args: Args) -> dict[str, Any]:
         "machine": machine_info(),
         "env": env_args,
         "seeds": [seeds[0], seeds[-1]],
-        "defaults": {k: v.default for k, v in
-                     inspect.signature(GridRuleDriver.__init__).parameters.items()
-                     if k != "self"},
+        "defaults": parameter_defaults(),
         "criterion": "success - collision (ties: fewer collisions, then grid order)",
         "rows": rows,
         "best": best,

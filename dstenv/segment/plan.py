@@ -207,6 +207,16 @@ def _train_drives(cfg: Mapping[str, Any], train_ds: Any, progress: bool) -> list
     return record_episodes(config, episode_targets(frames, cfg["tune"]["episodes"]), progress)
 
 
+def _add_dst(plan: Plan, seg: DSTSegmenter, drives: Drives) -> bool:
+    """Add a DST row, or mark it unscored when its parameters are not the stored ones
+    and the drives cannot be re-filtered; returns whether it was added."""
+    if drives.refilter_reason and seg.params != drives.generation_params:
+        plan.unscored[seg.label] = drives.refilter_reason
+        return False
+    plan.add(seg, "dst")
+    return True
+
+
 def _dst_rows(cfg: Mapping[str, Any], drives: Drives, train: Callable[[], list[Episode]],
               plan: Plan, progress: bool, log: Callable[[str], None],
               timings: dict[str, float]) -> None:
@@ -215,15 +225,11 @@ def _dst_rows(cfg: Mapping[str, Any], drives: Drives, train: Callable[[], list[E
     from dstenv.segment.tune import tune_dst_params
 
     gen = drives.generation_params
-    no_history = drives.refilter_reason
     presets = [create_segmenter("dst", preset=p) for p in cfg["dst_presets"]]
     if drives.evaluation_only and all(s.params != gen for s in presets):
         presets.insert(0, DSTSegmenter(gen, "dst", "dst (stored)"))
     for seg in presets:
-        if no_history and seg.params != gen:
-            plan.unscored[seg.label] = no_history
-        else:
-            plan.add(seg, "dst")
+        _add_dst(plan, seg, drives)
     tuned = None
     if cfg["tune"]["params"]:
         tuned = DSTSegmenter(DSTParams.from_dict(fixed_params(cfg["tune"]["params"],
@@ -242,12 +248,8 @@ def _dst_rows(cfg: Mapping[str, Any], drives: Drives, train: Callable[[], list[E
         plan.unscored["dst-tuned"] = (
             "no train split to tune on; set tune.params (e.g. the dst-tuned entry of a "
             "simulated benchmark's results.json) to score fixed tuned parameters")
-    if tuned is not None:
-        if no_history and tuned.params != gen:
-            plan.unscored["dst-tuned"] = no_history
-            tuned = None
-        else:
-            plan.add(tuned, "dst")
+    if tuned is not None and not _add_dst(plan, tuned, drives):
+        tuned = None
     if not cfg["complete"]["enabled"]:
         return
     base = tuned.params if tuned is not None else gen
@@ -305,10 +307,7 @@ def plan_segmenters(cfg: Mapping[str, Any], drives: Drives, datasets: Mapping[st
 
     _dst_rows(cfg, drives, train_eps, plan, progress, log, timings)
     for seg in dst_rows:
-        if drives.refilter_reason and seg.params != drives.generation_params:
-            plan.unscored[seg.label] = drives.refilter_reason
-        else:
-            plan.add(seg, "dst")
+        _add_dst(plan, seg, drives)
     if not drives.evaluation_only:
         from dstenv.segment.netplan import plan_networks
 

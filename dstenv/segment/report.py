@@ -172,11 +172,12 @@ def _real_lines(results: dict[str, Any]) -> list[str]:
              f"row (every row is scored from step {real.get('scored_from_step')} on): the "
              f"fine-tuning starts from {start['start']}, the simulated network with the best "
              f"mIoU on them ({cands})."]
-    tuned = next((r for r in results.get("segmenters", {}).values()
-                  if "frames" in r.get("describe", {}).get("tuning", {})), None)
+    from dstenv.segment.real import REAL_TUNED
+
+    tuned = results.get("segmenters", {}).get(REAL_TUNED)
     if tuned is not None:
         t = tuned["describe"]["tuning"]
-        lines[0] += (f" `{tuned['describe']['label']}` searched the DST parameters on "
+        lines[0] += (f" `{REAL_TUNED}` searched the DST parameters on "
                      f"them ({t['budget']} sets, {t['scope']} cells: mIoU "
                      f"{t['start_miou']:.3f} with the defaults, {t['best_miou']:.3f} tuned).")
     return lines + [""]

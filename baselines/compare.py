@@ -32,8 +32,8 @@ class Args:
 
     a: str = opt("", "CSV of driver A (evaluate.py --csv)")
     b: str = opt("", "CSV of driver B")
-    policy_a: str = opt("", "the policy of file A to use (default: its only one)")
-    policy_b: str = opt("", "the policy of file B to use (default: its only one)")
+    policy_a: str = opt("", "the policy of file A to use (empty: its only one)")
+    policy_b: str = opt("", "the policy of file B to use (empty: its only one)")
 
 
 def read_episodes(path: str, policy: str = "") -> tuple[str, dict[int, dict[str, bool]]]:

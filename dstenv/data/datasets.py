@@ -6,9 +6,15 @@ tensors. ``inputs`` selects ``x``:
 
 * ``"fcn10"``: the paper's FCN input, BetP at t then at t-1 (C = 10);
 * ``"pignistic"``: BetP at t (C = 5);
-* ``"masses"``: the raw DST masses (C = 32; shards generated with ``--masses``).
+* ``"masses"``: the raw DST masses (C = 32; shards generated with ``--masses``);
+* ``"fcn10+sensor"``: ``fcn10`` then the current sensor grid as two 0/1 channels, seen
+  free and seen occupied (C = 12; :func:`sensor_channels`): what the LIDAR says now,
+  which the filter's BetP carries only after its inertia.
 
-Labels keep :data:`dstenv.frame.IGNORE_INDEX` (255) for excluded cells.
+Labels keep :data:`dstenv.frame.IGNORE_INDEX` (255) for excluded cells. ``labels``
+selects their convention: ``"full"`` (as stored) or ``"kitti"``, KITTI's own
+(:func:`dstenv.kitti.grids.kitti_convention`: objects everywhere, seen-free cells
+navigable, everything else ignored), to train for real drives labelled that way.
 """
 
 from __future__ import annotations
@@ -29,14 +35,51 @@ from dstenv.data.sampling import episode_seeds, iter_frames, scenario_config
 from dstenv.data.shards import N_CLASSES, ShardError, ShardReader
 from dstenv.frame import Frame
 
-__all__ = ["INPUTS", "ShardDataset", "StreamingDataset", "frame_to_sample"]
+__all__ = ["INPUTS", "INPUT_CHANNELS", "LABELS", "ShardDataset", "StreamingDataset",
+           "frame_to_sample", "sensor_channels", "network_input"]
 
 #: ``inputs`` name -> shard datasets stacked into ``x``
 INPUTS: dict[str, tuple[str, ...]] = {
     "fcn10": ("pignistic", "pignistic_prev"),
     "pignistic": ("pignistic",),
     "masses": ("masses",),
+    "fcn10+sensor": ("pignistic", "pignistic_prev", "sensor"),
 }
+
+#: ``inputs`` name -> channels of ``x``
+INPUT_CHANNELS: dict[str, int] = {"fcn10": 10, "pignistic": 5, "masses": 32, "fcn10+sensor": 12}
+
+#: label conventions of :class:`ShardDataset` (module docstring)
+LABELS: tuple[str, ...] = ("full", "kitti")
+
+
+def sensor_channels(sensor: np.ndarray) -> np.ndarray:
+    """The sensor grid as network input: ``(..., H, W) uint8`` codes of
+    :class:`dstenv.dst.SensorState` -> ``(..., 2, H, W) float32``, seen free then seen
+    occupied (unknown cells are 0 in both)."""
+    from dstenv.dst import SensorState
+
+    s = np.asarray(sensor)
+    return np.stack([s == SensorState.FREE, s == SensorState.OCCUPIED], axis=-3).astype(np.float32)
+
+
+def network_input(x: np.ndarray, sensor: np.ndarray, inputs: str) -> np.ndarray:
+    """What a network trained on ``inputs`` reads, from the BetP at t and t-1.
+
+    Args:
+        x: ``(K, 10, H, W) float32`` BetP at t then t-1 (``fcn10``).
+        sensor: ``(K, H, W) uint8`` sensor grids of the same frames.
+        inputs: ``"fcn10"`` or ``"fcn10+sensor"``.
+
+    Returns:
+        ``(K, C, H, W) float32`` (``x`` itself for ``fcn10``).
+    """
+    if inputs == "fcn10":
+        return x
+    if inputs == "fcn10+sensor":
+        return np.concatenate([x, sensor_channels(sensor)], axis=1)
+    raise ValueError(f"a network on inputs {inputs!r} cannot be scored from BetP at t and "
+                     "t-1; scorable: fcn10, fcn10+sensor")
 
 
 def _check_inputs(inputs: str) -> tuple[str, ...]:
@@ -45,21 +88,36 @@ def _check_inputs(inputs: str) -> tuple[str, ...]:
     return INPUTS[inputs]
 
 
-def _sample(arrays: Mapping[str, np.ndarray], names: Sequence[str]) -> dict[str, torch.Tensor]:
-    x = np.concatenate([np.asarray(arrays[n], dtype=np.float32) for n in names], axis=0)
+def _check_labels(labels: str) -> str:
+    if labels not in LABELS:
+        raise ValueError(f"unknown labels {labels!r}; choose from {', '.join(LABELS)}")
+    return labels
+
+
+def _sample(arrays: Mapping[str, np.ndarray], names: Sequence[str],
+            labels: str = "full") -> dict[str, torch.Tensor]:
+    x = np.concatenate([sensor_channels(arrays[n]) if n == "sensor"
+                        else np.asarray(arrays[n], dtype=np.float32) for n in names], axis=0)
+    lab = arrays["labels"]
+    if labels == "kitti":
+        from dstenv.kitti.grids import kitti_convention
+
+        lab = kitti_convention(lab, arrays["sensor"])
     return {
         "x": torch.from_numpy(np.ascontiguousarray(x)),
-        "labels": torch.from_numpy(np.asarray(arrays["labels"], dtype=np.int64)),
+        "labels": torch.from_numpy(np.asarray(lab, dtype=np.int64)),
         "visible": torch.from_numpy(np.asarray(arrays["visible"], dtype=bool)),
     }
 
 
-def frame_to_sample(frame: Frame, inputs: str = "fcn10") -> dict[str, torch.Tensor]:
+def frame_to_sample(frame: Frame, inputs: str = "fcn10", labels: str = "full"
+                    ) -> dict[str, torch.Tensor]:
     """A :class:`Frame` as a training sample (see the module docstring)."""
     names = _check_inputs(inputs)
     if inputs == "masses" and frame.masses is None:
         raise ValueError("inputs='masses' needs frames with masses (config frame.masses = true)")
-    return _sample({n: getattr(frame, n) for n in (*names, "labels", "visible")}, names)
+    return _sample({n: getattr(frame, n) for n in (*names, "labels", "visible", "sensor")},
+                   names, _check_labels(labels))
 
 
 def _resolve_files(root_or_files: str | Path | Sequence[str | Path], split: str | None
@@ -86,7 +144,9 @@ class ShardDataset(Dataset):
         root_or_files: a dataset directory (its ``manifest.json`` is checked when
             present, else ``*.h5`` files are scanned), one shard file, or a list of files.
         split: keep only shards of this split (``attrs["split"]``); ``None`` keeps all.
-        inputs: ``"fcn10"``, ``"pignistic"`` or ``"masses"`` (module docstring).
+        inputs: a key of :data:`INPUTS` (module docstring).
+        labels: ``"full"`` or ``"kitti"`` (module docstring); :attr:`class_counts`
+            counts the stored labels either way.
         on_error: ``"raise"``: a corrupt or truncated shard raises
             :class:`~dstenv.data.shards.ShardError` naming the file; ``"skip"``: it is
             left out with a warning naming it (at construction, or at the first failed
@@ -100,8 +160,10 @@ class ShardDataset(Dataset):
     """
 
     def __init__(self, root_or_files: str | Path | Sequence[str | Path], split: str | None = None,
-                 inputs: str = "fcn10", on_error: str = "raise", cache: bool = False) -> None:
+                 inputs: str = "fcn10", on_error: str = "raise", cache: bool = False,
+                 labels: str = "full") -> None:
         self.names = _check_inputs(inputs)
+        self.labels = _check_labels(labels)
         if on_error not in ("raise", "skip"):
             raise ValueError(f"on_error must be 'raise' or 'skip', got {on_error!r}")
         self.inputs, self.on_error, self.split = inputs, on_error, split
@@ -176,8 +238,10 @@ class ShardDataset(Dataset):
                 if i in self._cache:
                     k, arrays = self._cache[i]
                 else:
-                    arrays = self._reader(k).get(local, (*self.names, "labels", "visible"),
-                                                 stored=True)
+                    wanted = {*self.names, "labels", "visible"}
+                    if self.labels == "kitti":
+                        wanted.add("sensor")
+                    arrays = self._reader(k).get(local, sorted(wanted), stored=True)
                     if self.cache:
                         self._cache[i] = (k, arrays)
             except ShardError as exc:
@@ -185,7 +249,8 @@ class ShardDataset(Dataset):
                 self._bad.add(k)
                 continue
             reader = self._reader(k)
-            return _sample({n: reader.dequantise(n, a) for n, a in arrays.items()}, self.names)
+            return _sample({n: reader.dequantise(n, a) for n, a in arrays.items()}, self.names,
+                           self.labels)
         raise ShardError(f"no readable frame left in {len(self.files)} shards")
 
     def __getstate__(self) -> dict[str, Any]:
@@ -212,7 +277,7 @@ class StreamingDataset(IterableDataset):
             from the stream ``(r, w, e)``, so workers never repeat each other.
         split: episodes come only from this split's map seeds (default ``"train"``:
             test maps stay unseen); ``None`` for any.
-        inputs: ``"fcn10"``, ``"pignistic"`` or ``"masses"``.
+        inputs: a key of :data:`INPUTS`; labels: ``"full"`` or ``"kitti"``.
         episode_length, stride, warmup: as in ``dstenv generate`` (steps of 0.1 s).
         episodes_per_map: episodes on each procedural city before the next one
             (:mod:`dstenv.data.sampling`; 1: a new city per episode).
@@ -223,8 +288,9 @@ class StreamingDataset(IterableDataset):
     def __init__(self, scenario: str | Path | Mapping[str, Any] | None = None, seed: int = 0, *,
                  split: str | None = "train", inputs: str = "fcn10", episode_length: int = 200,
                  stride: int = 10, warmup: int | None = None, max_frames: int | None = None,
-                 rank: int = 0, episodes_per_map: int = 1) -> None:
+                 rank: int = 0, episodes_per_map: int = 1, labels: str = "full") -> None:
         super().__init__()
+        self.labels = _check_labels(labels)
         self.config = scenario_config(scenario)
         self.names = _check_inputs(inputs)
         if inputs == "masses":
@@ -254,4 +320,4 @@ class StreamingDataset(IterableDataset):
         for n, frame in enumerate(frames):
             if self.max_frames is not None and n >= self.max_frames:
                 return
-            yield frame_to_sample(frame, self.inputs)
+            yield frame_to_sample(frame, self.inputs, self.labels)

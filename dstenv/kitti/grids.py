@@ -48,6 +48,7 @@ __all__ = [
     "box_mask",
     "dontcare_cells",
     "label_grid",
+    "kitti_convention",
 ]
 
 FREE_LABELS: tuple[str, ...] = ("navigable", "ignore")
@@ -195,4 +196,29 @@ def label_grid(
     if len(boxes):
         out[masks[~moving].any(axis=0)] = _STATIC
         out[masks[moving].any(axis=0)] = _MOVING
+    return out
+
+
+def kitti_convention(labels: np.ndarray, sensor: np.ndarray) -> np.ndarray:
+    """Full labels (a simulated frame's) relabelled the way :func:`label_grid` labels a
+    KITTI frame without a map: ``static``/``moving`` kept everywhere, other cells the
+    LIDAR sees free now ``navigable`` (the ``free_label`` rule), every other cell
+    ignored (walls, poles, kerbs, unseen ground: KITTI has no class for them). The
+    camera's field of view is not applied: a network trained on it learns from every
+    direction.
+
+    Args:
+        labels: ``(..., H, W) uint8`` class indices or :data:`IGNORE_INDEX`.
+        sensor: ``(..., H, W) uint8`` sensor grid of the same frames.
+
+    Returns:
+        ``(..., H, W) uint8``, a new array.
+    """
+    labels, sensor = np.asarray(labels), np.asarray(sensor)
+    if labels.shape != sensor.shape:
+        raise ValueError(f"labels {labels.shape} and sensor {sensor.shape} differ")
+    out = np.full(labels.shape, IGNORE_INDEX, dtype=np.uint8)
+    out[sensor == SensorState.FREE] = _NAV
+    obj = (labels == _STATIC) | (labels == _MOVING)
+    out[obj] = labels[obj]
     return out

@@ -79,9 +79,8 @@ def load_segmenter(path: str | Path, device: str | torch.device = "cpu") -> Torc
                          f"{', '.join(_SPEC_KEYS)}); was it written by dstenv train?")
     if not isinstance(ckpt.get("model"), dict):
         raise ValueError(f"{path}: checkpoint holds no model weights")
-    seg = TorchSegmenter(
-        spec["model"], spec["model_kwargs"], spec["in_channels"], spec["num_classes"], device
-    )
+    seg = TorchSegmenter(spec["model"], spec["model_kwargs"], spec["in_channels"],
+                         spec["num_classes"], device, str(spec.get("inputs", "fcn10")))
     try:
         seg.model.load_state_dict(ckpt["model"])
     except RuntimeError as exc:

@@ -38,6 +38,8 @@ def _train(args: argparse.Namespace) -> int:
         "model_kwargs": args.model_kwargs,
         "seed": args.seed,
         "device": args.device,
+        "inputs": args.inputs,
+        "labels": args.labels,
     }
     for key in ("epochs", "batch_size", "lr", "loss", "crop", "num_workers", "weight_power"):
         if getattr(args, key) is not None:
@@ -47,7 +49,8 @@ def _train(args: argparse.Namespace) -> int:
 
         spec = load_checkpoint(args.init)["spec"]  # one-line errors for a bad file
         # fine-tuning continues the checkpoint's network, whatever --model says
-        cfg.update(init=str(args.init), model=spec["model"], model_kwargs=spec["model_kwargs"])
+        cfg.update(init=str(args.init), model=spec["model"], model_kwargs=spec["model_kwargs"],
+                   inputs=spec.get("inputs", "fcn10"))
     if args.stream is not None:
         if not args.steps_per_epoch:
             raise CLIError("--stream needs --steps-per-epoch (a stream has no end)")
@@ -55,16 +58,19 @@ def _train(args: argparse.Namespace) -> int:
             raise CLIError(
                 "--stream with a weighted loss needs --class-weights (or --loss lovasz/ce)"
             )
-        train_ds = StreamingDataset(args.stream or None, seed=args.seed, split="train")
-        val_ds = ShardDataset(args.data, split="val") if args.data else None
+        train_ds = StreamingDataset(args.stream or None, seed=args.seed, split="train",
+                                    inputs=cfg["inputs"], labels=args.labels)
+        val_ds = ShardDataset(args.data, split="val", inputs=cfg["inputs"],
+                              labels=args.labels) if args.data else None
         cfg["max_batches"] = args.steps_per_epoch
     else:
         if not args.data:
             raise CLIError("give --data DIR (shards from dstenv generate) or --stream SCENARIO")
-        train_ds = ShardDataset(args.data, split="train")
+        train_ds = ShardDataset(args.data, split="train", inputs=cfg["inputs"],
+                                labels=args.labels)
         if len(train_ds) == 0:
             raise CLIError(f"{args.data}: no training frames (split 'train')")
-        val_ds = ShardDataset(args.data, split="val")
+        val_ds = ShardDataset(args.data, split="val", inputs=cfg["inputs"], labels=args.labels)
         val_ds = val_ds if len(val_ds) else None
     if args.class_weights is not None:
         cfg["class_weights"] = args.class_weights
@@ -244,6 +250,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         type=float,
         help="raise the median-frequency class weights to this power (default 1: paper eq. 2)",
     )
+    p.add_argument("--inputs", choices=("fcn10", "fcn10+sensor"), default="fcn10",
+                   help="network input: BetP at t and t-1 (fcn10, the paper's), or also the "
+                        "current sensor grid (fcn10+sensor)")
+    p.add_argument("--labels", choices=("full", "kitti"), default="full",
+                   help="label convention: as stored (full) or KITTI's (kitti: objects, "
+                        "seen-free cells navigable, the rest ignored), for real drives")
     p.add_argument("--epochs", type=int)
     p.add_argument("--batch-size", type=int)
     p.add_argument("--lr", type=float, help="Adam learning rate (default 1e-3)")

@@ -80,10 +80,13 @@ def load_checkpoints(
     segs = []
     for path in paths:
         seg = load_segmenter(path, device)
-        if seg.in_channels != in_channels:
+        # fcn10+sensor networks read the frames' sensor grids besides the BetP channels
+        from_data = seg.in_channels - (2 if seg.inputs == "fcn10+sensor" else 0)
+        if from_data != in_channels:
             raise ValueError(
-                f"{path}: checkpoint takes {seg.in_channels} input channels but the data "
-                f"gives {in_channels} (BetP at t and t-1)"
+                f"{path}: checkpoint takes {seg.in_channels} input channels"
+                + (f" ({seg.inputs})" if seg.inputs != "fcn10" else "")
+                + f" but the data gives {in_channels} (BetP at t and t-1)"
             )
         if seg.num_classes != num_classes:
             raise ValueError(

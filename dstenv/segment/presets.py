@@ -65,6 +65,15 @@ def default_benchmark_config() -> dict[str, Any]:
             "epochs": 0,
             "lr": 5e-4,  # Adam learning rate of the fine-tuning
         },
+        "real_net": {
+            # with --kitti: networks for the real drives, trained on simulated drives at
+            # the converted data's grid with KITTI's label convention and the sensor grid
+            # as input (dstenv.segment.realnet); rows "MODEL kitti-labels"; 0 frames = off
+            "frames": 0,
+            "epochs": 5,
+            "seeds": [0],
+            "model": "unet-light",
+        },
         "curve": {
             "frames": [],  # training-set sizes, e.g. [140, 1400, 14000]
             "model": "unet-light",
@@ -170,6 +179,8 @@ PRESETS: dict[str, dict[str, Any]] = {
         },
         # the no-map network for KITTI without OSM: +2 epochs on the ~500 map-free frames
         "no_map": {"epochs": 2},
+        # with --kitti: 1000 simulated frames at KITTI's 256 x 256 grid, KITTI's labels
+        "real_net": {"frames": 1000, "epochs": 5},
         "device": "cpu",
     },
     # the full benchmark for a GPU: the paper's FCN-8s, more data, full-size grids,
@@ -280,6 +291,16 @@ def check_config(cfg: Mapping[str, Any]) -> None:
     nm = cfg["no_map"]
     if not (isinstance(nm["epochs"], int) and nm["epochs"] >= 0) or not float(nm["lr"]) > 0:
         raise ConfigError(f"no_map: epochs must be an integer >= 0 and lr > 0, got {dict(nm)}")
+    rn = cfg["real_net"]
+    if not (isinstance(rn["frames"], int) and rn["frames"] >= 0 and isinstance(rn["epochs"], int)
+            and rn["epochs"] >= 1) or not rn["seeds"] or len(set(rn["seeds"])) != len(rn["seeds"]):
+        raise ConfigError(f"real_net: frames must be an integer >= 0, epochs >= 1 and seeds "
+                          f"distinct, got {dict(rn)}")
+    from dstenv.segment.models import MODELS
+
+    if rn["model"] not in MODELS:
+        raise ConfigError(f"real_net.model: unknown model {rn['model']!r}; choose from "
+                          + ", ".join(MODELS))
     if any(int(n) < 1 for n in cfg["curve"]["frames"]):
         raise ConfigError(f"curve.frames: sizes must be >= 1, got {cfg['curve']['frames']}")
     from dstenv.segment.score import SCOPES

@@ -9,6 +9,9 @@ observed cells accumulated) and scores, with the same
 * ``dst-tuned`` and ``dst-complete`` with the parameters the simulated run tuned
   on its training maps (never on real frames);
 * every network of the simulated run, trained only on simulated data;
+* with ``real_net.frames > 0``: networks trained for real drives, on simulated
+  drives at the converted grid with KITTI's label convention and the sensor grid as
+  input (:mod:`dstenv.segment.realnet`), also simulated data only;
 * with ``finetune_frames = N > 0``: a simulated network fine-tuned (``train.init``)
   on the labelled frames ``0 .. N-1`` of each sequence, starting from the one with
   the best mIoU on those same frames (:func:`start_scores`; with or without map
@@ -69,12 +72,16 @@ def start_scores(ckpts: Mapping[str, Path], ds: Any, picked: Sequence[int]
     from dstenv.segment.evaluate import load_checkpoints
     from dstenv.segment.metrics import confusion_matrix, mean_iou
 
+    from dstenv.data import ShardDataset
+
     samples = [ds[k] for k in picked]
-    x = torch.stack([s["x"] for s in samples])
+    x10 = torch.stack([s["x"] for s in samples])
     y = torch.stack([s["labels"] for s in samples])
     out = {}
     for label, path in ckpts.items():
-        (seg,) = load_checkpoints([path], int(x.shape[1]))
+        (seg,) = load_checkpoints([path], int(x10.shape[1]))
+        x = x10 if seg.inputs == ds.inputs else torch.stack(
+            [s["x"] for s in (ShardDataset(ds.files, inputs=seg.inputs)[k] for k in picked)])
         with torch.no_grad():
             pred = torch.cat([seg.predict(x[i:i + 4]) for i in range(0, len(x), 4)])
         miou = mean_iou(confusion_matrix(pred, y, 5))
@@ -100,8 +107,11 @@ def _finetune(ckpts: Mapping[str, Path], data: Path, frames: int, epochs: int, o
     log(f"fine-tuning start: {best} (mIoU on the {len(picked)} fine-tuning frames: "
         + ", ".join(f"{k} {v:.3f}" for k, v in scores.items()) + ")")
     spec = torch.load(ckpts[best], map_location="cpu", weights_only=True)["spec"]
+    inputs = spec.get("inputs", "fcn10")
     cfg = {"init": str(ckpts[best]), "model": spec["model"], "model_kwargs": spec["model_kwargs"],
-           "epochs": epochs, "batch_size": 4, "lr": 1e-4, "device": "cpu"}
+           "epochs": epochs, "batch_size": 4, "lr": 1e-4, "device": "cpu", "inputs": inputs}
+    if inputs != ds.inputs:  # the real labels are KITTI's already: labels stay "full"
+        ds = ShardDataset(data, split="test", inputs=inputs)
     log(f"fine-tuning {best} on {len(picked)} real frames")
     train(cfg, torch.utils.data.Subset(ds, picked), None, out, progress=progress, log=log)
     return out / "last.pt", {"start": best, "start_miou": scores}
@@ -179,6 +189,17 @@ def real_benchmark(
     data = kdir / "data"
     _convert(root, sequences, osm, data)
     ckpts = sim_checkpoints(sim)
+    facts = None
+    rn = sim["config"].get("real_net", {"frames": 0})  # runs older than real_net: none
+    if int(rn["frames"]) > 0:
+        from dstenv.data.manifest import load_manifest
+        from dstenv.segment.realnet import train_real_networks
+
+        manifest = load_manifest(data)
+        more, facts = train_real_networks(sim, tuple(manifest["grid_shape"]),
+                                          float(manifest["cell_size"]), kdir / "real_net",
+                                          progress, log)
+        ckpts.update(more)
     cfg = default_benchmark_config()
     cfg.update(models=[], device="cpu", examples=min(int(sim["config"]["examples"]), 2))
     segs = sim["segmenters"]
@@ -205,5 +226,5 @@ def real_benchmark(
     res["real"] = {"root": str(root), "sequences": list(sequences), "osm": osm,
                    "finetune_frames": finetune_frames, "gap": gap,
                    "finetune_start": start if finetune_frames > 0 else None,
-                   "scored_from_step": cfg["score_from_step"]}
+                   "scored_from_step": cfg["score_from_step"], "real_net": facts}
     return res

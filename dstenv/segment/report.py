@@ -164,11 +164,20 @@ def _real_lines(results: dict[str, Any]) -> list[str]:
     """What ``--kitti --finetune-frames N`` learned from the real frames it did not score."""
     real = results.get("real") or {}
     start = real.get("finetune_start")
+    net = real.get("real_net")
+    lines = []
+    if net:
+        f = net["frames"]
+        lines += [f"{', '.join(f'`{k} (sim only)`' for k in net['checkpoints'])}: trained on "
+                  f"{f['train']} simulated frames ({f['val']} validation) at this data's grid "
+                  f"({net['grid'][0]} x {net['grid'][1]} cells of {net['cell_size']:g} m), "
+                  "labelled as KITTI labels (objects, seen-free cells navigable, the rest "
+                  "ignored), reading the sensor grid besides BetP t / t-1; no real frame.", ""]
     if not real.get("finetune_frames") or not start:
-        return []
+        return lines
     n = real["finetune_frames"]
     cands = ", ".join(f"{k} {v:.3f}" for k, v in start["start_miou"].items())
-    lines = [f"Frames 0-{n - 1} of each sequence are labelled training frames, scored by no "
+    lines += [f"Frames 0-{n - 1} of each sequence are labelled training frames, scored by no "
              f"row (every row is scored from step {real.get('scored_from_step')} on): the "
              f"fine-tuning starts from {start['start']}, the simulated network with the best "
              f"mIoU on them ({cands})."]
@@ -177,7 +186,7 @@ def _real_lines(results: dict[str, Any]) -> list[str]:
     tuned = results.get("segmenters", {}).get(REAL_TUNED)
     if tuned is not None:
         t = tuned["describe"]["tuning"]
-        lines[0] += (f" `{REAL_TUNED}` searched the DST parameters on "
+        lines[-1] += (f" `{REAL_TUNED}` searched the DST parameters on "
                      f"them ({t['budget']} sets, {t['scope']} cells: mIoU "
                      f"{t['start_miou']:.3f} with the defaults, {t['best_miou']:.3f} tuned).")
     return lines + [""]

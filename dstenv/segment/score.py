@@ -50,6 +50,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from dstenv.data.datasets import network_input
 from dstenv.dst.frame import CLASSES
 from dstenv.dst.params import DSTParams
 from dstenv.frame import IGNORE_INDEX
@@ -228,7 +229,9 @@ def score(
     filter run with its own parameters over the drive's inputs (argmax of the
     stored BetP when they are the generation parameters and the drive has no
     history; unscorable otherwise). Any other segmenter (a network) reads the
-    drive's ``stored_x`` if set, else the filter run with ``generation_params``.
+    drive's ``stored_x`` if set, else the filter run with ``generation_params``,
+    and, when its ``inputs`` are ``fcn10+sensor``, the drive's sensor grids
+    (:func:`dstenv.data.datasets.network_input`).
 
     Args:
         segmenters: distinct ``label`` values.
@@ -289,12 +292,13 @@ def score(
                     continue
                 pred = seg.predict(torch.from_numpy(x)).numpy()
             else:
-                pred = np.concatenate(
-                    [
-                        seg.predict(torch.from_numpy(x_gen[j : j + batch_size])).numpy()
-                        for j in range(0, len(x_gen), batch_size)
-                    ]
-                )
+                inputs = getattr(seg, "inputs", "fcn10")
+                pred = np.concatenate([
+                    seg.predict(torch.from_numpy(network_input(
+                        x_gen[j : j + batch_size], ep.sensor[ep.steps[j : j + batch_size]],
+                        inputs))).numpy()
+                    for j in range(0, len(x_gen), batch_size)
+                ])
             for sc, m in masks.items():
                 conf[seg.label][sc][i] = confusion_matrix(pred, labels, nc, m)
             for k in range(len(ep.steps)):

@@ -82,6 +82,8 @@ class TorchSegmenter(Segmenter):
         model_kwargs: builder options (JSON-compatible, stored in checkpoints).
         in_channels, num_classes: network input channels and classes.
         device: where :meth:`predict` runs.
+        inputs: what the input channels are, a key of
+            :data:`dstenv.data.datasets.INPUTS` (``"fcn10"``: BetP at t and t-1).
     """
 
     def __init__(
@@ -91,8 +93,10 @@ class TorchSegmenter(Segmenter):
         in_channels: int = 10,
         num_classes: int = 5,
         device: str | torch.device = "cpu",
+        inputs: str = "fcn10",
     ) -> None:
         self.name = model_name
+        self.inputs = inputs
         self.label = model_name
         self.model_kwargs = dict(model_kwargs or {})
         self.in_channels = in_channels
@@ -119,6 +123,7 @@ class TorchSegmenter(Segmenter):
             "model_kwargs": self.model_kwargs,
             "in_channels": self.in_channels,
             "num_classes": self.num_classes,
+            "inputs": self.inputs,
         }
 
     def describe(self) -> dict[str, Any]:

@@ -22,6 +22,7 @@ import torch
 from tqdm import tqdm
 
 from dstenv.config import ConfigError, merge_config
+from dstenv.data.datasets import INPUT_CHANNELS, LABELS
 from dstenv.dst.frame import CLASSES
 from dstenv.segment.checkpoint import load_checkpoint, save_checkpoint
 from dstenv.segment.losses import LOSSES, build_loss, class_statistics, median_frequency_weights
@@ -53,6 +54,10 @@ def default_train_config() -> dict[str, Any]:
         "device": "cpu",  # "cpu", "cuda" or "auto"
         "num_workers": 0,  # DataLoader workers
         "init": "",  # checkpoint whose weights start the training (fine-tuning); "" = random
+        # what the data's "x" holds (dstenv.data.datasets.INPUTS) and its label convention
+        # (LABELS): recorded with the network; the caller's datasets must match them
+        "inputs": "fcn10",
+        "labels": "full",
     }
 
 
@@ -74,6 +79,12 @@ def _check(cfg: dict[str, Any]) -> None:
         raise ConfigError(
             f"train.loss: unknown loss {cfg['loss']!r}; choose from {', '.join(LOSSES)}"
         )
+    if cfg["inputs"] not in INPUT_CHANNELS:
+        raise ConfigError(f"train.inputs: unknown inputs {cfg['inputs']!r}; choose from "
+                          f"{', '.join(INPUT_CHANNELS)}")
+    if cfg["labels"] not in LABELS:
+        raise ConfigError(f"train.labels: unknown labels {cfg['labels']!r}; choose from "
+                          f"{', '.join(LABELS)}")
     for key in ("epochs", "batch_size"):
         if cfg[key] < 1:
             raise ConfigError(f"train.{key}: must be >= 1, got {cfg[key]}")
@@ -151,6 +162,9 @@ def train(
         raise ConfigError("train.max_batches must be > 0 for a streaming dataset (it has no end)")
     sample = next(iter(train_data)) if streaming else train_data[0]
     in_channels = int(sample["x"].shape[0])
+    if in_channels != INPUT_CHANNELS[cfg["inputs"]]:
+        raise ConfigError(f"train.inputs is {cfg['inputs']!r} ({INPUT_CHANNELS[cfg['inputs']]} "
+                          f"channels) but the training data gives {in_channels}")
 
     out = Path(out_dir) if out_dir is not None else None
     last = out / "last.pt" if out else None
@@ -172,7 +186,8 @@ def train(
         cfg["class_weights"] = _class_weights(cfg, train_data, log)
 
     torch.manual_seed(cfg["seed"])
-    seg = TorchSegmenter(cfg["model"], cfg["model_kwargs"], in_channels, len(CLASSES), device)
+    seg = TorchSegmenter(cfg["model"], cfg["model_kwargs"], in_channels, len(CLASSES), device,
+                         cfg["inputs"])
     model = seg.model
     if cfg["init"] and ckpt is None:
         model.load_state_dict(_init_weights(cfg, seg))
@@ -286,11 +301,12 @@ def train(
 def _init_weights(cfg: dict[str, Any], seg: TorchSegmenter) -> dict[str, Any]:
     """The state dict of ``cfg["init"]``, checked against the network being trained."""
     init = load_checkpoint(cfg["init"])
-    if init["spec"] != seg.spec():
-        diff = sorted(k for k in seg.spec() if init["spec"].get(k) != seg.spec()[k])
+    spec = {"inputs": "fcn10", **init["spec"]}  # written before inputs were recorded
+    if spec != seg.spec():
+        diff = sorted(k for k in seg.spec() if spec.get(k) != seg.spec()[k])
         raise ConfigError(
             f"train.init: {cfg['init']} holds another network ({', '.join(diff)} differ: "
-            f"{ {k: init['spec'].get(k) for k in diff} }); train the same model and inputs"
+            f"{ {k: spec.get(k) for k in diff} }); train the same model and inputs"
         )
     return init["model"]
 

@@ -135,3 +135,34 @@ def test_corrupt_chunk_at_read_time(tmp_path, make_frame, shard_attrs):
     np.testing.assert_array_equal(skipping[0]["labels"].numpy(), frames[2].labels)
     with pytest.warns(RuntimeWarning), pytest.raises(ShardError, match="no readable frame"):
         ShardDataset([path], on_error="skip")[1]
+
+
+def test_sensor_input_and_kitti_labels(dataset_dir):
+    """``inputs="fcn10+sensor"`` adds the sensor grid as free / occupied channels;
+    ``labels="kitti"`` relabels as a KITTI frame without a map is labelled."""
+    from dstenv.data.datasets import network_input, sensor_channels
+
+    root, frames = dataset_dir
+    f = frames[("train", "shard-00001.h5", 0)]
+    item = ShardDataset(root, split="train", inputs="fcn10+sensor", labels="kitti")[3]
+    assert item["x"].shape == (12, 12, 10)
+    np.testing.assert_array_equal(item["x"][:10].numpy(),
+                                  ShardDataset(root, split="train")[3]["x"].numpy())
+    np.testing.assert_array_equal(item["x"][10].numpy(), (f.sensor == 1).astype(np.float32))
+    np.testing.assert_array_equal(item["x"][11].numpy(), (f.sensor == 2).astype(np.float32))
+    lab = item["labels"].numpy()
+    obj = np.isin(f.labels, (3, 4))
+    np.testing.assert_array_equal(lab[obj], f.labels[obj])
+    assert (lab[~obj & (f.sensor == 1)] == 0).all()  # seen free: navigable
+    assert (lab[~obj & (f.sensor != 1)] == 255).all()  # anything else: ignored
+    assert (f.labels[~obj & (f.sensor != 1)] != 255).any()  # (something was relabelled)
+    # the same channels for a batch of scored frames
+    x = np.zeros((2, 10, 12, 10), np.float32)
+    both = network_input(x, np.stack([f.sensor, f.sensor]), "fcn10+sensor")
+    assert both.shape == (2, 12, 12, 10)
+    np.testing.assert_array_equal(both[1, 10:], sensor_channels(f.sensor))
+    assert network_input(x, f.sensor[None], "fcn10") is x
+    with pytest.raises(ValueError, match="cannot be scored"):
+        network_input(x, f.sensor[None], "masses")
+    with pytest.raises(ValueError, match="unknown labels 'coco'"):
+        ShardDataset(root, labels="coco")

@@ -208,3 +208,39 @@ def test_fine_tuning_starts_from_the_network_that_reads_its_frames_best(kitti_ro
     cm = confusion_matrix(pred, np.stack([s["labels"].numpy() for s in samples]), 5)
     assert scores == {"a": pytest.approx(mean_iou(cm)), "b": pytest.approx(mean_iou(cm))}
     assert 0.0 <= scores["a"] <= 1.0
+
+
+def test_real_net_is_trained_for_the_real_grid_and_scored_on_it(kitti_root, sim_checkpoint,
+                                                                  tmp_path):
+    """``real_net``: simulated drives at the converted grid, KITTI's labels, sensor input;
+    scored on the real drive next to the simulated run's network, and a candidate start
+    of the fine-tuning."""
+    import torch
+
+    from dstenv.data.manifest import load_manifest
+    from dstenv.segment.checkpoint import load_checkpoint
+    from dstenv.segment.presets import preset_config
+    from dstenv.segment.real import real_benchmark
+
+    cfg = preset_config("tiny", {"real_net": {"frames": 10, "epochs": 1}})
+    sim = {"config": cfg, "segmenters": {
+        "unet-light": {"kind": "learned", "describe": {"checkpoint": str(sim_checkpoint)}}}}
+    res = real_benchmark(sim, tmp_path, str(kitti_root), ["0001"], finetune_frames=2,
+                         finetune_epochs=1, gap=1, log=lambda m: None)
+    facts = res["real"]["real_net"]
+    label = "unet-light kitti-labels"
+    grid = load_manifest(tmp_path / "kitti" / "data")["grid_shape"]
+    assert facts["grid"] == grid and facts["labels"] == "kitti"
+    assert load_manifest(tmp_path / "kitti" / "real_net" / "data")["grid_shape"] == grid
+    ckpt = load_checkpoint(facts["checkpoints"][label])
+    assert ckpt["spec"]["inputs"] == "fcn10+sensor" and ckpt["spec"]["in_channels"] == 12
+    assert ckpt["config"]["labels"] == "kitti"
+    rows = res["segmenters"]
+    assert {f"{label} (sim only)", "unet-light (sim only)"} <= set(rows)
+    assert rows[f"{label} (sim only)"]["describe"]["inputs"] == "fcn10+sensor"
+    # both networks were candidates for the fine-tuning start
+    assert set(res["real"]["finetune_start"]["start_miou"]) == {"unet-light", label}
+    tuned = torch.load(tmp_path / "kitti" / "finetune" / "last.pt", weights_only=True)
+    assert tuned["spec"]["inputs"] == res["segmenters"][
+        "fine-tuned on 2 real frames/sequence"]["describe"]["inputs"]
+    assert set(res["real_goal"]["networks"]) >= {f"{label} (sim only)"}

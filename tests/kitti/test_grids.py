@@ -151,3 +151,19 @@ def test_real_cars_on_occupied_cells(real_root):
     assert np.mean(near) > 0.6 and np.min(near) > 0.3
     assert np.mean(free) < 0.15  # rays stop at the car: its footprint is not "seen free"
     assert np.mean(shifted) < 0.5 * np.mean(near)
+
+
+def test_kitti_convention_relabels_a_simulated_frame():
+    from dstenv.kitti.grids import kitti_convention
+
+    labels = np.array([[0, 1, 2, 3, 4, 255]], np.uint8)
+    free = np.full(labels.shape, 1, np.uint8)
+    np.testing.assert_array_equal(kitti_convention(labels, free), [[0, 0, 0, 3, 4, 0]])
+    occupied = np.full(labels.shape, 2, np.uint8)
+    np.testing.assert_array_equal(kitti_convention(labels, occupied),
+                                  [[255, 255, 255, 3, 4, 255]])
+    unseen = np.zeros(labels.shape, np.uint8)
+    np.testing.assert_array_equal(kitti_convention(labels, unseen),
+                                  [[255, 255, 255, 3, 4, 255]])
+    with pytest.raises(ValueError, match="differ"):
+        kitti_convention(labels, unseen[:, :3])

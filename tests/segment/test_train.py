@@ -159,3 +159,38 @@ def test_best_checkpoint_without_validation_follows_the_training_loss(tmp_path, 
     assert min(hist["train_loss"]) > 1 and hist["val_miou"] == [None, None]
     best = load_checkpoint(tmp_path / "best.pt")
     assert best["epoch"] == min(range(2), key=lambda e: hist["train_loss"][e])
+
+
+def test_inputs_are_recorded_checked_and_loaded(tmp_path, make_frames):
+    """train.inputs names what ``x`` holds: checked against the data, kept in the
+    checkpoint's spec, rebuilt by load_segmenter, and checked by load_checkpoints."""
+    from dstenv.segment.evaluate import load_checkpoints
+
+    quiet = {"progress": False, "log": lambda m: None}
+    data = make_frames(4, seed=1)
+    with pytest.raises(ConfigError, match="train.inputs is 'fcn10\\+sensor' \\(12 channels\\) "
+                                          "but the training data gives 10"):
+        train({**SMALL, "epochs": 1, "inputs": "fcn10+sensor"}, data, None, None, **quiet)
+    with pytest.raises(ConfigError, match="train.labels: unknown labels 'coco'"):
+        train({**SMALL, "labels": "coco"}, data, None, None, **quiet)
+    sensor = [{**s, "x": torch.cat([s["x"], torch.zeros(2, *s["x"].shape[1:])])} for s in data]
+    train({**SMALL, "epochs": 1, "inputs": "fcn10+sensor", "labels": "kitti"}, sensor, None,
+          tmp_path / "s", **quiet)
+    seg = load_segmenter(tmp_path / "s" / "last.pt")
+    assert seg.inputs == "fcn10+sensor" and seg.spec()["in_channels"] == 12
+    assert load_checkpoint(tmp_path / "s" / "last.pt")["config"]["labels"] == "kitti"
+    # scored on BetP data (10 channels), the sensor channels come from the drives
+    (loaded,) = load_checkpoints([tmp_path / "s" / "last.pt"], 10)
+    assert loaded.inputs == "fcn10+sensor"
+    with pytest.raises(ValueError, match="takes 12 input channels \\(fcn10\\+sensor\\) but the "
+                                         "data gives 5"):
+        load_checkpoints([tmp_path / "s" / "last.pt"], 5)
+    # a checkpoint written before inputs were recorded reads as fcn10 and can start a
+    # fine-tuning
+    train({**SMALL, "epochs": 1}, data, None, tmp_path / "old", **quiet)
+    ckpt = torch.load(tmp_path / "old" / "last.pt", weights_only=True)
+    del ckpt["spec"]["inputs"]
+    torch.save(ckpt, tmp_path / "old" / "last.pt")
+    assert load_segmenter(tmp_path / "old" / "last.pt").inputs == "fcn10"
+    train({**SMALL, "epochs": 1, "init": str(tmp_path / "old" / "last.pt")}, data, None, None,
+          **quiet)

@@ -54,14 +54,25 @@ from dstenv.segment.results import (
     tie_summary,
 )
 
-__all__ = ["run_benchmark"]
+__all__ = ["run_benchmark", "generate_data"]
 
 
 #: [bytes] largest train/val split kept in memory between epochs (ShardDataset cache)
 _CACHE_BYTES = 2 << 30
 
 
-def _generate(dcfg: dict[str, Any], protocol: str, out: Path, progress: bool) -> None:
+def generate_data(dcfg: Mapping[str, Any], protocol: str, out: Path, progress: bool,
+                  cell_size: float | None = None) -> None:
+    """Generate (or resume) a benchmark's shards into ``out``.
+
+    Args:
+        dcfg: a benchmark configuration's ``data`` section.
+        protocol: ``"sim"`` or ``"paper"`` (:func:`protocol_overrides`).
+        out: the dataset directory.
+        progress: tqdm bars.
+        cell_size: [m] grid cell size, over ``dcfg["overrides"]``; ``None`` keeps the
+            scenario's (or the overrides').
+    """
     from dstenv.data.generate import GenerateSpec, generate
     from dstenv.data.sampling import scenario_config
 
@@ -69,6 +80,8 @@ def _generate(dcfg: dict[str, Any], protocol: str, out: Path, progress: bool) ->
     overrides: dict[str, Any] = {"grid": {"height": g, "width": g}} if g else {}
     overrides = _deep_update(overrides, protocol_overrides(protocol))
     overrides = _deep_update(overrides, dcfg["overrides"])
+    if cell_size is not None:  # wins over data.overrides: it must match other data
+        overrides = _deep_update(overrides, {"grid": {"cell_size": float(cell_size)}})
     spec = GenerateSpec(
         config=scenario_config(dcfg["scenario"] or None, overrides or None),
         frames=int(dcfg["frames"]),
@@ -139,7 +152,7 @@ def run_benchmark(
     if data_dir is None:
         data_dir = out / "data"
         log(f"generating {cfg['data']['frames']} frames into {data_dir}")
-        _generate(cfg["data"], cfg["protocol"], data_dir, progress)
+        generate_data(cfg["data"], cfg["protocol"], data_dir, progress)
     data_dir = Path(data_dir)
     timings["data_s"] = time.perf_counter() - t
 

@@ -179,8 +179,9 @@ PRESETS: dict[str, dict[str, Any]] = {
         },
         # the no-map network for KITTI without OSM: +2 epochs on the ~500 map-free frames
         "no_map": {"epochs": 2},
-        # with --kitti: 1000 simulated frames at KITTI's 256 x 256 grid, KITTI's labels
-        "real_net": {"frames": 1000, "epochs": 5},
+        # with --kitti: three networks on 600 simulated frames at the converted grid
+        # (KITTI's 256 x 256), KITTI's labels, the sensor grid as input
+        "real_net": {"frames": 600, "epochs": 5, "seeds": [0, 1, 2]},
         "device": "cpu",
     },
     # the full benchmark for a GPU: the paper's FCN-8s, more data, full-size grids,
@@ -206,6 +207,7 @@ PRESETS: dict[str, dict[str, Any]] = {
             "num_workers": 4,
         },
         "train_seeds": [0, 1, 2],
+        "real_net": {"frames": 4000, "epochs": 10, "seeds": [0, 1, 2]},
         "device": "auto",
     },
     # the training-set-size curve: the paper's 140 frames, x10, x100, each network

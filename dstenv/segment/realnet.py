@@ -69,7 +69,7 @@ def train_real_networks(
         ValueError: a non-square grid.
     """
     from dstenv.data import ShardDataset
-    from dstenv.segment.benchmark import _deep_update, _generate
+    from dstenv.segment.benchmark import generate_data
     from dstenv.segment.train import resolve_device, train
 
     cfg = sim["config"]
@@ -78,12 +78,10 @@ def train_real_networks(
         raise ValueError(f"real_net: the real data's grid {grid} is not square")
     t = time.perf_counter()
     dcfg = {**cfg["data"], "frames": int(rn["frames"]), "grid": int(grid[0]),
-            "seed": int(cfg["data"]["seed"]) + _SEED_OFFSET,
-            "overrides": _deep_update(cfg["data"]["overrides"],
-                                      {"grid": {"cell_size": float(cell_size)}})}
+            "seed": int(cfg["data"]["seed"]) + _SEED_OFFSET}
     log(f"real_net: generating {dcfg['frames']} simulated frames at {grid[0]} x {grid[1]} "
         f"cells of {cell_size:g} m into {out / 'data'}")
-    _generate(dcfg, cfg["protocol"], out / "data", progress)
+    generate_data(dcfg, cfg["protocol"], out / "data", progress, cell_size)
     timings = {"data_s": time.perf_counter() - t}
     data = {s: ShardDataset(out / "data", split=s, inputs="fcn10+sensor", labels="kitti")
             for s in ("train", "val")}

@@ -62,7 +62,7 @@ _CACHE_BYTES = 2 << 30
 
 
 def generate_data(dcfg: Mapping[str, Any], protocol: str, out: Path, progress: bool,
-                  cell_size: float | None = None) -> None:
+                  cell_size: float | None = None, no_map: bool = False) -> None:
     """Generate (or resume) a benchmark's shards into ``out``.
 
     Args:
@@ -72,6 +72,8 @@ def generate_data(dcfg: Mapping[str, Any], protocol: str, out: Path, progress: b
         progress: tqdm bars.
         cell_size: [m] grid cell size, over ``dcfg["overrides"]``; ``None`` keeps the
             scenario's (or the overrides').
+        no_map: every drive without a map (``gis.source = "none"``), over
+            ``dcfg["overrides"]``.
     """
     from dstenv.data.generate import GenerateSpec, generate
     from dstenv.data.sampling import scenario_config
@@ -82,6 +84,8 @@ def generate_data(dcfg: Mapping[str, Any], protocol: str, out: Path, progress: b
     overrides = _deep_update(overrides, dcfg["overrides"])
     if cell_size is not None:  # wins over data.overrides: it must match other data
         overrides = _deep_update(overrides, {"grid": {"cell_size": float(cell_size)}})
+    if no_map:
+        overrides = _deep_update(overrides, {"gis": {"source": "none"}})
     spec = GenerateSpec(
         config=scenario_config(dcfg["scenario"] or None, overrides or None),
         frames=int(dcfg["frames"]),

@@ -13,12 +13,17 @@ from dstenv.config import ConfigError, merge_config
 
 __all__ = [
     "PRESETS",
+    "REAL_NET_MAPS",
     "PAPER_PROTOCOL",
     "check_config",
     "default_benchmark_config",
     "preset_config",
     "protocol_overrides",
 ]
+
+
+#: ``real_net.map`` values (:func:`dstenv.segment.realnet.train_real_networks`)
+REAL_NET_MAPS = ("match", "run")
 
 
 def default_benchmark_config() -> dict[str, Any]:
@@ -73,6 +78,9 @@ def default_benchmark_config() -> dict[str, Any]:
             "epochs": 5,
             "seeds": [0],
             "model": "unet-light",
+            # "match": drives without a map when the real drives have none (converted
+            # without --osm), else the run's map settings; "run": always the run's
+            "map": "match",
         },
         "curve": {
             "frames": [],  # training-set sizes, e.g. [140, 1400, 14000]
@@ -180,7 +188,8 @@ PRESETS: dict[str, dict[str, Any]] = {
         # the no-map network for KITTI without OSM: +2 epochs on the ~500 map-free frames
         "no_map": {"epochs": 2},
         # with --kitti: three networks on 600 simulated frames at the converted grid
-        # (KITTI's 256 x 256), KITTI's labels, the sensor grid as input
+        # (KITTI's 256 x 256), KITTI's labels, the sensor grid as input, no map when
+        # the real drives have none (real_net.map = "match")
         "real_net": {"frames": 600, "epochs": 5, "seeds": [0, 1, 2]},
         "device": "cpu",
     },
@@ -300,6 +309,9 @@ def check_config(cfg: Mapping[str, Any]) -> None:
                           f"distinct, got {dict(rn)}")
     from dstenv.segment.models import MODELS
 
+    if rn["map"] not in REAL_NET_MAPS:
+        raise ConfigError(f"real_net.map: unknown {rn['map']!r}; choose from "
+                          + ", ".join(REAL_NET_MAPS))
     if rn["model"] not in MODELS:
         raise ConfigError(f"real_net.model: unknown model {rn['model']!r}; choose from "
                           + ", ".join(MODELS))

@@ -198,7 +198,7 @@ def real_benchmark(
         manifest = load_manifest(data)
         more, facts = train_real_networks(sim, tuple(manifest["grid_shape"]),
                                           float(manifest["cell_size"]), kdir / "real_net",
-                                          progress, log)
+                                          progress, log, real_map=osm is not None)
         ckpts.update(more)
     cfg = default_benchmark_config()
     cfg.update(models=[], device="cpu", examples=min(int(sim["config"]["examples"]), 2))

@@ -16,6 +16,10 @@ for real drives"):
 * **What is seen now.** The filter keeps moving mass on cells a car has just left;
   the current sensor grid (``inputs = "fcn10+sensor"``) tells the network the cell is
   free now.
+* **No map.** Drives converted without an OSM file have a vacuous GIS grid; with
+  ``real_net.map = "match"`` every simulated drive is then fused without a map too
+  (the simulated run has a map in most drives), so the network never learns to lean on
+  map evidence the real drives lack.
 
 :func:`train_real_networks` generates the data (the simulated run's scenario,
 overrides and protocol; other map seeds) and trains one network per seed; it resumes
@@ -51,6 +55,7 @@ def train_real_networks(
     out: Path,
     progress: bool = False,
     log: Callable[[str], None] = print,
+    real_map: bool = False,
 ) -> tuple[dict[str, Path], dict[str, Any]]:
     """Generate simulated drives at the real data's grid and train the networks.
 
@@ -61,6 +66,10 @@ def train_real_networks(
         cell_size: its cell size [m].
         out: where ``data/`` and ``models/seedN/`` go.
         progress, log: tqdm bars, one-line messages.
+        real_map: whether the real drives were converted with a map. Without one and
+            with ``real_net.map = "match"`` (the default) every simulated drive is
+            fused without a map too (``gis.source = "none"``), as the network will
+            read the real ones.
 
     Returns:
         ``({row label: best.pt}, facts for results.json)``.
@@ -79,9 +88,10 @@ def train_real_networks(
     t = time.perf_counter()
     dcfg = {**cfg["data"], "frames": int(rn["frames"]), "grid": int(grid[0]),
             "seed": int(cfg["data"]["seed"]) + _SEED_OFFSET}
+    no_map = rn.get("map", "match") == "match" and not real_map
     log(f"real_net: generating {dcfg['frames']} simulated frames at {grid[0]} x {grid[1]} "
-        f"cells of {cell_size:g} m into {out / 'data'}")
-    generate_data(dcfg, cfg["protocol"], out / "data", progress, cell_size)
+        f"cells of {cell_size:g} m{' without a map' if no_map else ''} into {out / 'data'}")
+    generate_data(dcfg, cfg["protocol"], out / "data", progress, cell_size, no_map)
     timings = {"data_s": time.perf_counter() - t}
     data = {s: ShardDataset(out / "data", split=s, inputs="fcn10+sensor", labels="kitti")
             for s in ("train", "val")}
@@ -103,7 +113,7 @@ def train_real_networks(
         ckpts[label] = mdir / "best.pt"
     facts = {"data": str(out / "data"), "grid": list(grid), "cell_size": cell_size,
              "frames": {s: len(d) for s, d in data.items()}, "seeds": seeds,
-             "inputs": "fcn10+sensor", "labels": "kitti",
+             "inputs": "fcn10+sensor", "labels": "kitti", "no_map": no_map,
              "checkpoints": {k: str(v) for k, v in ckpts.items()},
              "histories": histories, "timings_s": timings}
     return ckpts, facts

@@ -170,7 +170,9 @@ def _real_lines(results: dict[str, Any]) -> list[str]:
         f = net["frames"]
         lines += [f"{', '.join(f'`{k} (sim only)`' for k in net['checkpoints'])}: trained on "
                   f"{f['train']} simulated frames ({f['val']} validation) at this data's grid "
-                  f"({net['grid'][0]} x {net['grid'][1]} cells of {net['cell_size']:g} m), "
+                  f"({net['grid'][0]} x {net['grid'][1]} cells of {net['cell_size']:g} m"
+                  f"{', every drive without a map, as the real ones' if net.get('no_map') else ''}"
+                  "), "
                   "labelled as KITTI labels (objects, seen-free cells navigable, the rest "
                   "ignored), reading the sensor grid besides BetP t / t-1; no real frame.", ""]
     if not real.get("finetune_frames") or not start:

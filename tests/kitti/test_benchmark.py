@@ -218,6 +218,7 @@ def test_real_net_is_trained_for_the_real_grid_and_scored_on_it(kitti_root, sim_
     import torch
 
     from dstenv.data.manifest import load_manifest
+    from dstenv.data.reader import ShardReader
     from dstenv.segment.checkpoint import load_checkpoint
     from dstenv.segment.presets import preset_config
     from dstenv.segment.real import real_benchmark
@@ -231,7 +232,16 @@ def test_real_net_is_trained_for_the_real_grid_and_scored_on_it(kitti_root, sim_
     label = "unet-light kitti-labels"
     grid = load_manifest(tmp_path / "kitti" / "data")["grid_shape"]
     assert facts["grid"] == grid and facts["labels"] == "kitti"
-    assert load_manifest(tmp_path / "kitti" / "real_net" / "data")["grid_shape"] == grid
+    rdata = tmp_path / "kitti" / "real_net" / "data"
+    assert load_manifest(rdata)["grid_shape"] == grid
+    # converted without --osm: every simulated drive without a map too (real_net.map
+    # "match"), though the tiny preset's own drives have one
+    assert cfg["data"]["overrides"].get("gis", {}).get("source", "map") == "map"
+    assert facts["no_map"] is True
+    for shard in sorted(rdata.rglob("*.h5")):
+        with ShardReader(shard) as r:
+            assert r.attrs["config"]["gis"]["source"] == "none"
+            assert not r.get(0, ["gis"])["gis"].any()  # vacuous GIS grid: all 0
     ckpt = load_checkpoint(facts["checkpoints"][label])
     assert ckpt["spec"]["inputs"] == "fcn10+sensor" and ckpt["spec"]["in_channels"] == 12
     assert ckpt["config"]["labels"] == "kitti"

@@ -119,6 +119,8 @@ def test_presets_validate():
         _check(preset_config("tiny", {"search": {"key": "speed", "values": [1]}}))
     with pytest.raises(ConfigError, match="train_seeds"):
         _check(preset_config("tiny", {"train_seeds": [1, 1]}))
+    with pytest.raises(ConfigError, match="real_net.map: unknown 'osm'; choose from match, run"):
+        _check(preset_config("tiny", {"real_net": {"map": "osm"}}))
 
 
 def test_paper_protocol_names_missing_pipeline_keys():

@@ -17,28 +17,29 @@ variant on 2 cores; rerun to resume.
 from __future__ import annotations
 
 import argparse
-import hashlib
 import json
 import time
 from pathlib import Path
 from typing import Any
 
-#: variant -> unet-light builder options (``model_kwargs``) and pipeline overrides of
-#: the generated drives over the ``cpu`` preset's (``overrides``)
+#: variant -> overrides of the ``cpu`` preset (``real_net``, ``model_kwargs``); the
+#: drives are treated as converted without a map (``real_map=False``), as 0003 is
 VARIANTS: dict[str, dict[str, Any]] = {
-    "none": {},
-    "betp_skip 1.0": {"model_kwargs": {"betp_skip": 1.0}},
-    # the converted KITTI drives have no map: every simulated drive without one too
-    "no map": {"overrides": {"gis": {"source": "none"}}},
+    # the main job's networks before real_net.map: the run's map settings
+    "none": {"real_net": {"map": "run"}},
+    "betp_skip 1.0": {"real_net": {"map": "run"},
+                      "model_kwargs": {"unet-light": {"betp_skip": 1.0}}},
+    # real_net.map "match": every simulated drive without a map, as the real ones
+    "no map": {"real_net": {"map": "match"}},
 }
 
 
 def main() -> None:
     from dstenv.data import ShardDataset
     from dstenv.data.manifest import load_manifest
-    from dstenv.segment.benchmark import _deep_update, run_benchmark
+    from dstenv.segment.benchmark import run_benchmark
     from dstenv.segment.presets import preset_config
-    from dstenv.segment.real import _convert, start_scores
+    from dstenv.segment.real import convert_sequences, start_scores
     from dstenv.segment.realnet import train_real_networks
     from dstenv.segment.shardindex import split_index
 
@@ -58,24 +59,20 @@ def main() -> None:
         raise SystemExit(f"--variants: unknown {unknown}; choose from {list(VARIANTS)}")
 
     kdata = args.work / "kitti"
-    _convert(args.kitti, args.sequences.split(","), None, kdata)
+    convert_sequences(args.kitti, args.sequences.split(","), None, kdata)
     manifest = load_manifest(kdata)
     ds = ShardDataset(kdata, split="test", inputs="fcn10")
     index, _ = split_index(ds.files)
     val = [k for k, fr in enumerate(index) if fr["step"] < args.val_frames]
-    cpu = preset_config("cpu")
     rows: dict[str, Any] = {}
     timings: dict[str, float] = {}
+    resumed = []
     for name in names:
-        var = VARIANTS[name]
-        data = {**cpu["data"], "overrides": _deep_update(cpu["data"]["overrides"],
-                                                         var.get("overrides", {}))}
-        cfg = {**cpu, "data": data,
-               "model_kwargs": {cpu["real_net"]["model"]: var.get("model_kwargs", {})}}
+        cfg = preset_config("cpu", VARIANTS[name])
+        if any((args.work / "nets" / name.replace(" ", "_")).glob("models/*/best.pt")):
+            resumed.append(name)  # its timing is then the resume's, not the training's
         t = time.perf_counter()
-        # one data folder for all: the same frames, generated once (copied; resumes)
-        ckpts, _ = _train(cfg, manifest, args.work, name, var.get("overrides", {}),
-                          train_real_networks)
+        ckpts = _train(cfg, manifest, args.work, name, train_real_networks)
         timings[name] = time.perf_counter() - t
         vals = start_scores(ckpts, ds, val)
         cfg_s = {"models": [], "device": "cpu", "examples": 1,
@@ -97,29 +94,30 @@ def main() -> None:
            "date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
            "selection": f"mIoU over labelled cells of frames 0-{args.val_frames - 1}",
            "scored": f"visible cells, frames {args.from_step}-", "variants": VARIANTS,
-           "rows": rows, "timings_s": {k: round(v, 1) for k, v in timings.items()}}
+           "rows": rows, "timings_s": {k: round(v, 1) for k, v in timings.items()},
+           "resumed": resumed}
     args.out.write_text(json.dumps(out, indent=1) + "\n")
     for k, v in rows.items():
         print(f"{k:55s} val {v['val_miou']} static {v['static']:.3f} moving "
               f"{v['moving']:.3f} mIoU {v['miou']:.3f}")
 
 
-def _train(cfg, manifest, work, name, overrides, train_real_networks):
-    """Train one variant's networks; variants with the same overrides share the frames
-    (copied from the first one generated: generation resumes on a complete copy)."""
+def _train(cfg, manifest, work, name, train_real_networks):
+    """Train one variant's networks; variants with the same ``real_net.map`` share the
+    frames (copied from the first one generated: generation resumes on a complete copy)."""
     import shutil
 
     out = work / "nets" / name.replace(" ", "_")
-    key = hashlib.sha1(json.dumps(overrides, sort_keys=True).encode()).hexdigest()[:10]
-    data = work / "data" / key
+    data = work / "data" / cfg["real_net"]["map"]
     if data.is_dir() and not (out / "data").exists():
         out.mkdir(parents=True, exist_ok=True)
         shutil.copytree(data, out / "data")
-    ckpts, facts = train_real_networks({"config": cfg}, tuple(manifest["grid_shape"]),
-                                       float(manifest["cell_size"]), out, log=lambda m: None)
+    ckpts, _ = train_real_networks({"config": cfg}, tuple(manifest["grid_shape"]),
+                                   float(manifest["cell_size"]), out, log=lambda m: None,
+                                   real_map=False)
     if not data.is_dir():
         shutil.copytree(out / "data", data)
-    return ckpts, facts
+    return ckpts
 
 if __name__ == "__main__":
     main()

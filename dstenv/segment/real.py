@@ -30,7 +30,8 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-__all__ = ["real_benchmark", "sim_checkpoints", "start_scores", "tune_on_real", "REAL_TUNED"]
+__all__ = ["convert_sequences", "real_benchmark", "sim_checkpoints", "start_scores",
+           "tune_on_real", "REAL_TUNED"]
 
 #: label of the DST row tuned on the real fine-tuning frames
 REAL_TUNED = "dst-tuned (real frames)"
@@ -47,12 +48,19 @@ def sim_checkpoints(results: Mapping[str, Any]) -> dict[str, Path]:
     return out
 
 
-def _convert(root: str, sequences: Sequence[str], osm: str | None, data: Path) -> None:
+def convert_sequences(root: str, sequences: Sequence[str], osm: str | None, data: Path) -> None:
+    """``dstenv kitti convert`` of ``sequences`` into ``data`` with every scan stored
+    (stride 1, no warm-up), so DST can be re-run; nothing when ``data`` holds a
+    converted dataset already (resumes).
+
+    Raises:
+        CLIError: the conversion failed (its one-line error was printed).
+    """
     from dstenv.cli import main
     from dstenv.config import CLIError
 
     if (data / "manifest.json").is_file():
-        return  # resumable: converted by an earlier run
+        return
     args = ["kitti", "convert", "--root", str(root), "--sequences", ",".join(sequences),
             "--stride", "1", "--warmup", "0", "--out", str(data)]
     if osm:
@@ -187,7 +195,7 @@ def real_benchmark(
 
     kdir = out / "kitti"
     data = kdir / "data"
-    _convert(root, sequences, osm, data)
+    convert_sequences(root, sequences, osm, data)
     ckpts = sim_checkpoints(sim)
     facts = None
     rn = sim["config"].get("real_net", {"frames": 0})  # runs older than real_net: none

@@ -9,15 +9,17 @@ fine-tuning frames, never scored: :func:`dstenv.segment.real.start_scores`) and
     python docs/real_net_variants.py --kitti /work/shared/data/kitti-tracking \\
         --work /tmp/rnv --out docs/real-net-variants.json
 
-Every variant shares the same 600 generated frames (the ``cpu`` preset's map seeds,
-so the ``none`` variant is the main job's ``kitti-labels`` networks). About 6 min a
-variant on 2 cores; rerun to resume.
+The variants draw the ``cpu`` preset's map seeds (600 frames unless a variant says
+otherwise), so ``no map`` is the main job's ``kitti-labels`` networks and ``none`` the
+ones before ``real_net.map``. About 4-6 min a 600-frame variant on 2 cores; rerun to
+resume.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import re
 import time
 from pathlib import Path
 from typing import Any
@@ -31,6 +33,7 @@ VARIANTS: dict[str, dict[str, Any]] = {
                       "model_kwargs": {"unet-light": {"betp_skip": 1.0}}},
     # real_net.map "match": every simulated drive without a map, as the real ones
     "no map": {"real_net": {"map": "match"}},
+    "no map 1000 frames": {"real_net": {"map": "match", "frames": 1000}},
 }
 
 
@@ -69,7 +72,7 @@ def main() -> None:
     resumed = []
     for name in names:
         cfg = preset_config("cpu", VARIANTS[name])
-        if any((args.work / "nets" / name.replace(" ", "_")).glob("models/*/best.pt")):
+        if any((args.work / "nets" / _slug(name)).glob("models/*/best.pt")):
             resumed.append(name)  # its timing is then the resume's, not the training's
         t = time.perf_counter()
         ckpts = _train(cfg, manifest, args.work, name, train_real_networks)
@@ -78,7 +81,7 @@ def main() -> None:
         cfg_s = {"models": [], "device": "cpu", "examples": 1,
                  "score_from_step": args.from_step,
                  "tune": {"enabled": False}, "complete": {"enabled": False}}
-        res = run_benchmark(cfg_s, args.work / "scores" / name.replace(" ", "_"),
+        res = run_benchmark(cfg_s, args.work / "scores" / _slug(name),
                             data_dir=kdata, progress=False, log=lambda m: None,
                             checkpoints=list(ckpts.items()))
         for label, row in res["segmenters"].items():
@@ -102,13 +105,19 @@ def main() -> None:
               f"{v['moving']:.3f} mIoU {v['miou']:.3f}")
 
 
+def _slug(name: str) -> str:
+    """A variant's folder name."""
+    return re.sub(r"[^A-Za-z0-9.]+", "_", name)
+
+
 def _train(cfg, manifest, work, name, train_real_networks):
-    """Train one variant's networks; variants with the same ``real_net.map`` share the
-    frames (copied from the first one generated: generation resumes on a complete copy)."""
+    """Train one variant's networks; variants with the same ``real_net`` map and frames
+    share the frames (copied from the first one generated: generation resumes on a
+    complete copy)."""
     import shutil
 
-    out = work / "nets" / name.replace(" ", "_")
-    data = work / "data" / cfg["real_net"]["map"]
+    out = work / "nets" / _slug(name)
+    data = work / "data" / f"{cfg['real_net']['map']}-{cfg['real_net']['frames']}"
     if data.is_dir() and not (out / "data").exists():
         out.mkdir(parents=True, exist_ok=True)
         shutil.copytree(data, out / "data")

@@ -24,8 +24,9 @@ import time
 from pathlib import Path
 from typing import Any
 
-#: variant -> overrides of the ``cpu`` preset (``real_net``, ``model_kwargs``); the
-#: drives are treated as converted without a map (``real_map=False``), as 0003 is
+#: variant -> overrides of the ``cpu`` preset (``real_net``, ``model_kwargs``) and of its
+#: drives' pipeline (``data_overrides``, merged into ``data.overrides``); the drives are
+#: treated as converted without a map (``real_map=False``), as 0003 is
 VARIANTS: dict[str, dict[str, Any]] = {
     # the main job's networks before real_net.map: the run's map settings
     "none": {"real_net": {"map": "run"}},
@@ -34,6 +35,9 @@ VARIANTS: dict[str, dict[str, Any]] = {
     # real_net.map "match": every simulated drive without a map, as the real ones
     "no map": {"real_net": {"map": "match"}},
     "no map 1000 frames": {"real_net": {"map": "match", "frames": 1000}},
+    # off-street parking lots (dstenv.sim.lots): cars parked 10-30 m from the road
+    "no map lots 0.2": {"real_net": {"map": "match"},
+                         "data_overrides": {"world": {"map": {"lot_prob": 0.2}}}},
 }
 
 
@@ -56,7 +60,8 @@ def main() -> None:
     ap.add_argument("--val-frames", type=int, default=10)
     ap.add_argument("--from-step", type=int, default=20)
     args = ap.parse_args()
-    names = [v for v in args.variants.split(",") if v]
+    assert not any("," in v for v in VARIANTS), "a variant name holds the list separator"
+    names = [v.strip() for v in args.variants.split(",") if v.strip()]
     unknown = [v for v in names if v not in VARIANTS]
     if unknown:
         raise SystemExit(f"--variants: unknown {unknown}; choose from {list(VARIANTS)}")
@@ -71,7 +76,10 @@ def main() -> None:
     timings: dict[str, float] = {}
     resumed = []
     for name in names:
-        cfg = preset_config("cpu", VARIANTS[name])
+        var = {k: v for k, v in VARIANTS[name].items() if k != "data_overrides"}
+        cfg = preset_config("cpu", var)
+        extra = VARIANTS[name].get("data_overrides", {})
+        cfg["data"]["overrides"] = _merged(cfg["data"]["overrides"], extra)
         if any((args.work / "nets" / _slug(name)).glob("models/*/best.pt")):
             resumed.append(name)  # its timing is then the resume's, not the training's
         t = time.perf_counter()
@@ -105,6 +113,14 @@ def main() -> None:
               f"{v['moving']:.3f} mIoU {v['miou']:.3f}")
 
 
+def _merged(base: dict, over: dict) -> dict:
+    """``base`` with ``over`` merged in, section by section (copies)."""
+    out = dict(base)
+    for k, v in over.items():
+        out[k] = _merged(out.get(k, {}), v) if isinstance(v, dict) else v
+    return out
+
+
 def _slug(name: str) -> str:
     """A variant's folder name."""
     return re.sub(r"[^A-Za-z0-9.]+", "_", name)
@@ -117,7 +133,8 @@ def _train(cfg, manifest, work, name, train_real_networks):
     import shutil
 
     out = work / "nets" / _slug(name)
-    data = work / "data" / f"{cfg['real_net']['map']}-{cfg['real_net']['frames']}"
+    extra = _slug(json.dumps(cfg["data"]["overrides"], sort_keys=True))
+    data = work / "data" / f"{cfg['real_net']['map']}-{cfg['real_net']['frames']}-{extra}"
     if data.is_dir() and not (out / "data").exists():
         out.mkdir(parents=True, exist_ok=True)
         shutil.copytree(data, out / "data")

@@ -31,6 +31,7 @@ from dstenv.sim.roundabout import (island_clutter, paint_roundabout, pick_rounda
 from dstenv.sim.sidewalks import LANE_OFFSET, add_block_rings
 from dstenv.sim.clutter import concat_obstacles, median_clutter, place_clutter
 from dstenv.sim.warp import Warp, draw_warp, kerb_ease, warp_boxes, warp_lanes, warp_obstacles
+from dstenv.sim.lots import city_lots, clear_of_lots
 from dstenv.sim.parking import SLOT_LENGTH, city_slots
 from dstenv.sim.types import MapClass, WorldMap
 
@@ -233,6 +234,12 @@ def generate_city(cfg: dict[str, Any], traffic: dict[str, Any], rng: np.random.G
     fill_rects(surface, spots, org, res, Surface.PARKING)
     buildings = city_buildings(list(faces) + [box for box, _ in strips],
                                [-1] * len(faces) + [side for _, side in strips], cfg, rng)
+    lot_slots, lot_rects = np.zeros((0, 6)), np.zeros((0, 4))
+    if cfg["lot_prob"] > 0:  # a stream of their own: without lots, the city of before
+        kept, lot_slots, lot_rects = city_lots(list(faces), [_sides(f) for f in faces],
+                                               buildings, cfg, rng.spawn(1)[0])
+        buildings = [buildings[i] for i in kept]
+        fill_rects(surface, lot_rects, org, res, Surface.PARKING)
     if drawn is None:
         for b in buildings:
             for r, v in ((raster, MapClass.BUILDING), (surface, Surface.BUILDING)):
@@ -245,13 +252,16 @@ def generate_city(cfg: dict[str, Any], traffic: dict[str, Any], rng: np.random.G
              for box, four, ks in [(f, _sides(f), range(4)) for f in faces] +
              [(box, _sides(box), (k,)) for box, k in strips] for k in ks]
     clutter = clutter or {"density": 0.0}
-    obstacles = place_clutter(sides, buildings, slots, walk_ends, curb, sw, clutter, real)
+    parked_boxes = np.vstack([slots, lot_slots]) if len(lot_slots) else slots
+    obstacles = place_clutter(sides, buildings, parked_boxes, walk_ends, curb, sw, clutter, real)
+    obstacles = clear_of_lots(obstacles, lot_rects)
     if medians or rounds:
         obstacles = concat_obstacles([obstacles, island_clutter(rounds, clutter, geo),
                                       median_clutter([median_box(*m) for m in medians],
                                                      clutter, geo)])
     streets = [e.poly for e in edges]
-    meta = {"kind": "procedural", "parking_slots": slots, "faces": faces, "warp": None,
+    meta = {"kind": "procedural", "parking_slots": slots, "lot_slots": lot_slots,
+            "faces": faces, "warp": None,
             "surface": surface,
             "roundabouts": np.array([[*r.centre, r.r_out, r.r_island] for r in rounds]
                                     ).reshape(-1, 4)}
@@ -269,7 +279,8 @@ def generate_city(cfg: dict[str, Any], traffic: dict[str, Any], rng: np.random.G
         obstacles = warp_obstacles(warp, obstacles)
         streets = warp.polylines(streets)
         meta["roundabouts"][:, :2] = warp.points(meta["roundabouts"][:, :2])
-        meta.update(parking_slots=slots, warp=warp, surface_source=meta.pop("surface"))
+        meta.update(parking_slots=slots, lot_slots=warp_boxes(warp, lot_slots), warp=warp,
+                    surface_source=meta.pop("surface"))
     network = builder.build(node_xy, control, phase, lw)
     street_lanes = np.array([e.n_fwd + e.n_bwd for e in edges], np.int64)
     return WorldMap(raster=raster, origin=org, resolution=res, buildings=buildings,

@@ -125,11 +125,12 @@ def render_png(world: Any, out: str | Path, sweep: Any = None, extent: float | N
 
 def _cmd(args: argparse.Namespace) -> int:
     from dstenv.config import build_config
+    from dstenv.data.cli import parse_set
     from dstenv.scenario_files import scenario_path
     from dstenv.sim import World
 
     path = scenario_path(args.scenario)
-    cfg = build_config(path)
+    cfg = build_config(path, ("--set", parse_set(args.set or [])))
     world = World(cfg["world"], seed=args.seed, base_dir=path.parent)
     for _ in range(args.steps):
         world.step()
@@ -160,4 +161,6 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="half width of the view around the ego [m] (0: whole map)")
     p.add_argument("--lanes", action="store_true", help="draw lane centre-lines")
     p.add_argument("--no-lidar", action="store_true", help="do not draw the LIDAR sweep")
+    p.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE",
+                   help="override any config value (TOML value), repeatable, as in generate")
     p.set_defaults(func=_cmd)

@@ -67,6 +67,10 @@ def default_config() -> dict[str, Any]:
             "parking_mix": [0.25, 0.55, 0.15, 0.05],  # weights of small car, car, van, truck
             # [-] share of (small / normal) cars parked half on the sidewalk
             "half_on_sidewalk_prob": 0.08,
+            # off-street parking lots in place of a block side's buildings (dstenv.sim.lots)
+            "lot_prob": 0.0,  # [-] chance that a block side is a lot (0: none, as before)
+            "lot_depth": 22.0,  # [m] depth of a lot behind the sidewalk, at most
+            "lot_fill": 0.7,  # [-] chance that a stall holds a car
             # -- geometry (0 everywhere: the straight Manhattan grid of the clean scenario)
             "shear_deg": 15.0,  # [deg] streets meet at 90 +- up to this (drawn per map, 0..30)
             "bend_amplitude": 7.0,  # [m] sideways bend of straight streets (0..30; 0: straight)
@@ -197,6 +201,9 @@ RULES: dict[str, Any] = {
         "parking_heading_jitter": between(0.0, 15.0, "deg"),
         "parking_mix": between(0.0, 1e3),
         "half_on_sidewalk_prob": PROB,
+        "lot_prob": PROB,
+        "lot_depth": between(5.0, 100.0, _M),
+        "lot_fill": PROB,
         "shear_deg": between(0.0, 30.0, "deg"),
         "bend_amplitude": between(0.0, 30.0, _M),
         "bend_wavelength": between(50.0, 5000.0, _M),

@@ -144,6 +144,9 @@ def populate(world_map: WorldMap, cfg: dict[str, Any], rng: np.random.Generator,
     for slot in slots[double]:
         if _double_park(world_map, st, slot, cfg, rng, k) is None:
             _add_parked(st, slot[None], rng)  # no lane beside it: it parks after all
+    lots = world_map.meta.get("lot_slots")
+    if lots is not None and len(lots):  # every lot slot holds a car (sized: no draw)
+        _add_parked(st, lots, rng)
     road = np.flatnonzero((net.kind == LaneKind.ROAD) & (net.length > 12.0))
     if len(road) == 0:
         road = np.flatnonzero(net.kind == LaneKind.ROAD)

@@ -16,6 +16,16 @@ def test_render_writes_a_png(tmp_path):
     assert not list(tmp_path.glob("*.png.tmp*"))
 
 
+def test_render_takes_set_overrides(tmp_path, capsys):
+    out = tmp_path / "lots.png"
+    assert main(["render", "--scenario", "dense", "--seed", "3", "--no-lidar", "--set",
+                 "world.map.lot_prob=0.5", "--out", str(out)]) == 0
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert main(["render", "--set", "world.map.lot_prob=2", "--out", str(tmp_path / "x.png")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "world.map.lot_prob: must be in [0, 1]" in err[0]
+
+
 def test_render_unknown_scenario_is_a_clean_error(tmp_path, capsys):
     assert main(["render", "--scenario", "atlantis", "--out", str(tmp_path / "x.png")]) == 2
     err = capsys.readouterr().err

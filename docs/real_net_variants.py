@@ -47,7 +47,6 @@ def main() -> None:
     from dstenv.segment.benchmark import run_benchmark
     from dstenv.segment.presets import preset_config
     from dstenv.segment.real import convert_sequences, start_scores
-    from dstenv.segment.realnet import train_real_networks
     from dstenv.segment.shardindex import split_index
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -83,7 +82,7 @@ def main() -> None:
         if any((args.work / "nets" / _slug(name)).glob("models/*/best.pt")):
             resumed.append(name)  # its timing is then the resume's, not the training's
         t = time.perf_counter()
-        ckpts = _train(cfg, manifest, args.work, name, train_real_networks)
+        ckpts = _train(cfg, manifest, args.work, name)
         timings[name] = time.perf_counter() - t
         vals = start_scores(ckpts, ds, val)
         cfg_s = {"models": [], "device": "cpu", "examples": 1,
@@ -126,11 +125,13 @@ def _slug(name: str) -> str:
     return re.sub(r"[^A-Za-z0-9.]+", "_", name)
 
 
-def _train(cfg, manifest, work, name, train_real_networks):
+def _train(cfg, manifest, work, name):
     """Train one variant's networks; variants with the same ``real_net`` map and frames
     share the frames (copied from the first one generated: generation resumes on a
     complete copy)."""
     import shutil
+
+    from dstenv.segment.realnet import train_real_networks
 
     out = work / "nets" / _slug(name)
     extra = _slug(json.dumps(cfg["data"]["overrides"], sort_keys=True))
@@ -144,6 +145,7 @@ def _train(cfg, manifest, work, name, train_real_networks):
     if not data.is_dir():
         shutil.copytree(out / "data", data)
     return ckpts
+
 
 if __name__ == "__main__":
     main()

@@ -44,11 +44,9 @@ def test_lot_cars_stand_off_the_road_clear_of_buildings_and_each_other():
     for i in range(len(lots)):
         assert not boxes_overlap(corners[i], np.delete(corners, i, 0)).any()
     # clutter stands clear of them (the lots are passed to its placement)
-    ob = w.map.obstacles
-    oc = np.stack([box_corners(*ob.xy[k], ob.yaw[k], ob.length[k], ob.width[k])
-                   for k in range(len(ob.xy))])
+    oc = w.map.obstacles.corners()
     assert len(oc) > 0 and not any(boxes_overlap(c, oc).any() for c in corners)
-    # 2-30 m from the kerb: distance to the nearest road cell
+    # 2-35 m from the road: distance to the nearest road cell
     road = np.argwhere(w.map.raster == MapClass.ROAD) * w.map.resolution
     d = np.array([np.min(np.hypot(*(road[:, ::-1] + np.asarray(w.map.origin) - p).T))
                   for p in lots[::7, :2]])

@@ -13,6 +13,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from dstenv.config import PROB, Section, between, one_of, section
+from dstenv.sensing.carshape import VEHICLE_SHAPES
 
 __all__ = [
     "LIDAR_MODELS",
@@ -54,6 +55,9 @@ def default_hdl64_config() -> dict[str, Any]:
         # P(detected) = Phi(ln(rho cos(incidence) (fade_range / r)^2) / fade_sigma)
         "fade_range": 0.0,  # [m] unit reflectivity, head-on: detected half the time; 0: off
         "fade_sigma": 1.0,  # [-] std of the natural log of a return's strength
+        # "box": agents are prisms from the road to their height; "car": cars are a
+        # body on wheels (clearance, cut corners, cabin; dstenv.sensing.carshape)
+        "vehicle_shape": "box",
         "intensity_noise": 0.03,  # std of additive reflectance noise [-]
         "spin_rate": 10.0,  # [Hz] one turn per LIDAR period; 0: no within-sweep skew
         "channel_seed": 64,  # seed of the fixed per-channel gain (a calibration table)
@@ -177,6 +181,7 @@ LIDAR = Section(default_lidar_config, {
         "dropout": PROB,
         "fade_range": between(0.0, 10_000.0, _M),
         "fade_sigma": between(0.01, 10.0),
+        "vehicle_shape": one_of(*VEHICLE_SHAPES),
         "intensity_noise": between(0.0, 1.0),
         "spin_rate": between(0.0, 100.0, "Hz"),
         "channel_seed": between(0, 2**31 - 1),

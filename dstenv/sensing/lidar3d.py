@@ -48,6 +48,7 @@ import numba
 import numpy as np
 
 from dstenv.grid import GridSpec
+from dstenv.sensing.carshape import car_part_rows
 from dstenv.sensing.cast3d import cast_boxes, cast_ground, cast_walls, column_index, raised_distance
 from dstenv.sensing.cloud import cloud_sensor_grid, ray_config
 from dstenv.sensing.config import lidar_config
@@ -59,7 +60,7 @@ from dstenv.sensing.draws import (
 )
 from dstenv.sensing.fading import fade_returns
 from dstenv.sensing.ground import ground_config
-from dstenv.sim.types import Agents, MapClass, WorldMap
+from dstenv.sim.types import AgentKind, Agents, MapClass, WorldMap
 
 __all__ = ["Hdl64", "Cloud", "SURFACES", "REFLECTANCE"]
 
@@ -189,7 +190,7 @@ class Hdl64:
             self._raster = np.ascontiguousarray(world_map.raster, dtype=np.uint8)
             self._dist = raised_distance(self._raster, MapClass.INTERMEDIATE)
             self._map = world_map
-        boxes = _box_table(agents, self._clutter)
+        boxes = _box_table(agents, self._clutter, c["vehicle_shape"] == "car")
         edges, starts, circles, heights = self._walls
         best, surf, idx = self._best, self._surf, self._idx  # reused: no page faults
         best.fill(np.inf)  # surf and idx are written with every finite best
@@ -333,15 +334,23 @@ def _column_poses(pose, speed, yaw_rate, tau, azimuth, mount):  # pragma: no cov
     return ox, oy, world_az, ux, uy
 
 
-def _box_table(agents: Agents, clutter: np.ndarray) -> np.ndarray:
+def _box_table(agents: Agents, clutter: np.ndarray, car_shape: bool = False) -> np.ndarray:
     """``(K, 11)`` rows ``cx, cy, cos, sin, half_l, half_w, z_lo, z_hi, surface, index, r``:
-    the agents, then the map's ``clutter`` rows (:func:`_clutter_table`)."""
+    the agents, then the map's ``clutter`` rows (:func:`_clutter_table`), then, with
+    ``car_shape`` (``vehicle_shape = "car"``), the cars' other parts
+    (:func:`dstenv.sensing.carshape.car_part_rows`; row ``i`` stays agent ``i``'s)."""
     if not len(agents):
         return clutter
     f64 = np.float64
-    return _agent_rows(np.ascontiguousarray(agents.xy, f64), np.asarray(agents.yaw, f64),
-                       np.asarray(agents.length, f64), np.asarray(agents.width, f64),
-                       np.asarray(agents.height, f64), clutter)
+    xy, yaw = np.ascontiguousarray(agents.xy, f64), np.asarray(agents.yaw, f64)
+    length, width = np.asarray(agents.length, f64), np.asarray(agents.width, f64)
+    height = np.asarray(agents.height, f64)
+    rows = _agent_rows(xy, yaw, length, width, height, clutter)
+    if not car_shape:
+        return rows
+    is_car = np.asarray(agents.kind) == AgentKind.CAR
+    extra = car_part_rows(xy, yaw, length, width, height, is_car, float(_AGENT), rows)
+    return np.concatenate([rows, extra]) if len(extra) else rows
 
 
 @numba.njit(cache=True)

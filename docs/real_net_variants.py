@@ -38,6 +38,9 @@ VARIANTS: dict[str, dict[str, Any]] = {
     # off-street parking lots (dstenv.sim.lots): cars parked 10-30 m from the road
     "no map lots 0.2": {"real_net": {"map": "match"},
                          "data_overrides": {"world": {"map": {"lot_prob": 0.2}}}},
+    # cars as a body on wheels for the 3-D LIDAR (dstenv.sensing.carshape)
+    "no map car shape": {"real_net": {"map": "match"},
+                         "data_overrides": {"lidar": {"hdl64": {"vehicle_shape": "car"}}}},
 }
 
 

@@ -11,6 +11,7 @@ filter's own nearest-neighbour warp (:func:`dstenv.dst.reference.source_cells` w
 
     python docs/edge_flicker.py --kitti-root /work/shared/data/kitti-tracking \\
         --drives 6 --out docs/edge-flicker.json [--lidar '{"hdl64": {...}}']
+        [--world '{"map": {...}}'] [--icp] [--chained]
 
 - ``occ_lost``: P(not occupied at t | occupied at t-1);
 - ``occ_gained``: P(occupied at t | not occupied at t-1);
@@ -23,7 +24,9 @@ benchmark's conversion), 256 x 256 cells, split at 21 m (the half side of the
 simulated 128 x 128 grid). Sim: ``docs/ego_speed.py``'s ``sim_at_speed`` drives
 (``dense``, no map, ``hdl64``, 128 x 128, parked density 0.3) in the ``fast``
 variant, steps 10..119 of 12 s drives, by ego speed; ``--lidar`` merges overrides
-into the ``lidar`` section (the before/after of a LIDAR effect).
+into the ``lidar`` section (the before/after of a LIDAR effect), ``--world`` into the
+``world`` section; ``--icp`` converts KITTI with the ICP scan-to-scan poses of
+``docs/kitti_pose_check.py`` instead of OXTS'.
 
 Label geometry (b): ``box_edges`` gives, for KITTI's static boxes in the camera view
 and for the simulated parked cars, the share of edge and interior footprint cells
@@ -34,6 +37,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import shlex
 import sys
 from collections import defaultdict
 from pathlib import Path
@@ -178,19 +182,26 @@ def _drive(frames, key_fn, spec: GridSpec, tally: Tally, box: dict, first: int =
         last = f
 
 
-def kitti(root: Path, sequence: str) -> dict:
+def kitti(root: Path, sequence: str, icp: bool = False) -> dict:
     from dstenv.kitti.sequence import KittiSequence, convert_sequence
 
     seq = KittiSequence(root, sequence)
     tally, box = Tally(), defaultdict(lambda: np.zeros(3, np.int64))
     spec = GridSpec(256, 256, 0.33)
+    if icp:  # the scans registered to each other (docs/kitti_pose_check.py)
+        from dstenv.kitti.sequence import kitti_config
+        from kitti_pose_check import chain, icp_motions
+
+        cfg = kitti_config({"stride": 1, "warmup": 0})
+        seq.trajectory.poses[:] = chain(seq.trajectory.poses[0].copy(),
+                                        icp_motions(seq, spec, cfg))
     frames = list(convert_sequence(seq, {"stride": 1, "warmup": 0}))
     assert [f.step for f in frames] == list(range(len(frames))), "a skipped scan"
     _drive(frames, lambda f: ("kitti",), spec, tally, box)
     return {"flicker": tally.table(), "box_edges": _box_table(box)}
 
 
-def sim(drives: int, lidar: dict | None, size: int = 128) -> dict:
+def sim(drives: int, lidar: dict | None, size: int = 128, world: dict | None = None) -> dict:
     from dstenv.config import merge_config
     from dstenv.data.sampling import scenario_config
     from dstenv.pipeline import Pipeline
@@ -199,6 +210,8 @@ def sim(drives: int, lidar: dict | None, size: int = 128) -> dict:
             "gis": {"no_map_prob": 1.0}, "world": {"traffic": {"parked_density": 0.3}}}
     if lidar:
         over = _deep(over, {"lidar": lidar})
+    if world:
+        over = _deep(over, {"world": world})
     pipe = Pipeline(merge_config(scenario_config("dense", over), FAST, "fast"))
     tally, box = Tally(), defaultdict(lambda: np.zeros(3, np.int64))
     points: list[int] = []
@@ -237,7 +250,10 @@ def main() -> None:
     ap.add_argument("--drives", type=int, default=6)
     ap.add_argument("--grid", type=int, default=128, help="simulated grid side [cells]")
     ap.add_argument("--lidar", default="", help="JSON overrides of the lidar section")
+    ap.add_argument("--world", default="", help="JSON overrides of the world section")
     ap.add_argument("--out", required=True)
+    ap.add_argument("--icp", action="store_true",
+                    help="KITTI with ICP scan-to-scan poses instead of OXTS")
     ap.add_argument("--chained", action="store_true", help="history warped sweep by sweep")
     ap.add_argument("--autopilot", type=float, default=0.0,
                     help="[m/s] fast variant's autopilot and start speed (0: FAST's)")
@@ -246,12 +262,12 @@ def main() -> None:
     CHAINED = args.chained
     if args.autopilot:
         FAST["world"]["ego"].update(autopilot_speed=args.autopilot, initial_speed=args.autopilot)
-    res = {"command": "python docs/edge_flicker.py " + " ".join(sys.argv[1:])}
+    res = {"command": "python docs/edge_flicker.py " + shlex.join(sys.argv[1:])}
     if args.kitti_root:
-        res["kitti"] = kitti(Path(args.kitti_root), args.sequence)
+        res["kitti"] = kitti(Path(args.kitti_root), args.sequence, args.icp)
     if args.drives:
         res["sim"] = sim(args.drives, json.loads(args.lidar) if args.lidar else None,
-                         args.grid)
+                         args.grid, json.loads(args.world) if args.world else None)
     from dstenv.io import atomic_write_text
 
     atomic_write_text(Path(args.out), json.dumps(res, indent=1) + "\n")

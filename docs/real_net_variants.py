@@ -38,6 +38,12 @@ VARIANTS: dict[str, dict[str, Any]] = {
     # off-street parking lots (dstenv.sim.lots): cars parked 10-30 m from the road
     "no map lots 0.2": {"real_net": {"map": "match"},
                          "data_overrides": {"world": {"map": {"lot_prob": 0.2}}}},
+    # the filter's ego motion with KITTI's OXTS step errors (dstenv.sensing.odometry;
+    # docs/kitti-pose-check.json: <= 9 cm along, a growing across-track error, <= 0.05 deg)
+    "no map odometry": {"real_net": {"map": "match"},
+                        "data_overrides": {"protocol": {"odometry_along": 0.04,
+                                                        "odometry_drift": 0.01,
+                                                        "odometry_yaw": 0.015}}},
     # cars as a body on wheels for the 3-D LIDAR (dstenv.sensing.carshape)
     "no map car shape": {"real_net": {"map": "match"},
                          "data_overrides": {"lidar": {"hdl64": {"vehicle_shape": "car"}}}},

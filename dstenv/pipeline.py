@@ -47,6 +47,7 @@ from dstenv.grid import GridSpec
 from dstenv.sensing.config import gis_is_exact
 from dstenv.sensing.gis import MapError, gis_grid
 from dstenv.sensing.labels import ignore_object_edges, label_grid, visible_mask
+from dstenv.sensing.odometry import Odometry
 from dstenv.sim.types import Agents, WorldMap
 
 __all__ = ["WORLD_SOURCES", "MOVING_RULES", "OBJECT_EDGES", "WorldSource", "default_config",
@@ -140,6 +141,12 @@ def _protocol_defaults() -> dict[str, Any]:
         # them ignored as KITTI's converter without a map does
         # (dstenv.sensing.labels.ignore_object_edges)
         "object_edges": "map",
+        # the ego motion the filter is given (dstenv.sensing.odometry: a real INS's step
+        # errors; 0: exact): along-track std [m], across-track drift std [m], yaw std
+        # [deg] per fused step; labels and grids keep the true pose
+        "odometry_along": 0.0,
+        "odometry_drift": 0.0,
+        "odometry_yaw": 0.0,
     }
 
 
@@ -167,6 +174,9 @@ PROTOCOL_SECTION = Section(_protocol_defaults, {
     "camera_fov": between(0.0, 180.0, "deg", hi_open=True),
     "moving_rule": one_of(*MOVING_RULES),
     "object_edges": one_of(*OBJECT_EDGES),
+    "odometry_along": between(0.0, 1.0, "m"),
+    "odometry_drift": between(0.0, 1.0, "m"),
+    "odometry_yaw": between(0.0, 5.0, "deg"),
 })
 #: The ``frame`` section: optional outputs of every :class:`Frame`.
 FRAME_SECTION = Section(_frame_defaults, {})
@@ -212,6 +222,10 @@ class Pipeline:
             self.lidar = Lidar(cfg["lidar"])
         self.fuse = bool(fuse)
         self.tracker = GridTracker(self.spec.shape, params, self.spec.cell_size)
+        self.odometry = Odometry(self.config["protocol"])
+        # the pose the filter was given at the last fused step (the true pose unless
+        # protocol.odometry_* is set; replay records it)
+        self.filter_pose: np.ndarray | None = None
         self.camera = (camera_mask(self.spec, prot["camera_fov"]) if prot["camera_fov"] > 0
                        else None)
         self._world = world
@@ -251,6 +265,7 @@ class Pipeline:
         self._map_error = (None if gis_is_exact(gis)
                            else MapError.sample(self._world.map, gis, self._rng))
         self.tracker.reset()
+        self.odometry.reset(self.seed)
         self.step_index = 0
         self._last = None
         return self._observe()
@@ -321,7 +336,8 @@ class Pipeline:
             return pose, agents, sensor, gis, None
         every = self.config["protocol"]["update_every"]
         if self.step_index % every == 0:
-            self.tracker.step(sensor, gis, pose, betp=frame or every > 1)
+            self.filter_pose = self.odometry.estimate(pose)
+            self.tracker.step(sensor, gis, self.filter_pose, betp=frame or every > 1)
         masses = self.tracker.filter.masses
         return pose, agents, sensor, gis, masses.copy() if want_masses else masses
 

@@ -58,7 +58,8 @@ class Episode:
         seed: the map seed of the drive.
         sensor: ``(T, H, W) uint8`` sensor grid at every step 0..T-1.
         gis: ``(T, H, W) uint8`` GIS grid at every step.
-        poses: ``(T, 3) float64`` ego pose at every step.
+        poses: ``(T, 3) float64`` ego pose the filter was given at every step (the
+            true pose unless ``protocol.odometry_*`` adds an INS's errors).
         steps: ``(K,) int64`` scored steps, increasing, each < T.
         labels: ``(K, H, W) uint8`` labels at the scored steps.
         visible: ``(K, H, W) bool`` visible cells at the scored steps.
@@ -192,15 +193,19 @@ def record_episodes(
             frames = [run.reset(traffic_seed(seed, k))]
         else:
             run = pipe
+        # the pose the filter was given (protocol.odometry_*), on the fused steps
+        poses = [run.filter_pose]
         while len(frames) <= steps[-1]:
             frames.append(run.step())
+            poses.append(run.filter_pose if run.step_index % run.config["protocol"][
+                "update_every"] == 0 else frames[-1].ego_pose)
         episodes.append(
             Episode(
                 seed=int(seed),
                 episode=int(k),
                 sensor=np.stack([f.sensor for f in frames]),
                 gis=np.stack([f.gis for f in frames]),
-                poses=np.stack([np.asarray(f.ego_pose, dtype=np.float64) for f in frames]),
+                poses=np.stack([np.asarray(p, dtype=np.float64) for p in poses]),
                 steps=steps,
                 labels=np.stack([frames[s].labels for s in steps]),
                 visible=np.stack([frames[s].visible for s in steps]),

@@ -18,6 +18,7 @@ import numpy as np
 
 from dstenv.dst.frame import CLASSES
 from dstenv.segment.replay import Episode, filter_period
+from dstenv.sensing.odometry import ODOMETRY_KEYS
 
 __all__ = [
     "split_index",
@@ -156,6 +157,11 @@ def stored_episodes(
                 "(store every filtered frame, e.g. kitti convert --stride 1 --warmup 0)"
             )
             break
+    prot = config.get("protocol", {})
+    if reason is None and any(prot.get(k, 0.0) for k in ODOMETRY_KEYS):
+        reason = ("the DST filter ran on noisy odometry (protocol.odometry_*), and the "
+                  "stored ego poses are the true ones: score it from its stored BetP, or "
+                  "replay it through the simulator (a dataset with a train split)")
     if reason is not None and require_history:
         return [], reason
     episodes = []

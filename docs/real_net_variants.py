@@ -20,6 +20,8 @@ from __future__ import annotations
 import argparse
 import json
 import re
+import shlex
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -44,6 +46,9 @@ VARIANTS: dict[str, dict[str, Any]] = {
                         "data_overrides": {"protocol": {"odometry_along": 0.04,
                                                         "odometry_drift": 0.01,
                                                         "odometry_yaw": 0.015}}},
+    # the sensor grid of one second earlier as two more input channels
+    # (dstenv.data.datasets, inputs "fcn10+sensor+past")
+    "no map past": {"real_net": {"map": "match", "inputs": "fcn10+sensor+past"}},
     # cars as a body on wheels for the 3-D LIDAR (dstenv.sensing.carshape)
     "no map car shape": {"real_net": {"map": "match"},
                          "data_overrides": {"lidar": {"hdl64": {"vehicle_shape": "car"}}}},
@@ -66,6 +71,9 @@ def main() -> None:
     ap.add_argument("--variants", default=",".join(VARIANTS),
                     help=f"comma-separated subset of: {', '.join(VARIANTS)}")
     ap.add_argument("--val-frames", type=int, default=10)
+    ap.add_argument("--val-from", type=int, default=0,
+                    help="first choosing frame (frames val-from .. val-from + val-frames - 1; "
+                         "keep them before --from-step)")
     ap.add_argument("--from-step", type=int, default=20)
     args = ap.parse_args()
     assert not any("," in v for v in VARIANTS), "a variant name holds the list separator"
@@ -79,7 +87,10 @@ def main() -> None:
     manifest = load_manifest(kdata)
     ds = ShardDataset(kdata, split="test", inputs="fcn10")
     index, _ = split_index(ds.files)
-    val = [k for k, fr in enumerate(index) if fr["step"] < args.val_frames]
+    val = [k for k, fr in enumerate(index)
+           if args.val_from <= fr["step"] < args.val_from + args.val_frames]
+    if args.val_from + args.val_frames > args.from_step:
+        raise SystemExit("--val-from/--val-frames: the choosing frames reach the scored ones")
     rows: dict[str, Any] = {}
     timings: dict[str, float] = {}
     resumed = []
@@ -107,11 +118,10 @@ def main() -> None:
                          "static": round(iou["static"], 3), "moving": round(iou["moving"], 3),
                          "miou": round(row["visible"]["miou"], 3)}
         print(f"{name}: {timings[name]:.0f} s", flush=True)
-    out = {"command": "python docs/real_net_variants.py --kitti "
-                      f"{args.kitti} --work {args.work} --out {args.out} "
-                      f"--variants '{','.join(names)}'",
+    out = {"command": "python docs/real_net_variants.py " + shlex.join(sys.argv[1:]),
            "date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-           "selection": f"mIoU over labelled cells of frames 0-{args.val_frames - 1}",
+           "selection": f"mIoU over labelled cells of frames {args.val_from}-"
+                        f"{args.val_from + args.val_frames - 1}",
            "scored": f"visible cells, frames {args.from_step}-", "variants": VARIANTS,
            "rows": rows, "timings_s": {k: round(v, 1) for k, v in timings.items()},
            "resumed": resumed}

@@ -10,6 +10,13 @@ tensors. ``inputs`` selects ``x``:
 * ``"fcn10+sensor"``: ``fcn10`` then the current sensor grid as two 0/1 channels, seen
   free and seen occupied (C = 12; :func:`sensor_channels`): what the LIDAR says now,
   which the filter's BetP carries only after its inertia.
+* ``"fcn10+sensor+past"``: ``fcn10+sensor`` then the sensor grid of :data:`PAST_STEPS`
+  steps earlier (one second), moved into the ego frame of t by the filter's
+  nearest-cell warp, as two more 0/1 channels (C = 14; :func:`past_sensor`): a static
+  object's cells were occupied there too, a moving one's were seen free
+  (``docs/past_occupancy.py``: alike on KITTI and in the simulator). Read from the
+  drive's stored frames (the frame ``PAST_STEPS`` steps earlier of the same drive;
+  unknown where there is none), so not from a :class:`StreamingDataset`.
 
 Labels keep :data:`dstenv.frame.IGNORE_INDEX` (255) for excluded cells. ``labels``
 selects their convention: ``"full"`` (as stored) or ``"kitti"``, KITTI's own
@@ -35,8 +42,9 @@ from dstenv.data.sampling import episode_seeds, iter_frames, scenario_config
 from dstenv.data.shards import N_CLASSES, ShardError, ShardReader
 from dstenv.frame import Frame
 
-__all__ = ["INPUTS", "INPUT_CHANNELS", "LABELS", "ShardDataset", "StreamingDataset",
-           "frame_to_sample", "sensor_channels", "network_input"]
+__all__ = ["INPUTS", "INPUT_CHANNELS", "LABELS", "PAST_STEPS", "ShardDataset",
+           "StreamingDataset", "frame_to_sample", "sensor_channels", "network_input",
+           "past_sensor", "past_rows"]
 
 #: ``inputs`` name -> shard datasets stacked into ``x``
 INPUTS: dict[str, tuple[str, ...]] = {
@@ -44,10 +52,14 @@ INPUTS: dict[str, tuple[str, ...]] = {
     "pignistic": ("pignistic",),
     "masses": ("masses",),
     "fcn10+sensor": ("pignistic", "pignistic_prev", "sensor"),
+    "fcn10+sensor+past": ("pignistic", "pignistic_prev", "sensor", "past"),
 }
 
 #: ``inputs`` name -> channels of ``x``
-INPUT_CHANNELS: dict[str, int] = {"fcn10": 10, "pignistic": 5, "masses": 32, "fcn10+sensor": 12}
+INPUT_CHANNELS: dict[str, int] = {"fcn10": 10, "pignistic": 5, "masses": 32, "fcn10+sensor": 12,
+                                  "fcn10+sensor+past": 14}
+#: steps between a frame and the past sensor grid of ``fcn10+sensor+past`` (1 s at 10 Hz)
+PAST_STEPS: int = 10
 
 #: label conventions of :class:`ShardDataset` (module docstring)
 LABELS: tuple[str, ...] = ("full", "kitti")
@@ -63,13 +75,54 @@ def sensor_channels(sensor: np.ndarray) -> np.ndarray:
     return np.stack([s == SensorState.FREE, s == SensorState.OCCUPIED], axis=-3).astype(np.float32)
 
 
-def network_input(x: np.ndarray, sensor: np.ndarray, inputs: str) -> np.ndarray:
+def past_sensor(prev: np.ndarray, prev_pose: np.ndarray, pose: np.ndarray,
+                cell_size: float) -> np.ndarray:
+    """An earlier sensor grid in the ego frame of ``pose``: ``(H, W) uint8``.
+
+    Args:
+        prev: ``(H, W) uint8`` the earlier grid.
+        prev_pose, pose: ``(3,)`` world poses of the earlier frame and of t.
+        cell_size: [m].
+
+    Returns:
+        Each cell the earlier grid's cell it comes from by the filter's nearest-cell
+        warp (:func:`dstenv.dst.reference.source_cells`); unknown (0) from outside it.
+    """
+    from dstenv.dst.reference import source_cells
+    from dstenv.grid import relative_pose
+
+    si, sj, ok = source_cells(prev.shape, cell_size, relative_pose(prev_pose, pose))
+    out = np.zeros(prev.shape, np.uint8)
+    out[ok] = prev[si[ok], sj[ok]]
+    return out
+
+
+def past_rows(steps: np.ndarray) -> np.ndarray:
+    """For each row of a drive's frames (``steps``: ``(N,)`` their step numbers, in
+    order), the row holding step ``step - PAST_STEPS`` of the same run of increasing
+    steps, or -1: ``(N,) int64``."""
+    steps = np.asarray(steps, np.int64)
+    out = np.full(len(steps), -1, np.int64)
+    start = 0
+    for i in range(len(steps)):
+        if i and steps[i] <= steps[i - 1]:
+            start = i  # the steps restart: another episode
+        j = int(np.searchsorted(steps[start:i], steps[i] - PAST_STEPS)) + start
+        if j < i and steps[j] == steps[i] - PAST_STEPS:
+            out[i] = j
+    return out
+
+
+def network_input(x: np.ndarray, sensor: np.ndarray, inputs: str,
+                  past: np.ndarray | None = None) -> np.ndarray:
     """What a network trained on ``inputs`` reads, from the BetP at t and t-1.
 
     Args:
         x: ``(K, 10, H, W) float32`` BetP at t then t-1 (``fcn10``).
         sensor: ``(K, H, W) uint8`` sensor grids of the same frames.
-        inputs: ``"fcn10"`` or ``"fcn10+sensor"``.
+        inputs: ``"fcn10"``, ``"fcn10+sensor"`` or ``"fcn10+sensor+past"``.
+        past: ``(K, H, W) uint8`` the past sensor grids (:func:`past_sensor`), for
+            ``fcn10+sensor+past``.
 
     Returns:
         ``(K, C, H, W) float32`` (``x`` itself for ``fcn10``).
@@ -78,8 +131,12 @@ def network_input(x: np.ndarray, sensor: np.ndarray, inputs: str) -> np.ndarray:
         return x
     if inputs == "fcn10+sensor":
         return np.concatenate([x, sensor_channels(sensor)], axis=1)
+    if inputs == "fcn10+sensor+past":
+        if past is None:
+            raise ValueError("inputs 'fcn10+sensor+past' need the past sensor grids")
+        return np.concatenate([x, sensor_channels(sensor), sensor_channels(past)], axis=1)
     raise ValueError(f"a network on inputs {inputs!r} cannot be scored from BetP at t and "
-                     "t-1; scorable: fcn10, fcn10+sensor")
+                     "t-1; scorable: fcn10, fcn10+sensor, fcn10+sensor+past")
 
 
 def _check_inputs(inputs: str) -> tuple[str, ...]:
@@ -96,7 +153,7 @@ def _check_labels(labels: str) -> str:
 
 def _sample(arrays: Mapping[str, np.ndarray], names: Sequence[str],
             labels: str = "full") -> dict[str, torch.Tensor]:
-    x = np.concatenate([sensor_channels(arrays[n]) if n == "sensor"
+    x = np.concatenate([sensor_channels(arrays[n]) if n in ("sensor", "past")
                         else np.asarray(arrays[n], dtype=np.float32) for n in names], axis=0)
     lab = arrays["labels"]
     if labels == "kitti":
@@ -114,6 +171,9 @@ def frame_to_sample(frame: Frame, inputs: str = "fcn10", labels: str = "full"
                     ) -> dict[str, torch.Tensor]:
     """A :class:`Frame` as a training sample (see the module docstring)."""
     names = _check_inputs(inputs)
+    if "past" in names:
+        raise ValueError(f"inputs {inputs!r} read an earlier frame of the drive: use stored "
+                         "shards (ShardDataset), not single frames or a StreamingDataset")
     if inputs == "masses" and frame.masses is None:
         raise ValueError("inputs='masses' needs frames with masses (config frame.masses = true)")
     return _sample({n: getattr(frame, n) for n in (*names, "labels", "visible", "sensor")},
@@ -193,6 +253,15 @@ class ShardDataset(Dataset):
         self._pid = os.getpid()
         self.cache = bool(cache)
         self._cache: dict[int, tuple[int, dict[str, np.ndarray]]] = {}
+        # fcn10+sensor+past: per shard, the frame PAST_STEPS steps before each (or -1)
+        self._past: dict[int, np.ndarray] = {}
+
+    def _past_row(self, k: int, local: int) -> int:
+        if k not in self._past:
+            r = self._reader(k)
+            self._past[k] = past_rows(np.array([int(r.get(i, ("step",))["step"])
+                                                for i in range(len(r))]))
+        return int(self._past[k][local])
 
     def _fail(self, exc: ShardError) -> None:
         if self.on_error == "raise":
@@ -238,10 +307,12 @@ class ShardDataset(Dataset):
                 if i in self._cache:
                     k, arrays = self._cache[i]
                 else:
-                    wanted = {*self.names, "labels", "visible"}
-                    if self.labels == "kitti":
+                    wanted = {*self.names, "labels", "visible"} - {"past"}
+                    if self.labels == "kitti" or "past" in self.names:
                         wanted.add("sensor")
                     arrays = self._reader(k).get(local, sorted(wanted), stored=True)
+                    if "past" in self.names:
+                        arrays = dict(arrays, past=self._read_past(k, local))
                     if self.cache:
                         self._cache[i] = (k, arrays)
             except ShardError as exc:
@@ -252,6 +323,17 @@ class ShardDataset(Dataset):
             return _sample({n: reader.dequantise(n, a) for n, a in arrays.items()}, self.names,
                            self.labels)
         raise ShardError(f"no readable frame left in {len(self.files)} shards")
+
+    def _read_past(self, k: int, local: int) -> np.ndarray:
+        """The sensor grid :data:`PAST_STEPS` steps before frame ``local`` of shard
+        ``k``, in its ego frame (all unknown when the shard has no such frame)."""
+        r = self._reader(k)
+        j = self._past_row(k, local)
+        now = r.get(local, ("sensor", "ego_pose"))
+        if j < 0:
+            return np.zeros_like(now["sensor"])
+        prev = r.get(j, ("sensor", "ego_pose"))
+        return past_sensor(prev["sensor"], prev["ego_pose"], now["ego_pose"], r.cell_size)
 
     def __getstate__(self) -> dict[str, Any]:
         state = dict(self.__dict__)

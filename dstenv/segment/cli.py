@@ -250,9 +250,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         type=float,
         help="raise the median-frequency class weights to this power (default 1: paper eq. 2)",
     )
-    p.add_argument("--inputs", choices=("fcn10", "fcn10+sensor"), default="fcn10",
+    p.add_argument("--inputs", choices=("fcn10", "fcn10+sensor", "fcn10+sensor+past"),
+                   default="fcn10",
                    help="network input: BetP at t and t-1 (fcn10, the paper's), or also the "
-                        "current sensor grid (fcn10+sensor)")
+                        "current sensor grid (fcn10+sensor), and the sensor grid of one "
+                        "second earlier (fcn10+sensor+past)")
     p.add_argument("--labels", choices=("full", "kitti"), default="full",
                    help="label convention: as stored (full) or KITTI's (kitti: objects, "
                         "seen-free cells navigable, the rest ignored), for real drives")

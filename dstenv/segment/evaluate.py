@@ -14,6 +14,7 @@ from pathlib import Path
 import torch
 from tqdm import tqdm
 
+from dstenv.data.datasets import INPUT_CHANNELS
 from dstenv.dst.frame import CLASSES
 from dstenv.segment.metrics import ConfusionMeter
 from dstenv.segment.segmenters import Segmenter, TorchSegmenter
@@ -80,8 +81,9 @@ def load_checkpoints(
     segs = []
     for path in paths:
         seg = load_segmenter(path, device)
-        # fcn10+sensor networks read the frames' sensor grids besides the BetP channels
-        from_data = seg.in_channels - (2 if seg.inputs == "fcn10+sensor" else 0)
+        # fcn10+sensor(+past) networks read the frames' sensor grids besides the BetP
+        from_data = seg.in_channels - (INPUT_CHANNELS[seg.inputs] - 10
+                                       if seg.inputs.startswith("fcn10+") else 0)
         if from_data != in_channels:
             raise ValueError(
                 f"{path}: checkpoint takes {seg.in_channels} input channels"

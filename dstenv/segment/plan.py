@@ -117,7 +117,7 @@ def _subset(ep: Episode, keep: Any) -> Episode | None:
     return Episode(ep.seed, ep.sensor, ep.gis, ep.poses, ep.steps[keep], ep.labels[keep],
                    ep.visible[keep], ep.cell_size, ep.episode,
                    None if ep.stored_x is None else ep.stored_x[keep], ep.history, ep.period,
-                   None if ep.stored_steps is None else ep.stored_steps[keep])
+                   None if ep.stored_steps is None else ep.stored_steps[keep], ep.row_steps)
 
 
 def _source_steps(ep: Episode) -> Any:

@@ -14,6 +14,7 @@ from dstenv.config import ConfigError, merge_config
 __all__ = [
     "PRESETS",
     "REAL_NET_MAPS",
+    "REAL_NET_INPUTS",
     "PAPER_PROTOCOL",
     "check_config",
     "default_benchmark_config",
@@ -24,6 +25,8 @@ __all__ = [
 
 #: ``real_net.map`` values (:func:`dstenv.segment.realnet.train_real_networks`)
 REAL_NET_MAPS = ("match", "run")
+#: ``real_net.inputs`` values (:data:`dstenv.data.datasets.INPUTS` that read the sensor)
+REAL_NET_INPUTS = ("fcn10+sensor", "fcn10+sensor+past")
 
 
 def default_benchmark_config() -> dict[str, Any]:
@@ -81,6 +84,9 @@ def default_benchmark_config() -> dict[str, Any]:
             # "match": drives without a map when the real drives have none (converted
             # without --osm), else the run's map settings; "run": always the run's
             "map": "match",
+            # the networks' input (dstenv.data.datasets): "fcn10+sensor", or with the
+            # sensor grid of one second earlier too, "fcn10+sensor+past"
+            "inputs": "fcn10+sensor",
         },
         "curve": {
             "frames": [],  # training-set sizes, e.g. [140, 1400, 14000]
@@ -312,6 +318,9 @@ def check_config(cfg: Mapping[str, Any]) -> None:
     if rn["map"] not in REAL_NET_MAPS:
         raise ConfigError(f"real_net.map: unknown {rn['map']!r}; choose from "
                           + ", ".join(REAL_NET_MAPS))
+    if rn["inputs"] not in REAL_NET_INPUTS:
+        raise ConfigError(f"real_net.inputs: unknown {rn['inputs']!r}; choose from "
+                          + ", ".join(REAL_NET_INPUTS))
     if rn["model"] not in MODELS:
         raise ConfigError(f"real_net.model: unknown model {rn['model']!r}; choose from "
                           + ", ".join(MODELS))

@@ -93,7 +93,8 @@ def train_real_networks(
         f"cells of {cell_size:g} m{' without a map' if no_map else ''} into {out / 'data'}")
     generate_data(dcfg, cfg["protocol"], out / "data", progress, cell_size, no_map)
     timings = {"data_s": time.perf_counter() - t}
-    data = {s: ShardDataset(out / "data", split=s, inputs="fcn10+sensor", labels="kitti")
+    inputs = rn.get("inputs", "fcn10+sensor")  # runs older than real_net.inputs: this one
+    data = {s: ShardDataset(out / "data", split=s, inputs=inputs, labels="kitti")
             for s in ("train", "val")}
     seeds = [int(s) for s in rn["seeds"]]
     ckpts, histories = {}, {}
@@ -104,7 +105,7 @@ def train_real_networks(
                 "model_kwargs": cfg["model_kwargs"].get(rn["model"], {}),
                 "epochs": int(rn["epochs"]), "seed": seed,
                 "device": str(resolve_device(cfg["device"])),
-                "inputs": "fcn10+sensor", "labels": "kitti", "init": ""}
+                "inputs": inputs, "labels": "kitti", "init": ""}
         mdir = out / "models" / f"seed{seed}"
         log(f"real_net: training {label} on {len(data['train'])} frames")
         _, histories[label] = train(tcfg, data["train"], data["val"] if len(data["val"]) else None,
@@ -113,7 +114,7 @@ def train_real_networks(
         ckpts[label] = mdir / "best.pt"
     facts = {"data": str(out / "data"), "grid": list(grid), "cell_size": cell_size,
              "frames": {s: len(d) for s, d in data.items()}, "seeds": seeds,
-             "inputs": "fcn10+sensor", "labels": "kitti", "no_map": no_map,
+             "inputs": inputs, "labels": "kitti", "no_map": no_map,
              "checkpoints": {k: str(v) for k, v in ckpts.items()},
              "histories": histories, "timings_s": timings}
     return ckpts, facts

@@ -79,6 +79,9 @@ class Episode:
         stored_steps: optional ``(K,) int64`` step numbers of the scored frames in
             their source when ``steps`` index stored frames instead (``None``: the
             same as ``steps``).
+        row_steps: optional ``(T,) int64`` step number of every row of ``sensor``,
+            ``gis`` and ``poses`` in the source (``None``: the row index), which
+            :func:`dstenv.segment.score.past_grids` needs for stored frames.
     """
 
     seed: int
@@ -94,6 +97,7 @@ class Episode:
     history: bool = True
     period: int = 1
     stored_steps: np.ndarray | None = None
+    row_steps: np.ndarray | None = None
 
     @property
     def key(self) -> tuple[int, int]:

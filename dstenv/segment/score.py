@@ -50,7 +50,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from dstenv.data.datasets import network_input
+from dstenv.data.datasets import network_input, past_rows, past_sensor
 from dstenv.dst.frame import CLASSES
 from dstenv.dst.params import DSTParams
 from dstenv.frame import IGNORE_INDEX
@@ -68,6 +68,7 @@ __all__ = [
     "observed_cells",
     "object_counts",
     "tie_cells",
+    "past_grids",
 ]
 
 #: cell sets scored, headline first (module docstring)
@@ -215,6 +216,22 @@ def _key(p: DSTParams) -> tuple:
     return tuple(round(v, 9) for v in p.to_dict().values())
 
 
+
+def past_grids(episode: Episode) -> np.ndarray:
+    """``(K, H, W) uint8``: for each scored frame, the drive's sensor grid
+    :data:`~dstenv.data.datasets.PAST_STEPS` steps earlier in its ego frame (all
+    unknown where the drive holds no such step), as ``fcn10+sensor+past`` reads it."""
+    rows = (np.arange(len(episode.sensor)) if episode.row_steps is None
+            else np.asarray(episode.row_steps))
+    prow = past_rows(rows)
+    out = np.zeros((len(episode.steps), *episode.sensor.shape[1:]), np.uint8)
+    for k, row in enumerate(episode.steps):
+        j = int(prow[row])
+        if j >= 0:
+            out[k] = past_sensor(episode.sensor[j], episode.poses[j], episode.poses[row],
+                                 episode.cell_size)
+    return out
+
 def score(
     segmenters: Sequence[Segmenter],
     episodes: Sequence[Episode],
@@ -230,8 +247,8 @@ def score(
     stored BetP when they are the generation parameters and the drive has no
     history; unscorable otherwise). Any other segmenter (a network) reads the
     drive's ``stored_x`` if set, else the filter run with ``generation_params``,
-    and, when its ``inputs`` are ``fcn10+sensor``, the drive's sensor grids
-    (:func:`dstenv.data.datasets.network_input`).
+    and, when its ``inputs`` are ``fcn10+sensor`` (``+past``), the drive's sensor grids
+    (and :func:`past_grids`; :func:`dstenv.data.datasets.network_input`).
 
     Args:
         segmenters: distinct ``label`` values.
@@ -293,10 +310,11 @@ def score(
                 pred = seg.predict(torch.from_numpy(x)).numpy()
             else:
                 inputs = getattr(seg, "inputs", "fcn10")
+                past = past_grids(ep) if inputs == "fcn10+sensor+past" else None
                 pred = np.concatenate([
                     seg.predict(torch.from_numpy(network_input(
                         x_gen[j : j + batch_size], ep.sensor[ep.steps[j : j + batch_size]],
-                        inputs))).numpy()
+                        inputs, None if past is None else past[j : j + batch_size]))).numpy()
                     for j in range(0, len(x_gen), batch_size)
                 ])
             for sc, m in masks.items():

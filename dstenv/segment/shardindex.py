@@ -190,6 +190,7 @@ def stored_episodes(
             history=reason is None,
             period=1,  # the time axis is the stored (= fused) frames
             stored_steps=np.array([fr["step"] for fr in rows], dtype=np.int64),
+            row_steps=np.array([fr["step"] for fr in rows], dtype=np.int64),
         )
         episodes.append((ep, ep.stored_steps))
     return episodes, reason

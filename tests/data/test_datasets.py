@@ -166,3 +166,57 @@ def test_sensor_input_and_kitti_labels(dataset_dir):
         network_input(x, f.sensor[None], "masses")
     with pytest.raises(ValueError, match="unknown labels 'coco'"):
         ShardDataset(root, labels="coco")
+
+
+def test_past_rows_find_the_step_one_second_earlier_in_the_same_drive():
+    from dstenv.data.datasets import PAST_STEPS, past_rows
+
+    assert PAST_STEPS == 10
+    np.testing.assert_array_equal(past_rows(np.arange(13)), [-1] * 10 + [0, 1, 2])
+    np.testing.assert_array_equal(past_rows([10, 20, 30]), [-1, 0, 1])  # stride 10
+    # a second drive restarts the steps: its frames never reach into the first
+    np.testing.assert_array_equal(past_rows([10, 20, 30, 10, 20]), [-1, 0, 1, -1, 3])
+    np.testing.assert_array_equal(past_rows([10, 15, 25, 35]), [-1, -1, 1, 2])
+
+
+def test_past_sensor_is_the_filters_warp():
+    from dstenv.data.datasets import past_sensor
+
+    prev = np.random.default_rng(0).integers(0, 3, size=(9, 7)).astype(np.uint8)
+    pose = np.array([3.0, -2.0, 0.4])
+    np.testing.assert_array_equal(past_sensor(prev, pose, pose, 0.5), prev)
+    # two cells forward: what stood two rows ahead is two rows nearer now
+    ahead = pose + np.array([1.0 * np.cos(0.4), 1.0 * np.sin(0.4), 0.0])
+    out = past_sensor(prev, pose, ahead, 0.5)
+    np.testing.assert_array_equal(out[2:], prev[:-2])
+    assert (out[:2] == 0).all()  # from outside the earlier grid: unknown
+
+
+def test_past_input_reads_the_frame_one_second_earlier(tmp_path, make_frame, shard_attrs):
+    from dstenv.data.datasets import frame_to_sample, network_input, sensor_channels
+
+    rng = np.random.default_rng(6)
+    frames = [make_frame(rng, step=i, seed=4) for i in range(14)]
+    for f in frames:
+        f.ego_pose = np.array([1.0, 2.0, 0.3])  # a standing ego: the warp is the identity
+    path = tmp_path / "shard-00000.h5"
+    with ShardWriter(path, dict(shard_attrs, split="train")) as w:
+        for f in frames:
+            w.add(f)
+    ds = ShardDataset(path, inputs="fcn10+sensor+past")
+    item = ds[12]
+    assert item["x"].shape == (14, 12, 10)
+    np.testing.assert_array_equal(item["x"][:12].numpy(),
+                                  ShardDataset(path, inputs="fcn10+sensor")[12]["x"].numpy())
+    np.testing.assert_array_equal(item["x"][12:].numpy(), sensor_channels(frames[2].sensor))
+    assert not ds[9]["x"][12:].any()  # no frame one second earlier: all unknown
+    cached = ShardDataset(path, inputs="fcn10+sensor+past", cache=True)
+    torch.testing.assert_close(cached[12]["x"], item["x"], rtol=0, atol=0)
+    # a batch of scored frames reads the same channels; single frames cannot
+    x = np.zeros((1, 10, 12, 10), np.float32)
+    got = network_input(x, frames[12].sensor[None], "fcn10+sensor+past", frames[2].sensor[None])
+    np.testing.assert_array_equal(got[0, 12:], item["x"][12:].numpy())
+    with pytest.raises(ValueError, match="past sensor grids"):
+        network_input(x, frames[12].sensor[None], "fcn10+sensor+past")
+    with pytest.raises(ValueError, match="earlier frame of the drive"):
+        frame_to_sample(frames[12], "fcn10+sensor+past")

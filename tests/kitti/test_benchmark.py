@@ -210,8 +210,9 @@ def test_fine_tuning_starts_from_the_network_that_reads_its_frames_best(kitti_ro
     assert 0.0 <= scores["a"] <= 1.0
 
 
+@pytest.mark.parametrize("inputs", ["fcn10+sensor", "fcn10+sensor+past"])
 def test_real_net_is_trained_for_the_real_grid_and_scored_on_it(kitti_root, sim_checkpoint,
-                                                                  tmp_path):
+                                                                  tmp_path, inputs):
     """``real_net``: simulated drives at the converted grid, KITTI's labels, sensor input;
     scored on the real drive next to the simulated run's network, and a candidate start
     of the fine-tuning."""
@@ -223,7 +224,7 @@ def test_real_net_is_trained_for_the_real_grid_and_scored_on_it(kitti_root, sim_
     from dstenv.segment.presets import preset_config
     from dstenv.segment.real import real_benchmark
 
-    cfg = preset_config("tiny", {"real_net": {"frames": 10, "epochs": 1}})
+    cfg = preset_config("tiny", {"real_net": {"frames": 10, "epochs": 1, "inputs": inputs}})
     sim = {"config": cfg, "segmenters": {
         "unet-light": {"kind": "learned", "describe": {"checkpoint": str(sim_checkpoint)}}}}
     res = real_benchmark(sim, tmp_path, str(kitti_root), ["0001"], finetune_frames=2,
@@ -243,11 +244,12 @@ def test_real_net_is_trained_for_the_real_grid_and_scored_on_it(kitti_root, sim_
             assert r.attrs["config"]["gis"]["source"] == "none"
             assert not r.get(0, ["gis"])["gis"].any()  # vacuous GIS grid: all 0
     ckpt = load_checkpoint(facts["checkpoints"][label])
-    assert ckpt["spec"]["inputs"] == "fcn10+sensor" and ckpt["spec"]["in_channels"] == 12
+    assert ckpt["spec"]["inputs"] == inputs and facts["inputs"] == inputs
+    assert ckpt["spec"]["in_channels"] == {"fcn10+sensor": 12, "fcn10+sensor+past": 14}[inputs]
     assert ckpt["config"]["labels"] == "kitti"
     rows = res["segmenters"]
     assert {f"{label} (sim only)", "unet-light (sim only)"} <= set(rows)
-    assert rows[f"{label} (sim only)"]["describe"]["inputs"] == "fcn10+sensor"
+    assert rows[f"{label} (sim only)"]["describe"]["inputs"] == inputs
     # both networks were candidates for the fine-tuning start
     assert set(res["real"]["finetune_start"]["start_miou"]) == {"unet-light", label}
     tuned = torch.load(tmp_path / "kitti" / "finetune" / "last.pt", weights_only=True)

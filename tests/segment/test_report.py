@@ -121,6 +121,9 @@ def test_presets_validate():
         _check(preset_config("tiny", {"train_seeds": [1, 1]}))
     with pytest.raises(ConfigError, match="real_net.map: unknown 'osm'; choose from match, run"):
         _check(preset_config("tiny", {"real_net": {"map": "osm"}}))
+    with pytest.raises(ConfigError, match="real_net.inputs: unknown 'fcn10'; choose from "
+                                          "fcn10[+]sensor, fcn10[+]sensor[+]past"):
+        _check(preset_config("tiny", {"real_net": {"inputs": "fcn10"}}))
 
 
 def test_paper_protocol_names_missing_pipeline_keys():

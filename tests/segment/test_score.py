@@ -10,6 +10,7 @@ from dstenv.segment.score import (
     SCOPES,
     object_counts,
     observed_cells,
+    past_grids,
     score,
     tie_cells,
 )
@@ -127,3 +128,21 @@ def test_score_without_history_scores_only_generation_params():
                 [ep], gen)
     assert "p" in res.unscored and "filter history" in res.unscored["p"]
     assert set(res.confusion) == {"g"} and res.observed_definition == "visible"
+
+
+def test_past_grids_read_the_step_one_second_earlier():
+    rng = np.random.default_rng(2)
+    sensor = rng.integers(0, 3, size=(21, 6, 5)).astype(np.uint8)
+    poses = np.zeros((21, 3))
+    poses[:, 0] = np.arange(21) * 0.1  # 0.1 m a step: after 10 steps one cell forward
+    past = past_grids(_episode(poses, sensor, [5, 12, 20]))
+    assert not past[0].any()  # step 5 has no step -5
+    np.testing.assert_array_equal(past[1][1:], sensor[2][:-1])  # moved one row nearer
+    np.testing.assert_array_equal(past[2][1:], sensor[10][:-1])
+    # stored frames: rows are the stored steps (stride 10 here)
+    ep = _episode(poses[[0, 10, 20]], sensor[[0, 10, 20]], [0, 1, 2], history=False,
+                  stored_x=np.zeros((3, 10, 6, 5), np.float32),
+                  stored_steps=np.array([0, 10, 20]), row_steps=np.array([0, 10, 20]))
+    past = past_grids(ep)
+    assert not past[0].any()
+    np.testing.assert_array_equal(past[2][1:], sensor[10][:-1])

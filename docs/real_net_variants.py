@@ -49,6 +49,10 @@ VARIANTS: dict[str, dict[str, Any]] = {
     # the sensor grid of one second earlier as two more input channels
     # (dstenv.data.datasets, inputs "fcn10+sensor+past")
     "no map past": {"real_net": {"map": "match", "inputs": "fcn10+sensor+past"}},
+    # three more seeds of each (the seed spread on one drive is wide)
+    "no map seeds 3-5": {"real_net": {"map": "match", "seeds": [3, 4, 5]}},
+    "no map past seeds 3-5": {"real_net": {"map": "match", "inputs": "fcn10+sensor+past",
+                                           "seeds": [3, 4, 5]}},
     # cars as a body on wheels for the 3-D LIDAR (dstenv.sensing.carshape)
     "no map car shape": {"real_net": {"map": "match"},
                          "data_overrides": {"lidar": {"hdl64": {"vehicle_shape": "car"}}}},

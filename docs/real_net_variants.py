@@ -53,6 +53,13 @@ VARIANTS: dict[str, dict[str, Any]] = {
     "no map seeds 3-5": {"real_net": {"map": "match", "seeds": [3, 4, 5]}},
     "no map past seeds 3-5": {"real_net": {"map": "match", "inputs": "fcn10+sensor+past",
                                            "seeds": [3, 4, 5]}},
+    # both: simulated DST with OXTS-like motion errors (moving evidence on static edges,
+    # as KITTI's parked cars have) and the past grid that tells them apart
+    "no map past odometry": {"real_net": {"map": "match", "inputs": "fcn10+sensor+past",
+                                          "seeds": [0, 1, 2, 3, 4, 5]},
+                             "data_overrides": {"protocol": {"odometry_along": 0.04,
+                                                             "odometry_drift": 0.01,
+                                                             "odometry_yaw": 0.015}}},
     # cars as a body on wheels for the 3-D LIDAR (dstenv.sensing.carshape)
     "no map car shape": {"real_net": {"map": "match"},
                          "data_overrides": {"lidar": {"hdl64": {"vehicle_shape": "car"}}}},

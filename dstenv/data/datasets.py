@@ -375,6 +375,9 @@ class StreamingDataset(IterableDataset):
         self.labels = _check_labels(labels)
         self.config = scenario_config(scenario)
         self.names = _check_inputs(inputs)
+        if "past" in self.names:
+            raise ValueError(f"inputs {inputs!r} read an earlier frame of the drive: use "
+                             "stored shards (ShardDataset), not a StreamingDataset")
         if inputs == "masses":
             self.config["frame"]["masses"] = True
         self.inputs, self.seed, self.split, self.rank = inputs, int(seed), split, int(rank)

@@ -220,3 +220,7 @@ def test_past_input_reads_the_frame_one_second_earlier(tmp_path, make_frame, sha
         network_input(x, frames[12].sensor[None], "fcn10+sensor+past")
     with pytest.raises(ValueError, match="earlier frame of the drive"):
         frame_to_sample(frames[12], "fcn10+sensor+past")
+    from dstenv.data.datasets import StreamingDataset
+
+    with pytest.raises(ValueError, match="not a StreamingDataset"):
+        StreamingDataset("dense", inputs="fcn10+sensor+past")

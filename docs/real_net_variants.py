@@ -60,6 +60,8 @@ VARIANTS: dict[str, dict[str, Any]] = {
                              "data_overrides": {"protocol": {"odometry_along": 0.04,
                                                              "odometry_drift": 0.01,
                                                              "odometry_yaw": 0.015}}},
+    # the full median-frequency class weights (the paper's eq. 2) instead of their root
+    "no map wp 1.0": {"real_net": {"map": "match"}, "train": {"weight_power": 1.0}},
     # cars as a body on wheels for the 3-D LIDAR (dstenv.sensing.carshape)
     "no map car shape": {"real_net": {"map": "match"},
                          "data_overrides": {"lidar": {"hdl64": {"vehicle_shape": "car"}}}},

@@ -18,7 +18,9 @@ observed cells accumulated) and scores, with the same
   input, whichever reads these real drives best), and
   ``dst-tuned (real frames)``: the DST parameters searched on the same frames
   (:func:`~dstenv.segment.tune.tune_dst_params`, the simulated run's budget, seed
-  and scope), the non-learned counterpart of the fine-tuning. Only frames from
+  and scope), the non-learned counterpart of the fine-tuning. The fine-tuning's
+  length is chosen among :data:`FINETUNE_EPOCHS` on the ``gap`` frames between the
+  fine-tuning and the scored ones, which nothing trains on. Only frames from
   step ``N + gap`` on are then scored, for every row, so no fine-tuning or tuning
   frame (nor its immediate neighbours) is a test frame; the filter still runs
   over the earlier scans, as it would on a car.
@@ -31,10 +33,13 @@ from pathlib import Path
 from typing import Any
 
 __all__ = ["convert_sequences", "real_benchmark", "sim_checkpoints", "start_scores",
-           "tune_on_real", "REAL_TUNED"]
+           "tune_on_real", "REAL_TUNED", "FINETUNE_EPOCHS"]
 
 #: label of the DST row tuned on the real fine-tuning frames
 REAL_TUNED = "dst-tuned (real frames)"
+#: candidate fine-tuning lengths [epochs], chosen on the frames between the fine-tuning
+#: and the scored ones (5 alone until 2026-12-05)
+FINETUNE_EPOCHS: tuple[int, ...] = (5, 10, 20, 40)
 
 
 def sim_checkpoints(results: Mapping[str, Any]) -> dict[str, Path]:
@@ -97,32 +102,64 @@ def start_scores(ckpts: Mapping[str, Path], ds: Any, picked: Sequence[int]
     return out
 
 
-def _finetune(ckpts: Mapping[str, Path], data: Path, frames: int, epochs: int, out: Path,
-              progress: bool, log: Callable[[str], None]) -> tuple[Path, dict[str, Any]]:
+def _finetune(ckpts: Mapping[str, Path], data: Path, frames: int, epochs: Sequence[int],
+              gap: int, out: Path, progress: bool, log: Callable[[str], None]
+              ) -> tuple[Path, dict[str, Any]]:
+    """Fine-tune the best-reading simulated network on the first ``frames`` real frames.
+
+    ``epochs``: candidate lengths, trained one after the other in one run (each resumes
+    the last: the same weights as a run of that length); with several, the one whose
+    network reads the ``gap`` frames between the fine-tuning and the scored frames best
+    (mIoU over their labelled cells; ties: the shorter) is kept. Those frames are never
+    trained on nor scored.
+    """
+    import shutil
+
     import torch
 
     from dstenv.data import ShardDataset
     from dstenv.segment.shardindex import split_index
     from dstenv.segment.train import train
 
+    cands = sorted({int(e) for e in epochs})
+    if not cands or cands[0] < 1:
+        raise ValueError(f"finetune_epochs: lengths must be >= 1, got {list(epochs)}")
     ds = ShardDataset(data, split="test", inputs="fcn10")
     index, _ = split_index(ds.files)
     picked = [k for k, fr in enumerate(index) if fr["step"] < frames]
     if not picked:
         raise ValueError(f"finetune_frames {frames}: no converted frame before it")
+    val = [k for k, fr in enumerate(index) if frames <= fr["step"] < frames + gap]
+    if len(cands) > 1 and not val:
+        raise ValueError(f"finetune_epochs {cands}: choosing a length needs real frames between "
+                         "the fine-tuning and the scored ones (a gap > 0 holding frames)")
     scores = start_scores(ckpts, ds, picked)
     best = max(scores, key=scores.__getitem__)  # ties: the first (the simulated run's order)
     log(f"fine-tuning start: {best} (mIoU on the {len(picked)} fine-tuning frames: "
         + ", ".join(f"{k} {v:.3f}" for k, v in scores.items()) + ")")
     spec = torch.load(ckpts[best], map_location="cpu", weights_only=True)["spec"]
     inputs = spec.get("inputs", "fcn10")
-    cfg = {"init": str(ckpts[best]), "model": spec["model"], "model_kwargs": spec["model_kwargs"],
-           "epochs": epochs, "batch_size": 4, "lr": 1e-4, "device": "cpu", "inputs": inputs}
     if inputs != ds.inputs:  # the real labels are KITTI's already: labels stay "full"
         ds = ShardDataset(data, split="test", inputs=inputs)
-    log(f"fine-tuning {best} on {len(picked)} real frames")
-    train(cfg, torch.utils.data.Subset(ds, picked), None, out, progress=progress, log=log)
-    return out / "last.pt", {"start": best, "start_miou": scores}
+    length: dict[int, float] = {}
+    for e in cands:
+        cfg = {"init": str(ckpts[best]), "model": spec["model"],
+               "model_kwargs": spec["model_kwargs"], "epochs": e, "batch_size": 4, "lr": 1e-4,
+               "device": "cpu", "inputs": inputs}
+        log(f"fine-tuning {best} on {len(picked)} real frames, {e} epochs")
+        train(cfg, torch.utils.data.Subset(ds, picked), None, out, progress=progress, log=log)
+        shutil.copyfile(out / "last.pt", out / f"epochs-{e}.pt")
+        if len(cands) > 1:
+            length[e] = start_scores({"x": out / f"epochs-{e}.pt"}, ds, val)["x"]
+    chosen = max(cands, key=lambda e: (length.get(e, 0.0), -e))
+    if len(cands) > 1:
+        log(f"fine-tuning length: {chosen} epochs (mIoU on the {len(val)} frames between: "
+            + ", ".join(f"{e} {v:.3f}" for e, v in length.items()) + ")")
+    first, last = (index[val[0]]["step"], index[val[-1]]["step"]) if val else (None, None)
+    return out / f"epochs-{chosen}.pt", {
+        "start": best, "start_miou": scores,
+        "epochs": {"candidates": cands, "chosen": chosen, "miou": length,
+                   "chosen_on": f"frames {first}-{last}" if val else None}}
 
 
 def tune_on_real(data: Path, frames: int, tune: Mapping[str, Any], progress: bool = False,
@@ -171,7 +208,7 @@ def real_benchmark(
     sequences: Sequence[str],
     osm: str | None = None,
     finetune_frames: int = 0,
-    finetune_epochs: int = 5,
+    finetune_epochs: int | Sequence[int] = FINETUNE_EPOCHS,
     gap: int = 10,
     progress: bool = False,
     log: Callable[[str], None] = print,
@@ -183,7 +220,8 @@ def real_benchmark(
         out: the simulated run's output directory (``kitti/`` is written inside).
         root: KITTI tracking folder; sequences: e.g. ``["0003"]``; osm: optional map.
         finetune_frames: N labelled real frames per sequence for fine-tuning (0: none).
-        finetune_epochs: fine-tuning epochs.
+        finetune_epochs: fine-tuning epochs, or candidate lengths chosen on the ``gap``
+            frames (:data:`FINETUNE_EPOCHS`).
         gap: frames skipped between the fine-tuning and the scored frames.
         progress, log: tqdm bars, one-line messages.
 
@@ -224,7 +262,9 @@ def real_benchmark(
     start: dict[str, Any] = {}
     if finetune_frames > 0:
         cfg["score_from_step"] = finetune_frames + gap
-        tuned, start = _finetune(ckpts, data, finetune_frames, finetune_epochs,
+        lengths = ([finetune_epochs] if isinstance(finetune_epochs, int)
+                   else list(finetune_epochs))
+        tuned, start = _finetune(ckpts, data, finetune_frames, lengths, gap,
                                  kdir / "finetune", progress, log)
         labelled.append((f"fine-tuned on {finetune_frames} real frames/sequence", tuned))
         dst_rows.append(tune_on_real(data, finetune_frames, sim["config"]["tune"], progress,

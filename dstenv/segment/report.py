@@ -183,6 +183,11 @@ def _real_lines(results: dict[str, Any]) -> list[str]:
              f"row (every row is scored from step {real.get('scored_from_step')} on): the "
              f"fine-tuning starts from {start['start']}, the simulated network with the best "
              f"mIoU on them ({cands})."]
+    ep = start.get("epochs")  # runs before 2026-12-05: 5 epochs, no choice
+    if ep and len(ep["candidates"]) > 1:
+        tried = ", ".join(f"{e} {v:.3f}" for e, v in ep["miou"].items())
+        lines[-1] += (f" Its length, {ep['chosen']} epochs, was chosen on {ep['chosen_on']}, "
+                      f"which nothing trains on and no row scores (mIoU by epochs: {tried}).")
     from dstenv.segment.real import REAL_TUNED
 
     tuned = results.get("segmenters", {}).get(REAL_TUNED)

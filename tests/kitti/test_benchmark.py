@@ -228,8 +228,16 @@ def test_real_net_is_trained_for_the_real_grid_and_scored_on_it(kitti_root, sim_
     sim = {"config": cfg, "segmenters": {
         "unet-light": {"kind": "learned", "describe": {"checkpoint": str(sim_checkpoint)}}}}
     res = real_benchmark(sim, tmp_path, str(kitti_root), ["0001"], finetune_frames=2,
-                         finetune_epochs=1, gap=1, log=lambda m: None)
+                         finetune_epochs=(2, 1), gap=1, log=lambda m: None)
     facts = res["real"]["real_net"]
+    # the fine-tuning's length: chosen on frame 2, between the fine-tuning and scored frames
+    ep = res["real"]["finetune_start"]["epochs"]
+    assert ep["candidates"] == [1, 2] and set(ep["miou"]) == {1, 2}
+    assert ep["chosen_on"] == "frames 2-2" and ep["chosen"] == max(
+        (1, 2), key=lambda e: (ep["miou"][e], -e))
+    tuned_path = res["segmenters"]["fine-tuned on 2 real frames/sequence"]["describe"][
+        "checkpoint"]
+    assert tuned_path.endswith(f"epochs-{ep['chosen']}.pt")
     label = "unet-light kitti-labels"
     grid = load_manifest(tmp_path / "kitti" / "data")["grid_shape"]
     assert facts["grid"] == grid and facts["labels"] == "kitti"
@@ -256,3 +264,15 @@ def test_real_net_is_trained_for_the_real_grid_and_scored_on_it(kitti_root, sim_
     assert tuned["spec"]["inputs"] == res["segmenters"][
         "fine-tuned on 2 real frames/sequence"]["describe"]["inputs"]
     assert set(res["real_goal"]["networks"]) >= {f"{label} (sim only)"}
+
+
+def test_several_fine_tuning_lengths_need_frames_to_choose_on(kitti_root, sim_checkpoint,
+                                                              tmp_path):
+    from dstenv.segment.real import _finetune
+
+    ds = _convert(kitti_root, tmp_path / "ds", "--stride", "1")
+    with pytest.raises(ValueError, match="a gap > 0 holding frames"):
+        _finetune({"a": sim_checkpoint}, ds, 2, [1, 2], 0, tmp_path / "ft", False,
+                  lambda m: None)
+    with pytest.raises(ValueError, match="lengths must be >= 1"):
+        _finetune({"a": sim_checkpoint}, ds, 2, [0], 1, tmp_path / "ft", False, lambda m: None)

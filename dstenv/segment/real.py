@@ -133,7 +133,8 @@ def _finetune(ckpts: Mapping[str, Path], data: Path, frames: int, epochs: Sequen
     if len(cands) > 1 and not val:
         raise ValueError(f"finetune_epochs {cands}: choosing a length needs real frames between "
                          "the fine-tuning and the scored ones (a gap > 0 holding frames)")
-    scores = start_scores(ckpts, ds, picked)
+    base = ds  # fcn10: what start_scores reads (it adds a network's other inputs itself)
+    scores = start_scores(ckpts, base, picked)
     best = max(scores, key=scores.__getitem__)  # ties: the first (the simulated run's order)
     log(f"fine-tuning start: {best} (mIoU on the {len(picked)} fine-tuning frames: "
         + ", ".join(f"{k} {v:.3f}" for k, v in scores.items()) + ")")
@@ -150,7 +151,7 @@ def _finetune(ckpts: Mapping[str, Path], data: Path, frames: int, epochs: Sequen
         train(cfg, torch.utils.data.Subset(ds, picked), None, out, progress=progress, log=log)
         shutil.copyfile(out / "last.pt", out / f"epochs-{e}.pt")
         if len(cands) > 1:
-            length[e] = start_scores({"x": out / f"epochs-{e}.pt"}, ds, val)["x"]
+            length[e] = start_scores({"x": out / f"epochs-{e}.pt"}, base, val)["x"]
     chosen = max(cands, key=lambda e: (length.get(e, 0.0), -e))
     if len(cands) > 1:
         log(f"fine-tuning length: {chosen} epochs (mIoU on the {len(val)} frames between: "

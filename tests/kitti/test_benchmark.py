@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -264,6 +265,13 @@ def test_real_net_is_trained_for_the_real_grid_and_scored_on_it(kitti_root, sim_
     assert tuned["spec"]["inputs"] == res["segmenters"][
         "fine-tuned on 2 real frames/sequence"]["describe"]["inputs"]
     assert set(res["real_goal"]["networks"]) >= {f"{label} (sim only)"}
+    # a network reading the sensor (and past) grids as the start, several lengths
+    from dstenv.segment.real import _finetune
+
+    path, info = _finetune({label: Path(facts["checkpoints"][label])}, tmp_path / "kitti" / "data",
+                           2, [1, 2], 1, tmp_path / "ft2", False, lambda m: None)
+    assert info["start"] == label and path.name == f"epochs-{info['epochs']['chosen']}.pt"
+    assert torch.load(path, weights_only=True)["spec"]["inputs"] == inputs
 
 
 def test_several_fine_tuning_lengths_need_frames_to_choose_on(kitti_root, sim_checkpoint,

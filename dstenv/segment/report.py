@@ -194,7 +194,7 @@ def _real_lines(results: dict[str, Any]) -> list[str]:
     if tuned is not None:
         t = tuned["describe"]["tuning"]
         lines[-1] += (f" `{REAL_TUNED}` searched the DST parameters on "
-                     f"them ({t['budget']} sets, {t['scope']} cells: mIoU "
+                     f"the fine-tuning frames ({t['budget']} sets, {t['scope']} cells: mIoU "
                      f"{t['start_miou']:.3f} with the defaults, {t['best_miou']:.3f} tuned).")
     return lines + [""]
 

@@ -119,6 +119,7 @@ def run_benchmark(
     checkpoints: Sequence[str | Path] = (),
     split: str = "test",
     dst_rows: Sequence[Any] = (),
+    finetuned: Sequence[str] = (),
 ) -> dict[str, Any]:
     """Run the whole benchmark and write its report into ``out``.
 
@@ -136,6 +137,8 @@ def run_benchmark(
         split: the split scored (``"test"``; a KITTI conversion may use another name).
         dst_rows: more :class:`~dstenv.segment.segmenters.DSTSegmenter` rows with fixed
             parameters (:func:`~dstenv.segment.plan.plan_segmenters`).
+        finetuned: labels of the networks trained on real frames, held to the real-data
+            goal's larger margin (:data:`~dstenv.segment.results.MARGIN_REAL_FINETUNED`).
 
     Returns:
         The JSON-compatible results (also in ``out/results.json``).
@@ -214,7 +217,7 @@ def run_benchmark(
                     and segs[k]["describe"]["params"] == drives.generation_params.to_dict()),
                    None)
         results["goal"] = None
-        results["real_goal"] = (real_goal(segs, confusion, weights, ref)
+        results["real_goal"] = (real_goal(segs, confusion, weights, ref, finetuned=finetuned)
                                 if drives.source == "kitti" and ref else None)
     else:
         results["goal"] = goal(segs, confusion, weights)

@@ -144,12 +144,23 @@ def _finetune(ckpts: Mapping[str, Path], data: Path, frames: int, epochs: Sequen
         ds = ShardDataset(data, split="test", inputs=inputs)
     length: dict[int, float] = {}
     for e in cands:
-        cfg = {"init": str(ckpts[best]), "model": spec["model"],
-               "model_kwargs": spec["model_kwargs"], "epochs": e, "batch_size": 4, "lr": 1e-4,
-               "device": "cpu", "inputs": inputs}
-        log(f"fine-tuning {best} on {len(picked)} real frames, {e} epochs")
-        train(cfg, torch.utils.data.Subset(ds, picked), None, out, progress=progress, log=log)
-        shutil.copyfile(out / "last.pt", out / f"epochs-{e}.pt")
+        snap = out / f"epochs-{e}.pt"
+        if not snap.exists():  # a rerun keeps the lengths it has (their own weights)
+            last = out / "last.pt"
+            done = (int(torch.load(last, map_location="cpu", weights_only=True)["epoch"]) + 1
+                    if last.exists() else 0)  # "epoch": the last finished, from 0
+            if done > e:
+                raise ValueError(f"{out}: holds a fine-tuning of {done} epochs but no "
+                                 f"{snap.name}; remove the folder to fine-tune again")
+            cfg = {"init": str(ckpts[best]), "model": spec["model"],
+                   "model_kwargs": spec["model_kwargs"], "epochs": e, "batch_size": 4,
+                   "lr": 1e-4, "device": "cpu", "inputs": inputs}
+            log(f"fine-tuning {best} on {len(picked)} real frames, {e} epochs")
+            train(cfg, torch.utils.data.Subset(ds, picked), None, out, progress=progress,
+                  log=log)
+            tmp = snap.with_suffix(".tmp")
+            shutil.copyfile(last, tmp)
+            tmp.replace(snap)  # atomic: a snapshot is whole or absent
         if len(cands) > 1:
             length[e] = start_scores({"x": out / f"epochs-{e}.pt"}, base, val)["x"]
     chosen = max(cands, key=lambda e: (length.get(e, 0.0), -e))
@@ -259,6 +270,7 @@ def real_benchmark(
     else:
         cfg["complete"]["enabled"] = False
     labelled = [(f"{k} (sim only)", p) for k, p in ckpts.items()]
+    finetuned: list[str] = []
     dst_rows = []
     start: dict[str, Any] = {}
     if finetune_frames > 0:
@@ -268,10 +280,12 @@ def real_benchmark(
         tuned, start = _finetune(ckpts, data, finetune_frames, lengths, gap,
                                  kdir / "finetune", progress, log)
         labelled.append((f"fine-tuned on {finetune_frames} real frames/sequence", tuned))
+        finetuned.append(labelled[-1][0])
         dst_rows.append(tune_on_real(data, finetune_frames, sim["config"]["tune"], progress,
                                      log))
     res = run_benchmark(cfg, kdir, data_dir=data, progress=progress, log=log,
-                        command=None, checkpoints=labelled, dst_rows=dst_rows)
+                        command=None, checkpoints=labelled, dst_rows=dst_rows,
+                        finetuned=finetuned)
     res["real"] = {"root": str(root), "sequences": list(sequences), "osm": osm,
                    "finetune_frames": finetune_frames, "gap": gap,
                    "finetune_start": start if finetune_frames > 0 else None,

@@ -153,7 +153,7 @@ def _goal_lines(goal: dict[str, Any] | None, real: dict[str, Any] | None) -> lis
             lines.append(
                 f"- **{label}**: moving {_ci(row['moving']['diff'], row['moving']['ci'])}, "
                 f"static {_ci(row['static']['diff'], row['static']['ci'])} "
-                f"(goal >= {real['margin_goal']:.2f}: "
+                f"(goal >= {row.get('margin', real['margin_goal']):.2f}: "
                 + ("met" if row["moving"]["met"] and row["static"]["met"] else "NOT met") + ")"
             )
         lines.append("")

@@ -265,6 +265,10 @@ def test_real_net_is_trained_for_the_real_grid_and_scored_on_it(kitti_root, sim_
     assert tuned["spec"]["inputs"] == res["segmenters"][
         "fine-tuned on 2 real frames/sequence"]["describe"]["inputs"]
     assert set(res["real_goal"]["networks"]) >= {f"{label} (sim only)"}
+    # trained on real frames: held to the goal's larger margin
+    goal_rows = res["real_goal"]["networks"]
+    assert goal_rows["fine-tuned on 2 real frames/sequence"]["margin"] == 0.15
+    assert goal_rows[f"{label} (sim only)"]["margin"] == 0.10
     # a network reading the sensor (and past) grids as the start, several lengths
     from dstenv.segment.real import _finetune
 
@@ -272,6 +276,16 @@ def test_real_net_is_trained_for_the_real_grid_and_scored_on_it(kitti_root, sim_
                            2, [1, 2], 1, tmp_path / "ft2", False, lambda m: None)
     assert info["start"] == label and path.name == f"epochs-{info['epochs']['chosen']}.pt"
     assert torch.load(path, weights_only=True)["spec"]["inputs"] == inputs
+    # a rerun keeps each length's own weights and choice; a longer run without the
+    # snapshots is refused instead of being taken for a shorter one
+    again, info2 = _finetune({label: Path(facts["checkpoints"][label])},
+                             tmp_path / "kitti" / "data", 2, [1, 2], 1, tmp_path / "ft2", False,
+                             lambda m: None)
+    assert info2["epochs"] == info["epochs"] and again == path
+    (tmp_path / "ft2" / "epochs-1.pt").unlink()
+    with pytest.raises(ValueError, match="holds a fine-tuning of 2 epochs but no epochs-1.pt"):
+        _finetune({label: Path(facts["checkpoints"][label])}, tmp_path / "kitti" / "data", 2,
+                  [1, 2], 1, tmp_path / "ft2", False, lambda m: None)
 
 
 def test_several_fine_tuning_lengths_need_frames_to_choose_on(kitti_root, sim_checkpoint,

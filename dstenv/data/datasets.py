@@ -139,9 +139,14 @@ def network_input(x: np.ndarray, sensor: np.ndarray, inputs: str,
                      "t-1; scorable: fcn10, fcn10+sensor, fcn10+sensor+past")
 
 
-def _check_inputs(inputs: str) -> tuple[str, ...]:
+def _check_inputs(inputs: str, single_frames: bool = False) -> tuple[str, ...]:
+    """The stacked names of ``inputs``; ``single_frames``: refuse inputs that read an
+    earlier frame of the drive (frames one at a time, a stream)."""
     if inputs not in INPUTS:
         raise ValueError(f"unknown inputs {inputs!r}; choose from {', '.join(INPUTS)}")
+    if single_frames and "past" in INPUTS[inputs]:
+        raise ValueError(f"inputs {inputs!r} read an earlier frame of the drive: use stored "
+                         "shards (ShardDataset), not a StreamingDataset or single frames")
     return INPUTS[inputs]
 
 
@@ -170,10 +175,7 @@ def _sample(arrays: Mapping[str, np.ndarray], names: Sequence[str],
 def frame_to_sample(frame: Frame, inputs: str = "fcn10", labels: str = "full"
                     ) -> dict[str, torch.Tensor]:
     """A :class:`Frame` as a training sample (see the module docstring)."""
-    names = _check_inputs(inputs)
-    if "past" in names:
-        raise ValueError(f"inputs {inputs!r} read an earlier frame of the drive: use stored "
-                         "shards (ShardDataset), not single frames or a StreamingDataset")
+    names = _check_inputs(inputs, single_frames=True)
     if inputs == "masses" and frame.masses is None:
         raise ValueError("inputs='masses' needs frames with masses (config frame.masses = true)")
     return _sample({n: getattr(frame, n) for n in (*names, "labels", "visible", "sensor")},
@@ -308,11 +310,14 @@ class ShardDataset(Dataset):
                     k, arrays = self._cache[i]
                 else:
                     wanted = {*self.names, "labels", "visible"} - {"past"}
-                    if self.labels == "kitti" or "past" in self.names:
+                    if self.labels == "kitti":
                         wanted.add("sensor")
+                    if "past" in self.names:
+                        wanted |= {"sensor", "ego_pose"}
                     arrays = self._reader(k).get(local, sorted(wanted), stored=True)
                     if "past" in self.names:
-                        arrays = dict(arrays, past=self._read_past(k, local))
+                        arrays = dict(arrays, past=self._read_past(k, local, arrays["sensor"],
+                                                                   arrays["ego_pose"]))
                     if self.cache:
                         self._cache[i] = (k, arrays)
             except ShardError as exc:
@@ -324,16 +329,17 @@ class ShardDataset(Dataset):
                            self.labels)
         raise ShardError(f"no readable frame left in {len(self.files)} shards")
 
-    def _read_past(self, k: int, local: int) -> np.ndarray:
+    def _read_past(self, k: int, local: int, sensor: np.ndarray, pose: np.ndarray
+                   ) -> np.ndarray:
         """The sensor grid :data:`PAST_STEPS` steps before frame ``local`` of shard
-        ``k``, in its ego frame (all unknown when the shard has no such frame)."""
-        r = self._reader(k)
+        ``k`` (whose ``sensor`` and ego ``pose`` are given), in its ego frame (all
+        unknown when the shard has no such frame)."""
         j = self._past_row(k, local)
-        now = r.get(local, ("sensor", "ego_pose"))
         if j < 0:
-            return np.zeros_like(now["sensor"])
+            return np.zeros_like(sensor)
+        r = self._reader(k)
         prev = r.get(j, ("sensor", "ego_pose"))
-        return past_sensor(prev["sensor"], prev["ego_pose"], now["ego_pose"], r.cell_size)
+        return past_sensor(prev["sensor"], prev["ego_pose"], pose, r.cell_size)
 
     def __getstate__(self) -> dict[str, Any]:
         state = dict(self.__dict__)
@@ -374,10 +380,7 @@ class StreamingDataset(IterableDataset):
         super().__init__()
         self.labels = _check_labels(labels)
         self.config = scenario_config(scenario)
-        self.names = _check_inputs(inputs)
-        if "past" in self.names:
-            raise ValueError(f"inputs {inputs!r} read an earlier frame of the drive: use "
-                             "stored shards (ShardDataset), not a StreamingDataset")
+        self.names = _check_inputs(inputs, single_frames=True)
         if inputs == "masses":
             self.config["frame"]["masses"] = True
         self.inputs, self.seed, self.split, self.rank = inputs, int(seed), split, int(rank)

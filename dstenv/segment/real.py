@@ -133,22 +133,21 @@ def _finetune(ckpts: Mapping[str, Path], data: Path, frames: int, epochs: Sequen
     if len(cands) > 1 and not val:
         raise ValueError(f"finetune_epochs {cands}: choosing a length needs real frames between "
                          "the fine-tuning and the scored ones (a gap > 0 holding frames)")
-    base = ds  # fcn10: what start_scores reads (it adds a network's other inputs itself)
-    scores = start_scores(ckpts, base, picked)
+    scores = start_scores(ckpts, ds, picked)  # fcn10: it adds a network's other inputs
     best = max(scores, key=scores.__getitem__)  # ties: the first (the simulated run's order)
     log(f"fine-tuning start: {best} (mIoU on the {len(picked)} fine-tuning frames: "
         + ", ".join(f"{k} {v:.3f}" for k, v in scores.items()) + ")")
     spec = torch.load(ckpts[best], map_location="cpu", weights_only=True)["spec"]
     inputs = spec.get("inputs", "fcn10")
-    if inputs != ds.inputs:  # the real labels are KITTI's already: labels stay "full"
-        ds = ShardDataset(data, split="test", inputs=inputs)
+    # the network's own inputs to train on; the real labels are KITTI's already: "full"
+    tds = ds if inputs == ds.inputs else ShardDataset(data, split="test", inputs=inputs)
     length: dict[int, float] = {}
     for e in cands:
         snap = out / f"epochs-{e}.pt"
         if not snap.exists():  # a rerun keeps the lengths it has (their own weights)
-            last = out / "last.pt"
-            done = (int(torch.load(last, map_location="cpu", weights_only=True)["epoch"]) + 1
-                    if last.exists() else 0)  # "epoch": the last finished, from 0
+            last_pt = out / "last.pt"
+            done = (int(torch.load(last_pt, map_location="cpu", weights_only=True)["epoch"])
+                    + 1 if last_pt.exists() else 0)  # "epoch": the last finished, from 0
             if done > e:
                 raise ValueError(f"{out}: holds a fine-tuning of {done} epochs but no "
                                  f"{snap.name}; remove the folder to fine-tune again")
@@ -156,13 +155,13 @@ def _finetune(ckpts: Mapping[str, Path], data: Path, frames: int, epochs: Sequen
                    "model_kwargs": spec["model_kwargs"], "epochs": e, "batch_size": 4,
                    "lr": 1e-4, "device": "cpu", "inputs": inputs}
             log(f"fine-tuning {best} on {len(picked)} real frames, {e} epochs")
-            train(cfg, torch.utils.data.Subset(ds, picked), None, out, progress=progress,
+            train(cfg, torch.utils.data.Subset(tds, picked), None, out, progress=progress,
                   log=log)
             tmp = snap.with_suffix(".tmp")
-            shutil.copyfile(last, tmp)
+            shutil.copyfile(last_pt, tmp)
             tmp.replace(snap)  # atomic: a snapshot is whole or absent
         if len(cands) > 1:
-            length[e] = start_scores({"x": out / f"epochs-{e}.pt"}, base, val)["x"]
+            length[e] = start_scores({"x": snap}, ds, val)["x"]
     chosen = max(cands, key=lambda e: (length.get(e, 0.0), -e))
     if len(cands) > 1:
         log(f"fine-tuning length: {chosen} epochs (mIoU on the {len(val)} frames between: "

@@ -189,12 +189,9 @@ def kitti(root: Path, sequence: str, icp: bool = False) -> dict:
     tally, box = Tally(), defaultdict(lambda: np.zeros(3, np.int64))
     spec = GridSpec(256, 256, 0.33)
     if icp:  # the scans registered to each other (docs/kitti_pose_check.py)
-        from dstenv.kitti.sequence import kitti_config
-        from kitti_pose_check import chain, icp_motions
+        from kitti_pose_check import use_icp_poses
 
-        cfg = kitti_config({"stride": 1, "warmup": 0})
-        seq.trajectory.poses[:] = chain(seq.trajectory.poses[0].copy(),
-                                        icp_motions(seq, spec, cfg))
+        use_icp_poses(seq)
     frames = list(convert_sequence(seq, {"stride": 1, "warmup": 0}))
     assert [f.step for f in frames] == list(range(len(frames))), "a skipped scan"
     _drive(frames, lambda f: ("kitti",), spec, tally, box)

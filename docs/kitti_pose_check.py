@@ -101,6 +101,17 @@ def chain(first: np.ndarray, rows: list[dict[str, float]]) -> np.ndarray:
     return np.stack(out)
 
 
+def use_icp_poses(seq) -> None:
+    """Replace ``seq``'s OXTS poses, in place, by the chain of ICP scan-to-scan motions
+    from its first pose (the grid and ground settings of a frame-by-frame conversion)."""
+    from dstenv.grid import GridSpec
+    from dstenv.kitti.sequence import kitti_config
+
+    cfg = kitti_config({"stride": 1, "warmup": 0})
+    seq.trajectory.poses[:] = chain(seq.trajectory.poses[0].copy(),
+                                    icp_motions(seq, GridSpec(**cfg["grid"]), cfg))
+
+
 def _convert(seq, cfg, out: Path) -> None:
     from dstenv.data.manifest import shard_entry, write_manifest
     from dstenv.data.shards import ShardWriter

@@ -124,10 +124,9 @@ def kitti(root: Path, sequence: str, icp: bool = False) -> dict:
     cfg = kitti_config({"stride": 1, "warmup": 0})
     spec = GridSpec(**cfg["grid"])
     if icp:  # the scans registered to each other (docs/kitti_pose_check.py)
-        from kitti_pose_check import chain, icp_motions
+        from kitti_pose_check import use_icp_poses
 
-        seq.trajectory.poses[:] = chain(seq.trajectory.poses[0].copy(),
-                                        icp_motions(seq, spec, cfg))
+        use_icp_poses(seq)
     frames = list(convert_sequence(seq, {"stride": 1, "warmup": 0}))
     scans = []
     for fr in frames:

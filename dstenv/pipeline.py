@@ -296,7 +296,7 @@ class Pipeline:
             raise RuntimeError("Pipeline.advance: call reset(seed) first")
         self.world.step(action)
         self.step_index += 1
-        if self.fuse and self.step_index % self.config["protocol"]["update_every"]:
+        if self.fuse and not self.fused_step:
             # not a fused step and no frame: nothing but the world (one sweep and one
             # DST update per fused step; the LIDAR stream is keyed by the step, so the
             # next sweep is the one step() would give)
@@ -304,6 +304,13 @@ class Pipeline:
             self._last = (np.array(w.ego_pose, dtype=np.float64), float(w.time))
             return
         self._sense(False, frame=False)
+
+    @property
+    def fused_step(self) -> bool:
+        """Whether the current step feeds the DST filter: every ``protocol.update_every``-th
+        step from step 0, when the pipeline fuses at all (then :attr:`filter_pose` is
+        the pose it was given)."""
+        return self.fuse and self.step_index % self.config["protocol"]["update_every"] == 0
 
     def _sweep_rng(self) -> np.random.Generator:
         """The LIDAR noise of this step: keyed by (episode seed, step), so a sweep does not
@@ -335,7 +342,7 @@ class Pipeline:
         if not self.fuse:
             return pose, agents, sensor, gis, None
         every = self.config["protocol"]["update_every"]
-        if self.step_index % every == 0:
+        if self.fused_step:
             self.filter_pose = self.odometry.estimate(pose)
             self.tracker.step(sensor, gis, self.filter_pose, betp=frame or every > 1)
         masses = self.tracker.filter.masses

@@ -201,8 +201,7 @@ def record_episodes(
         poses = [run.filter_pose]
         while len(frames) <= steps[-1]:
             frames.append(run.step())
-            poses.append(run.filter_pose if run.step_index % run.config["protocol"][
-                "update_every"] == 0 else frames[-1].ego_pose)
+            poses.append(run.filter_pose if run.fused_step else frames[-1].ego_pose)
         episodes.append(
             Episode(
                 seed=int(seed),

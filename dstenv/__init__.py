@@ -11,7 +11,7 @@ from pathlib import Path
 
 from dstenv import _jitcache
 
-__version__ = "0.1.0"
+__version__ = "0.2.0.dev0"
 
 __all__ = ["__version__"]
 

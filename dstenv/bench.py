@@ -67,7 +67,17 @@ def run_benchmark(name: str, args: argparse.Namespace) -> dict[str, Any]:
 
 
 def _cmd(args: argparse.Namespace) -> int:
+    from dstenv.config import CLIError
+
     names = list(BENCHMARKS) if args.name == "all" else [args.name]
+    if args.json:  # before minutes of timing, not after
+        out = Path(args.json)
+        if out.is_dir():
+            raise CLIError(f"--json {out}: is a directory; give a file name")
+        try:
+            out.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as e:
+            raise CLIError(f"--json {out}: cannot create its folder ({e.strerror})") from None
     results = {}
     for name in names:
         print(f"== bench {name}: {BENCHMARKS[name][1]}")

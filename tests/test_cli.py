@@ -29,6 +29,22 @@ def test_bench_fusion_quick(capsys, tmp_path):
     assert "256x256" in text and out.exists()
 
 
+def test_bench_json_path_is_checked_before_timing(capsys, tmp_path):
+    # a missing folder is created (as render and generate do); a directory or a path
+    # under a file fails at once, in one line, not after the benchmark has run
+    out = tmp_path / "new" / "dir" / "bench.json"
+    assert main(["bench", "fusion", "--quick", "--repeats", "1", "--json", str(out)]) == 0
+    assert out.exists()
+    capsys.readouterr()
+    assert main(["bench", "fusion", "--quick", "--json", str(tmp_path)]) == 2
+    out_, err = capsys.readouterr()
+    assert "is a directory" in err and err.count("\n") == 1 and "== bench" not in out_
+    (tmp_path / "file").write_text("x")
+    assert main(["bench", "fusion", "--quick", "--json", str(tmp_path / "file" / "b.json")]) == 2
+    out_, err = capsys.readouterr()
+    assert "cannot create its folder" in err and "== bench" not in out_
+
+
 def test_unknown_bench_is_rejected(capsys):
     with pytest.raises(SystemExit) as exc:
         main(["bench", "nope"])

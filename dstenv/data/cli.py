@@ -215,8 +215,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--compression", default="gzip", choices=["gzip", "lzf", "none"],
                    help="shard compression (default gzip)")
     p.add_argument("--gzip-level", type=int, default=1, choices=range(10), metavar="0-9",
-                   help="gzip level (default 1: ~55-60 KB per 256x256 frame with isal; zlib "
-                        "level 6: ~45 KB at ~10x the write time)")
+                   help="gzip level (default 1: ~46 KiB per 256x256 frame of the default "
+                        "scenario with isal; higher levels shrink it a little at several "
+                        "times the write time)")
     p.add_argument("--deflate", default="isal", choices=["isal", "zlib"],
                    help="gzip engine: isal (default, ~5x faster) or zlib (h5py's own bytes); "
                         "both read back with plain h5py")

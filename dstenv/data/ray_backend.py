@@ -53,7 +53,8 @@ def run_ray(todo: list[Any], out: Path, address: str, workers: int,
     except ImportError:
         from dstenv.data.generate import GenerateError
 
-        raise GenerateError("--ray needs Ray: pip install 'dstenv[ray]'") from None
+        raise GenerateError("--ray needs Ray: pip install -e '.[ray]' in the dstenv "
+                            "checkout") from None
     if not todo:
         return {}
     started = not ray.is_initialized()

@@ -94,10 +94,12 @@ def _convert(args: argparse.Namespace) -> int:
     if foreign:
         raise CLIError(f"{out}: holds other shards ({foreign[0].relative_to(out)}); "
                        "choose an empty output directory")
+    # every sequence (and its map) is read before anything is written: a bad one in the
+    # list leaves no shard of the good ones without a manifest
+    seqs = [KittiSequence(args.root, name) for name in args.sequences]
+    maps = [_gis(args, seq) for seq in seqs]
     entries = []
-    for name in args.sequences:
-        seq = KittiSequence(args.root, name)
-        gis_fn, note = _gis(args, seq)
+    for seq, (gis_fn, note) in zip(seqs, maps, strict=True):
         print(f"sequence {seq.name}: {seq.n_frames} frames, DST every {cfg['update_every']}, "
               f"keep every {cfg['stride']} from {cfg['warmup']}, labels {cfg['labels']['rule']}; "
               f"{note}")
@@ -174,7 +176,7 @@ def _evaluate(args: argparse.Namespace) -> int:
         set=[f"eval_batch_size={args.batch_size}", "device=\"cpu\"", *(args.set or [])],
     )
     try:
-        run_cli_benchmark(bench, split=args.split)
+        run_cli_benchmark(bench, split=args.split, kept=tmp is None)
         if args.json:
             shutil.copyfile(Path(bench.out) / "results.json", args.json)
             print(f"wrote {args.json}")

@@ -122,7 +122,8 @@ def split_root(root: str | Path) -> Path:
     for cand in (root / "training", root):
         if (cand / "velodyne").is_dir():
             return cand
-    raise KittiError(f"{root}: no KITTI tracking data (expected {root}/training/velodyne/)")
+    raise KittiError(f"{root}: no KITTI tracking data (expected {root}/training/velodyne/ or "
+                     f"{root}/velodyne/); point the root at the folder that holds training/")
 
 
 def velodyne_path(split: Path, sequence: str, frame: int) -> Path:

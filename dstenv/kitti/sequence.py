@@ -146,7 +146,11 @@ class KittiSequence:
             raise KittiError(f"sequence {sequence!r} is not a number like 0003")
         self.name = f"{int(name):04d}"
         if not (self.split / "velodyne" / self.name).is_dir():
-            raise KittiError(f"{self.split / 'velodyne' / self.name}: missing scan folder")
+            have = sorted(d.name for d in (self.split / "velodyne").iterdir()
+                          if d.is_dir() and d.name.isdigit())
+            listed = ", ".join(have[:20]) + (" ..." if len(have) > 20 else "")
+            raise KittiError(f"{self.split / 'velodyne' / self.name}: missing scan folder "
+                             f"(sequences there: {listed or 'none'})")
         self.calib = read_calib(self.split / "calib" / f"{self.name}.txt")
         oxts = read_oxts(self.split / "oxts" / f"{self.name}.txt")
         self.trajectory = oxts_to_trajectory(oxts, self.calib.Tr_imu_velo)

@@ -137,8 +137,11 @@ def benchmark_command(args: argparse.Namespace) -> str:
     return " ".join(shlex.quote(a) for a in parts)
 
 
-def run_cli_benchmark(args: argparse.Namespace, split: str = "test") -> dict[str, Any]:
-    """Shared by ``dstenv benchmark`` and ``dstenv kitti evaluate``: config, run, print."""
+def run_cli_benchmark(args: argparse.Namespace, split: str = "test", kept: bool = True
+                      ) -> dict[str, Any]:
+    """Shared by ``dstenv benchmark`` and ``dstenv kitti evaluate``: config, run, print.
+    ``kept=False``: ``args.out`` is a scratch folder its caller removes, so the files are
+    not announced (the report is printed either way)."""
     from dstenv.data.cli import parse_set
     from dstenv.segment.benchmark import run_benchmark
     from dstenv.segment.presets import preset_config
@@ -164,7 +167,11 @@ def run_cli_benchmark(args: argparse.Namespace, split: str = "test") -> dict[str
     )
     out = Path(args.out)
     print((out / "results.md").read_text())
-    print(f"wrote {out / 'results.json'}, {out / 'results.md'}, {out / 'figures'}/*.png")
+    if kept:
+        print(f"wrote {out / 'results.json'}, {out / 'results.md'}, {out / 'figures'}/*.png")
+    else:
+        print("the report is not kept: add --out DIR to keep results.json, results.md and "
+              "the figures")
     return results
 
 

@@ -92,6 +92,10 @@ def test_render_and_evaluate(tiny_root, tmp_path, capsys):
     assert main(["kitti", "evaluate", "--data", str(out), "--json", str(js)]) == 0
     text = capsys.readouterr().out  # an alias of dstenv benchmark --data: its report
     assert "| dst (default) |" in text and "3 frames" in text
+    # without --out the report lives in a scratch folder that is removed: no "wrote" of it
+    wrote = [ln for ln in text.splitlines() if ln.startswith("wrote ")]
+    assert wrote == [f"wrote {js}"]
+    assert "the report is not kept: add --out DIR" in text
     res = json.loads(js.read_text())["segmenters"]["dst (default)"]
     assert set(res) >= {"observed", "all", "visible"}
 
@@ -107,3 +111,22 @@ def test_osm_with_dangling_refs(tiny_root, tmp_path, capsys, osm):
         assert (item["labels"].numpy() != 255).any()
     else:  # or refuses it in one line naming the file
         assert rc == 2 and err.count("\n") == 1 and osm in err
+
+
+def test_a_missing_sequence_in_the_list_writes_nothing(tiny_root, tmp_path, capsys):
+    # every sequence is read before any shard is written: the good one of the list
+    # would otherwise be left as a shard without a manifest
+    out = tmp_path / "o"
+    assert main(["kitti", "convert", "--root", str(tiny_root), "--sequences", "0001,0005",
+                 "--stride", "2", "--warmup", "0", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "0005: missing scan folder (sequences there: 0001)" in err
+    assert not out.exists() or not list(out.rglob("*.h5*"))
+
+
+def test_a_root_one_level_too_deep_says_where_to_point(tiny_root, tmp_path, capsys):
+    deep = tiny_root / "training" / "velodyne"
+    assert main(["kitti", "convert", "--root", str(deep), "--sequences", "0001",
+                 "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "point the root at the folder that holds training/" in err

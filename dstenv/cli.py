@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 from collections.abc import Sequence
 
@@ -90,6 +91,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"dstenv: {'terminated' if terminated else 'interrupted'}; finished work is kept, "
               "rerun the same command to resume", file=sys.stderr)
         return 143 if terminated else 130
+    except BrokenPipeError:  # the reader of stdout went away (dstenv info ... | head)
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no error at exit
+        return 141  # as a shell reports SIGPIPE
     except EXPECTED_ERRORS as exc:
         print(f"dstenv {args.command}: error: {one_line(exc)}", file=sys.stderr)
         return 2

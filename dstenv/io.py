@@ -15,7 +15,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 __all__ = ["PARTIAL_SUFFIX", "partial_path", "atomic_path", "atomic_write_bytes",
-           "atomic_write_text", "fsync_file", "fsync_dir"]
+           "atomic_write_text", "fsync_file", "fsync_dir", "png_path"]
 
 #: suffix of a file being written; never a final file (readers and scans skip it)
 PARTIAL_SUFFIX = ".partial"
@@ -89,3 +89,16 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
 def atomic_write_text(path: str | Path, text: str) -> Path:
     """:func:`atomic_write_bytes` of UTF-8 text."""
     return atomic_write_bytes(path, text.encode("utf-8"))
+
+
+def png_path(path: str | Path, option: str = "--out") -> Path:
+    """``path`` as a :class:`Path` if it names a ``.png`` file (the renderers write PNG).
+
+    Raises:
+        ValueError: another suffix (a ``.jpg`` name would hold PNG bytes), naming the fix.
+    """
+    out = Path(path)
+    if out.suffix.lower() != ".png":
+        raise ValueError(f"{option} {out}: the picture is a PNG; give a name ending in .png")
+    return out
+

@@ -132,9 +132,11 @@ def _convert(args: argparse.Namespace) -> int:
 def _render(args: argparse.Namespace) -> int:
     from dstenv.config import CLIError
     from dstenv.grid import GridSpec
+    from dstenv.io import png_path
     from dstenv.kitti.render import render_frame
     from dstenv.kitti.sequence import KittiSequence, convert_sequence, kitti_config
 
+    png_path(args.out)  # before the conversion, not after
     over = _overrides(args)
     every = over.get("update_every", 1)
     if args.frame < 0 or args.frame % every:

@@ -126,9 +126,11 @@ def render_png(world: Any, out: str | Path, sweep: Any = None, extent: float | N
 def _cmd(args: argparse.Namespace) -> int:
     from dstenv.config import build_config
     from dstenv.data.cli import parse_set
+    from dstenv.io import png_path
     from dstenv.scenario_files import scenario_path
     from dstenv.sim import World
 
+    png_path(args.out)  # before the simulation, not after
     path = scenario_path(args.scenario)
     cfg = build_config(path, ("--set", parse_set(args.set or [])))
     world = World(cfg["world"], seed=args.seed, base_dir=path.parent)

@@ -52,6 +52,22 @@ def test_info_prints_paper_reference(tmp_path, capsys, fake_pipeline):
     assert "4 in 1 shards" in capsys.readouterr().out
 
 
+def test_info_into_a_closed_pipe_is_quiet(tmp_path, fake_pipeline):
+    # `dstenv info DIR | head -1`: the reader leaves early; no "Broken pipe" error line
+    import subprocess
+    import sys
+
+    spec = GenerateSpec(config={"grid": {"height": 8, "width": 6, "cell_size": 0.5}}, frames=4,
+                        frames_per_shard=4, episode_length=5, stride=2, warmup=0)
+    generate(spec, tmp_path, progress=False)
+    proc = subprocess.Popen([sys.executable, "-m", "dstenv.cli", "info", str(tmp_path)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc.stdout.close()  # before the child writes its first line
+    err = proc.stderr.read().decode()
+    proc.stderr.close()
+    assert proc.wait(timeout=120) in (0, 141) and "Broken pipe" not in err, err
+
+
 def test_info_errors_are_one_line(tmp_path, capsys, fake_pipeline):
     assert main(["info", str(tmp_path / "nope")]) == 2
     assert capsys.readouterr().err.strip().endswith("nope: no such file or directory")

@@ -85,6 +85,10 @@ def test_render_and_evaluate(tiny_root, tmp_path, capsys):
     assert main(["kitti", "render", "--root", str(tiny_root), "--sequence", "1", "--frame", "9",
                  "--out", str(png)]) == 2
     assert "frame 9 was not converted" in capsys.readouterr().err
+    assert main(["kitti", "render", "--root", str(tiny_root), "--sequence", "1", "--frame", "3",
+                 "--out", str(tmp_path / "f.jpg")]) == 2
+    assert "give a name ending in .png" in capsys.readouterr().err
+    assert not (tmp_path / "f.jpg").exists()
     out = tmp_path / "ds"
     assert _convert(tiny_root, out) == 0
     capsys.readouterr()

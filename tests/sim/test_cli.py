@@ -26,6 +26,14 @@ def test_render_takes_set_overrides(tmp_path, capsys):
     assert len(err) == 1 and "world.map.lot_prob: must be in [0, 1]" in err[0]
 
 
+def test_render_refuses_a_name_that_is_not_png(tmp_path, capsys):
+    # the picture is a PNG: a .jpg name would hold PNG bytes; refused before any work
+    assert main(["render", "--scenario", "clean", "--out", str(tmp_path / "x.jpg")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "give a name ending in .png" in err
+    assert not list(tmp_path.iterdir())
+
+
 def test_render_unknown_scenario_is_a_clean_error(tmp_path, capsys):
     assert main(["render", "--scenario", "atlantis", "--out", str(tmp_path / "x.png")]) == 2
     err = capsys.readouterr().err

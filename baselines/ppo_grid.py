@@ -364,8 +364,22 @@ def warm_start(args: Args, model: PPO, env: VecEnv, log: TrainingLog) -> dict[st
             "wall_s": round(result.wall_s, 1), "rounds": result.rounds}
 
 
+#: the files a run writes into ``--out`` (their presence: a run is there)
+RUN_FILES = ("model.pt", "model.json", "episodes.csv", "progress.csv")
+
+
 def train(args: Args) -> tuple[PPO, dict[str, Any]]:
     """Train PPO as ``args`` says; returns the model and the ``model.json`` content."""
+    for flag, value, lo in (("--total-timesteps", args.total_timesteps, 1),
+                            ("--n-envs", args.n_envs, 1), ("--n-steps", args.n_steps, 2),
+                            ("--batch-size", args.batch_size, 2),
+                            ("--max-episode-steps", args.max_episode_steps, 0)):
+        if value < lo:
+            raise ValueError(f"{flag} {value}: must be at least {lo}")
+    taken = [n for n in RUN_FILES if (Path(args.out) / n).exists()]
+    if taken:  # a finished or interrupted run would be overwritten in silence
+        raise ValueError(f"--out {args.out}: holds a training run ({taken[0]}); choose another "
+                         "--out, or remove it to start over")
     if args.residual and args.warm_start:
         raise ValueError("--residual with --warm-start: the residual policy starts as the "
                          "rule driver already; use one of the two")

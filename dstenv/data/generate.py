@@ -30,7 +30,14 @@ from typing import Any
 from dstenv.data.codec import DEFLATE_ENGINES
 from dstenv.data.lifeline import die_with_parent, sigterm_as_interrupt
 from dstenv.data.lock import DatasetLocked, dataset_lock
-from dstenv.data.manifest import scan_shards, shard_entry, write_manifest
+from dstenv.data.manifest import (
+    MANIFEST_NAME,
+    ManifestError,
+    load_manifest,
+    scan_shards,
+    shard_entry,
+    write_manifest,
+)
 from dstenv.data.sampling import SPLIT_BUCKETS, SPLITS, episode_seeds, frame_steps, iter_frames
 from dstenv.data.shards import (
     FORMAT_VERSION, ShardError, ShardReader, ShardWriter, partial_path,
@@ -244,6 +251,12 @@ def _prepare(out: Path, tasks: list[ShardTask]
     except OSError as exc:
         raise GenerateError(f"output directory {out} is not writable: "
                             f"{exc.strerror or exc}") from None
+    if (out / MANIFEST_NAME).exists():  # the run rewrites it: never someone else's file
+        try:
+            load_manifest(out, verify="none")
+        except ManifestError:
+            raise GenerateError(f"{out / MANIFEST_NAME}: not a dstenv manifest, and this run "
+                                "would replace it; use another --out") from None
     planned = {(out / t.file).resolve() for t in tasks}
     strays = [p for p in scan_shards(out) if p.resolve() not in planned]
     if strays:

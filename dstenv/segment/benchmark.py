@@ -37,6 +37,7 @@ moving rule, an imperfect map); a key the simulator does not have is a
 
 from __future__ import annotations
 
+import json
 import time
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
@@ -108,6 +109,31 @@ def _deep_update(base: dict[str, Any], over: Mapping[str, Any]) -> dict[str, Any
     return out
 
 
+#: the data a benchmark folder's trained networks and results belong to
+_DATA_RECORD = "data-identity.json"
+
+
+def _same_data(out: Path, data_dir: Path) -> None:
+    """Refuse to resume ``out`` on other data than it was made with (its networks would
+    be scored on data they were not trained on, its results replaced in silence);
+    record the data on a first run."""
+    from dstenv.data.manifest import data_identity
+    from dstenv.io import atomic_write_text
+
+    ident = {"data": str(data_dir.resolve()), "sha256": data_identity(data_dir)}
+    path = out / _DATA_RECORD
+    if path.exists():
+        try:
+            old = json.loads(path.read_text())
+        except (OSError, ValueError):
+            old = {}
+        if old.get("sha256") != ident["sha256"]:
+            raise ValueError(f"{out}: holds a benchmark of other data ({old.get('data', '?')}); "
+                             "choose another --out, or remove it to start over")
+        return
+    atomic_write_text(path, json.dumps(ident, indent=1) + "\n")
+
+
 def run_benchmark(
     config: Mapping[str, Any],
     out: str | Path,
@@ -161,6 +187,7 @@ def run_benchmark(
         log(f"generating {cfg['data']['frames']} frames into {data_dir}")
         generate_data(cfg["data"], cfg["protocol"], data_dir, progress)
     data_dir = Path(data_dir)
+    _same_data(out, data_dir)
     timings["data_s"] = time.perf_counter() - t
 
     test_ds = ShardDataset(data_dir, split=split, inputs="fcn10")

@@ -34,11 +34,11 @@ def _train(args: argparse.Namespace) -> int:
     from dstenv.segment.train import train
 
     cfg: dict[str, Any] = {
-        "model": args.model,
+        "model": args.model or "unet-light",
         "model_kwargs": args.model_kwargs,
         "seed": args.seed,
         "device": args.device,
-        "inputs": args.inputs,
+        "inputs": args.inputs or "fcn10",
         "labels": args.labels,
     }
     for key in ("epochs", "batch_size", "lr", "loss", "crop", "num_workers", "weight_power"):
@@ -48,7 +48,15 @@ def _train(args: argparse.Namespace) -> int:
         from dstenv.segment.checkpoint import load_checkpoint
 
         spec = load_checkpoint(args.init)["spec"]  # one-line errors for a bad file
-        # fine-tuning continues the checkpoint's network, whatever --model says
+        # fine-tuning continues the checkpoint's network: a flag that says otherwise is a
+        # mistake, not something to drop in silence
+        given = {"--model": (args.model, spec["model"]),
+                 "--inputs": (args.inputs, spec.get("inputs", "fcn10")),
+                 "--model-kwargs": (args.model_kwargs or None, spec["model_kwargs"])}
+        for flag, (mine, theirs) in given.items():
+            if mine is not None and mine != theirs:
+                raise CLIError(f"{flag} {mine}: --init {args.init} holds a network with "
+                               f"{flag} {theirs}; leave {flag} out to continue it")
         cfg.update(init=str(args.init), model=spec["model"], model_kwargs=spec["model_kwargs"],
                    inputs=spec.get("inputs", "fcn10"))
     if args.stream is not None:
@@ -236,7 +244,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--steps-per-epoch", type=int, default=0, help="batches per epoch when streaming"
     )
     p.add_argument("--out", required=True, metavar="DIR", help="checkpoint directory")
-    p.add_argument("--model", default="unet-light", choices=sorted(MODELS))
+    p.add_argument("--model", choices=sorted(MODELS), help="default unet-light (with --init: "
+                   "the checkpoint's)")
     p.add_argument(
         "--model-kwargs",
         type=_json_arg,
@@ -258,10 +267,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="raise the median-frequency class weights to this power (default 1: paper eq. 2)",
     )
     p.add_argument("--inputs", choices=("fcn10", "fcn10+sensor", "fcn10+sensor+past"),
-                   default="fcn10",
                    help="network input: BetP at t and t-1 (fcn10, the paper's), or also the "
                         "current sensor grid (fcn10+sensor), and the sensor grid of one "
-                        "second earlier (fcn10+sensor+past)")
+                        "second earlier (fcn10+sensor+past); default fcn10 (with --init: "
+                        "the checkpoint's)")
     p.add_argument("--labels", choices=("full", "kitti"), default="full",
                    help="label convention: as stored (full) or KITTI's (kitti: objects, "
                         "seen-free cells navigable, the rest ignored), for real drives")

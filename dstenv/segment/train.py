@@ -88,10 +88,16 @@ def _check(cfg: dict[str, Any]) -> None:
     for key in ("epochs", "batch_size"):
         if cfg[key] < 1:
             raise ConfigError(f"train.{key}: must be >= 1, got {cfg[key]}")
-    if (cfg["crop"] < 0 or cfg["max_batches"] < 0 or cfg["fixed_batches"] < 0 or cfg["lr"] <= 0
-            or cfg["weight_power"] < 0):
+    # written as "not >=" so that NaN fails too
+    if not (cfg["crop"] >= 0 and cfg["max_batches"] >= 0 and cfg["fixed_batches"] >= 0
+            and cfg["lr"] > 0 and math.isfinite(cfg["lr"]) and cfg["weight_power"] >= 0
+            and math.isfinite(cfg["weight_power"])):
         raise ConfigError("train.crop, max_batches, fixed_batches and weight_power must be >= 0 "
-                          "and train.lr > 0")
+                          "and train.lr > 0 (finite numbers)")
+    w = cfg["class_weights"]
+    if w is not None and (not all(isinstance(v, (int, float)) and math.isfinite(v) and v >= 0
+                                  for v in w) or not any(v > 0 for v in w)):
+        raise ConfigError(f"train.class_weights: {list(w)}: need finite values >= 0, not all 0")
 
 
 def _class_weights(

@@ -95,6 +95,11 @@ def test_atomic_write_leaves_no_temp_file(tmp_path) -> None:
      "--residual-p-rule: 1.0 must be in (0, 1)"),
     ("ppo_grid.py", ["--env-config", '{"reward": {"collison": 1}}', "--out", "out"],
      "config.reward.collison: unknown key"),
+    ("ppo_grid.py", ["--total-timesteps", "-5", "--out", "out"],
+     "--total-timesteps -5: must be at least 1"),
+    ("ppo_grid.py", ["--n-envs", "0", "--out", "out"], "--n-envs 0: must be at least 1"),
+    ("ppo_grid.py", ["--max-episode-steps", "-1", "--out", "out"],
+     "--max-episode-steps -1: must be at least 0"),
     ("evaluate.py", ["--policies", "--checkpoints", "no-such.pt"],
      "--checkpoints: no such file"),
     ("rule_based.py", ["--driver", "bogus"], "--driver: expected one of"),
@@ -118,3 +123,18 @@ def test_scripts_report_bad_input_in_one_line(tmp_path, script, argv, message) -
     assert message in lines[0]
     # not even an empty output folder
     assert not (tmp_path / "out").exists() and not (tmp_path / "c.png").exists()
+
+
+def test_ppo_grid_refuses_an_out_holding_a_run(tmp_path) -> None:
+    """A finished (or interrupted) run in --out is never overwritten in silence."""
+    import subprocess
+    import sys
+
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "episodes.csv").write_text("timesteps\n")
+    proc = subprocess.run([sys.executable, str(BASELINES / "ppo_grid.py"), "--out", str(run)],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2 and "holds a training run (episodes.csv)" in proc.stderr
+    assert (run / "episodes.csv").read_text() == "timesteps\n"
+

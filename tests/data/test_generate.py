@@ -111,6 +111,20 @@ def test_resume_refuses_other_settings(tmp_path, fake_pipeline):
     assert m["frames"] == 10 and len(fake.resets) == 1
 
 
+def test_a_foreign_manifest_is_never_replaced(tmp_path, fake_pipeline):
+    for text in ("x", '{"format": "other"}'):
+        (tmp_path / "manifest.json").write_text(text)
+        with pytest.raises(gen.GenerateError, match="not a dstenv manifest, and this run would "
+                                                    "replace it; use another --out"):
+            gen.generate(_spec(frames=4, split="train"), tmp_path, progress=False)
+        assert (tmp_path / "manifest.json").read_text() == text
+        assert not list(tmp_path.rglob("*.h5*"))
+    # a dstenv manifest of this run's own shards is rewritten as before
+    (tmp_path / "manifest.json").unlink()
+    gen.generate(_spec(frames=4, split="train"), tmp_path, progress=False)
+    gen.generate(_spec(frames=4, split="train"), tmp_path, progress=False)
+
+
 def test_unwritable_output_is_one_line(tmp_path):
     blocker = tmp_path / "file"
     blocker.write_text("x")

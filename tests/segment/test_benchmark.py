@@ -123,3 +123,15 @@ def test_cli_train_resumes(tiny, tmp_path, capsys):
     assert load_checkpoint(tmp_path / "last.pt")["history"]["epoch"] == [1, 2]
     assert main([*args, "--epochs", "2", "--lr", "0.5"]) == 2
     assert "other settings" in capsys.readouterr().err
+    # --init continues the checkpoint's network: flags that say otherwise are refused,
+    # not dropped in silence
+    init = ["train", "--data", str(out / "data"), "--init", str(tmp_path / "last.pt"),
+            "--epochs", "1", "--device", "cpu", "--quiet"]
+    for flags, name in ((["--model", "fcn8s-vgg16"], "--model fcn8s-vgg16"),
+                        (["--inputs", "fcn10+sensor"], "--inputs fcn10+sensor"),
+                        (["--model-kwargs", '{"base": 8}'], "--model-kwargs")):
+        assert main([*init, *flags, "--out", str(tmp_path / "ft")]) == 2
+        err = capsys.readouterr().err
+        assert name in err and "leave" in err and err.count("\n") == 1
+    assert not (tmp_path / "ft").exists()
+    assert main([*init, "--model", "unet-light", "--out", str(tmp_path / "ft")]) == 0

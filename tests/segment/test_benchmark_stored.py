@@ -70,3 +70,24 @@ def test_no_test_split_is_an_error(tmp_path):
     (tmp_path / "empty").mkdir()
     with pytest.raises(ValueError, match="no test frames"):
         _run(tmp_path / "empty", tmp_path / "out")
+
+
+def test_a_benchmark_folder_refuses_other_data(tmp_path):
+    # its trained networks and results belong to the data it was made with: resuming it
+    # on other data would score them on data they never saw and replace the results
+    from dstenv.data.manifest import data_identity
+
+    a = _generate(tmp_path / "a", stride=1, warmup=0)
+    b = _generate(tmp_path / "b", stride=2, warmup=1)
+    assert data_identity(a) != data_identity(b)
+    import shutil
+
+    shutil.copytree(a, tmp_path / "a-copy")
+    assert data_identity(tmp_path / "a-copy") == data_identity(a)  # where it lives: no matter
+    out = tmp_path / "out"
+    _run(a, out)
+    _run(tmp_path / "a-copy", out)  # the same data: resumes
+    before = (out / "results.json").read_bytes()
+    with pytest.raises(ValueError, match="holds a benchmark of other data .*choose another --out"):
+        _run(b, out)
+    assert (out / "results.json").read_bytes() == before

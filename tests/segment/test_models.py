@@ -140,3 +140,15 @@ def test_betp_skip_starts_from_dst_and_learns_its_weight():
     assert model.betp_weight.grad is not None and model.betp_weight.grad != 0
     with pytest.raises(ValueError, match="betp_skip must be >= 0"):
         build_model("unet-light", betp_skip=-1.0)
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"depth": 40}, "depth: an integer in 1..8"),  # ran a 24 GB machine out of memory
+    ({"base": 0}, "base: an integer in 1..256"),
+    ({"base": -4}, "base: an integer in 1..256"),
+    ({"base": 4.5}, "base: an integer in 1..256"),
+    ({"base": 256, "depth": 8}, "at most 4096"),
+])
+def test_unet_sizes_are_checked_before_any_allocation(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        build_model("unet-light", 10, 5, **kwargs)

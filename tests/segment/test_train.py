@@ -54,6 +54,20 @@ def test_resume_with_other_settings_is_refused(tmp_path, make_frames):
         )
 
 
+@pytest.mark.parametrize("over, message", [
+    ({"weight_power": float("nan")}, "weight_power must be >= 0"),
+    ({"lr": float("inf")}, "train.lr > 0"),
+    ({"class_weights": [1, 1, float("nan"), 1, 1]}, "need finite values >= 0"),
+    ({"class_weights": [-1, 1, 1, 1, 1]}, "need finite values >= 0"),
+    ({"class_weights": [0, 0, 0, 0, 0]}, "not all 0"),
+])
+def test_nan_negative_or_zero_weights_are_refused(make_frames, tmp_path, over, message):
+    # a NaN weight trained to NaN weights and still exited 0
+    with pytest.raises(ConfigError, match=message):
+        train({**SMALL, **over}, make_frames(2), None, tmp_path, progress=False)
+    assert not list(tmp_path.iterdir())
+
+
 def test_bad_config_names_the_key(make_frames):
     with pytest.raises(ConfigError, match="unknown key 'epoch'"):
         train({"epoch": 3}, make_frames(2), progress=False)

@@ -29,8 +29,12 @@ class UNetEncoder(nn.Module):
 
     def __init__(self, in_channels: int, base: int = 16, depth: int = 3) -> None:
         super().__init__()
-        if depth < 1:
-            raise ValueError(f"depth must be >= 1, got {depth}")
+        for key, value, hi in (("base", base, 256), ("depth", depth, 8)):
+            if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= hi:
+                raise ValueError(f"model_kwargs {key}: an integer in 1..{hi}, got {value!r}")
+        if base * 2**depth > 4096:  # the deepest stage's channels: memory grows with them
+            raise ValueError(f"model_kwargs base {base} and depth {depth}: the deepest stage "
+                             f"would have {base * 2**depth} channels (at most 4096)")
         self.channels = [base * 2**k for k in range(depth + 1)]
         cins = [in_channels, *self.channels[:-1]]
         self.stages = nn.ModuleList(conv_block(a, b) for a, b in zip(cins, self.channels))

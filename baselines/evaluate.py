@@ -34,7 +34,15 @@ import numpy as np
 
 from random_policy import RandomPolicy
 from rl_common import EnvArgs, EpisodeResult, atomic_write_text, evaluate_policy, machine_info
-from rl_common import cli, make_env, opt, parse_args, summarize, write_results_csv
+from rl_common import (
+    cli,
+    make_env,
+    opt,
+    output_file,
+    parse_args,
+    summarize,
+    write_results_csv,
+)
 from rule_based import DRIVERS, reference_driver
 
 BEGIN, END = "<!-- results:begin -->", "<!-- results:end -->"
@@ -76,7 +84,13 @@ class PPOPolicy:
         sidecar = self.path.with_suffix(".json")
         if not sidecar.is_file():
             raise FileNotFoundError(f"{self.path}: missing its sidecar {sidecar.name}")
-        self.meta: dict[str, Any] = json.loads(sidecar.read_text())
+        try:
+            self.meta: dict[str, Any] = json.loads(sidecar.read_text())
+            a = self.meta["args"]
+            a["extractor"]
+        except (ValueError, KeyError, TypeError):
+            raise ValueError(f"{sidecar}: not the model.json of a ppo_grid.py run (bad JSON "
+                             "or no 'args'); keep the pair that ppo_grid.py wrote") from None
         self.deterministic = deterministic
         self.temperature = float(temperature)
         a = self.meta["args"]
@@ -200,6 +214,10 @@ def run(args: Args, command: str) -> str:
     seeds = range(args.seed, args.seed + args.episodes)
     rows: list[tuple[str, dict[str, float], dict[str, Any] | None]] = []
     episodes: list[tuple[str, list[EpisodeResult]]] = []
+    output_file(args.csv, "--csv")
+    # every checkpoint (file, sidecar, temperature) is read before the first episode
+    ppo = {path: PPOPolicy(path, args.deterministic, args.temperature)
+           for path in args.checkpoints}
     jobs: list[tuple[Any, Any]] = [(name, None) for name in args.policies]
     jobs += [(None, path) for path in args.checkpoints]
     for name, path in jobs:
@@ -207,7 +225,7 @@ def run(args: Args, command: str) -> str:
             policy, env = _reference(name, args)
             meta = None
         else:
-            policy = PPOPolicy(path, args.deterministic, args.temperature)
+            policy = ppo[path]
             env, meta = policy.make_env(args), policy.meta
             if meta["args"]["env_id"] != args.env_id:
                 print(f"warning: {path} was trained on {meta['args']['env_id']}, "

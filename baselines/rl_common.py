@@ -142,6 +142,21 @@ def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
+def output_file(path: str, flag: str) -> None:
+    """Refuse, before any work, an output ``path`` that cannot become a file: a directory,
+    or a path under a file. Nothing is created (the writer makes its folder)."""
+    if not path:
+        return
+    out = Path(path)
+    if out.is_dir():
+        raise ValueError(f"{flag} {out}: is a directory; give a file name")
+    parent = out.parent
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    if not parent.is_dir():
+        raise ValueError(f"{flag} {out}: {parent} is a file, not a folder")
+
+
 def make_env(args: EnvArgs, overrides: dict[str, Any] | None = None, monitor: bool = False,
              wrap: Callable[[gym.Env], gym.Env] | None = None) -> gym.Env:
     """Build one environment with ``gym.make`` (registered id, its default observation).
@@ -155,6 +170,16 @@ def make_env(args: EnvArgs, overrides: dict[str, Any] | None = None, monitor: bo
             ``info["episode"]``).
         wrap: applied to the env before ``Monitor`` (e.g. :func:`residual.wrap`).
     """
+    if not args.env_id.startswith("DSTGrid-") or args.env_id not in gym.registry:
+        import dstenv.envs  # noqa: F401  (registers the ids)
+
+        known = sorted(k for k in gym.registry if k.startswith("DSTGrid-"))
+        if args.env_id not in known:
+            raise ValueError(f"--env-id {args.env_id}: not a registered DSTGrid id; choose "
+                             f"from {', '.join(known)}")
+    if args.max_episode_steps < 0:
+        raise ValueError(f"--max-episode-steps {args.max_episode_steps}: must be >= 0 "
+                         "(0: the registration's)")
     kwargs: dict[str, Any] = {"config": env_config(args, overrides)}
     if args.max_episode_steps > 0:
         kwargs["max_episode_steps"] = args.max_episode_steps

@@ -34,7 +34,7 @@ from pathlib import Path
 from typing import Any
 
 from rl_common import EnvArgs, atomic_write_text, cli, evaluate_policy, machine_info, make_env
-from rl_common import opt, parse_args, summarize
+from rl_common import opt, output_file, parse_args, summarize
 from rule_based import GridRuleDriver
 
 
@@ -163,6 +163,7 @@ def run(args: Args) -> dict[str, Any]:
 def main(argv: list[str] | None = None) -> dict[str, Any]:
     """Command-line entry point; returns the search record."""
     args = parse_args(Args, argv)
+    output_file(args.out, "--out")
     record = run(args)
     best = record["best"]
     print(f"best: {json.dumps(best['params'])} (success {best['summary']['success']:.2f}, "

@@ -33,6 +33,8 @@ def _train(args: argparse.Namespace) -> int:
     from dstenv.data import ShardDataset, StreamingDataset
     from dstenv.segment.train import train
 
+    if Path(args.out).exists() and not Path(args.out).is_dir():
+        raise CLIError(f"--out {args.out}: is a file; give a folder for the checkpoints")
     cfg: dict[str, Any] = {
         "model": args.model or "unet-light",
         "model_kwargs": args.model_kwargs,

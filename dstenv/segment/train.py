@@ -174,7 +174,12 @@ def train(
 
     out = Path(out_dir) if out_dir is not None else None
     last = out / "last.pt" if out else None
-    ckpt = load_checkpoint(last) if (resume and last is not None and last.exists()) else None
+    ckpt = None
+    if resume and last is not None and last.exists():
+        try:
+            ckpt = load_checkpoint(last)
+        except ValueError as exc:  # a damaged last.pt: say how to start over
+            raise ValueError(f"{exc}; start over with --no-resume (resume=False)") from None
     if ckpt is not None:
         # options added since the checkpoint was written count as their defaults
         saved = {k: v for k, v in {**default_train_config(), **ckpt["config"]}.items()

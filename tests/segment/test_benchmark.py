@@ -100,6 +100,9 @@ def test_cli_benchmark_on_existing_data_and_errors(tiny, tmp_path, capsys):
     assert "unknown key 'frame'" in capsys.readouterr().err
     assert main(["train", "--out", str(tmp_path / "m")]) == 2
     assert "--data" in capsys.readouterr().err
+    (tmp_path / "afile").write_text("x")
+    assert main(["train", "--data", str(tmp_path), "--out", str(tmp_path / "afile")]) == 2
+    assert "is a file; give a folder" in capsys.readouterr().err
 
 
 def test_cli_train_resumes(tiny, tmp_path, capsys):

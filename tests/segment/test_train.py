@@ -68,6 +68,14 @@ def test_nan_negative_or_zero_weights_are_refused(make_frames, tmp_path, over, m
     assert not list(tmp_path.iterdir())
 
 
+def test_a_damaged_last_checkpoint_says_how_to_start_over(tmp_path, make_frames):
+    (tmp_path / "last.pt").write_bytes(b"not a checkpoint")
+    with pytest.raises(ValueError, match="cannot read checkpoint.*start over with --no-resume"):
+        train({**SMALL, "epochs": 1}, make_frames(2), None, tmp_path, progress=False)
+    train({**SMALL, "epochs": 1}, make_frames(2), None, tmp_path, resume=False, progress=False,
+          log=lambda m: None)
+
+
 def test_bad_config_names_the_key(make_frames):
     with pytest.raises(ConfigError, match="unknown key 'epoch'"):
         train({"epoch": 3}, make_frames(2), progress=False)

@@ -57,8 +57,10 @@ def _json_or_word(text: str) -> Any:
 
 
 def _grid(text: str) -> tuple[int, int]:
-    h, _, w = text.lower().partition("x")
+    h, sep, w = text.lower().partition("x")
     try:
+        if sep and not w:  # "64x": a width left out, not a square grid
+            raise ValueError
         size = (int(h), int(w or h))
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected N or HxW cells, got {text!r}") from None

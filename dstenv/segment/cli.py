@@ -28,6 +28,18 @@ def _sequence_list(text: str) -> list[str]:
     return names
 
 
+def _apart(out: str | None, data: str | None) -> None:
+    """Refuse an output folder that is, or lies inside, the dataset (its checkpoints or
+    results would sit among the shards, and a later generate would take the folder)."""
+    from dstenv.config import CLIError
+
+    if not out or not data:
+        return
+    o, d = Path(out).resolve(), Path(data).resolve()
+    if o == d or d in o.parents:
+        raise CLIError(f"--out {out}: inside the dataset --data {data}; give another folder")
+
+
 def _train(args: argparse.Namespace) -> int:
     from dstenv.config import CLIError
     from dstenv.data import ShardDataset, StreamingDataset
@@ -35,6 +47,7 @@ def _train(args: argparse.Namespace) -> int:
 
     if Path(args.out).exists() and not Path(args.out).is_dir():
         raise CLIError(f"--out {args.out}: is a file; give a folder for the checkpoints")
+    _apart(args.out, args.data)
     cfg: dict[str, Any] = {
         "model": args.model or "unet-light",
         "model_kwargs": args.model_kwargs,
@@ -156,6 +169,7 @@ def run_cli_benchmark(args: argparse.Namespace, split: str = "test", kept: bool 
     from dstenv.segment.benchmark import run_benchmark
     from dstenv.segment.presets import preset_config
 
+    _apart(args.out, args.data)
     overrides = parse_set(args.set or [])
     for section, row in (("tune", "dst-tuned"), ("complete", "dst-complete")):
         node = overrides.get(section, {})

@@ -67,7 +67,10 @@ def resolve_device(name: str) -> torch.device:
         return torch.device("cuda" if torch.cuda.is_available() else "cpu")
     if name.startswith("cuda") and not torch.cuda.is_available():
         raise ConfigError(f"device {name!r} requested but CUDA is not available")
-    return torch.device(name)
+    try:
+        return torch.device(name)
+    except RuntimeError:  # torch's message is several lines
+        raise ConfigError(f"device {name!r}: not a torch device; use auto, cpu or cuda") from None
 
 
 def _check(cfg: dict[str, Any]) -> None:

@@ -80,3 +80,11 @@ def test_info_errors_are_one_line(tmp_path, capsys, fake_pipeline):
     assert main(["info", str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "lists val/shard-00001.h5 but that file is missing" in err
+
+
+@pytest.mark.parametrize("grid", ["64x", "x64", "64x64x2", "sixty", "1x64"])
+def test_generate_grid_must_be_n_or_hxw(tmp_path, capsys, grid):
+    with pytest.raises(SystemExit) as exc:
+        main(["generate", "--frames", "2", "--grid", grid, "--out", str(tmp_path / "o")])
+    assert exc.value.code == 2 and "--grid" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()

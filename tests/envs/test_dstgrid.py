@@ -223,3 +223,15 @@ def test_city_turn_meta_actions_steer_the_route():
     speed_only = gym.make("DSTGrid-v0", config={**SMALL_CITY, "action": {"type": "speed"}})
     assert speed_only.action_space.n == 3
     speed_only.close()
+
+
+def test_an_action_outside_the_space_is_refused_in_one_line():
+    # -1 used to be taken as the last action, 99 to raise an IndexError
+    env = gym.make("DSTGrid-RL-v0")
+    env.reset(seed=0)
+    for bad in (-1, 99, 1.5, True, "FASTER"):
+        with pytest.raises(ValueError, match=r"action .* is not in Discrete"):
+            env.step(bad)
+    for good in (1, np.int64(2), np.array(0)):
+        env.step(good)
+    env.close()

@@ -103,6 +103,10 @@ def test_cli_benchmark_on_existing_data_and_errors(tiny, tmp_path, capsys):
     (tmp_path / "afile").write_text("x")
     assert main(["train", "--data", str(tmp_path), "--out", str(tmp_path / "afile")]) == 2
     assert "is a file; give a folder" in capsys.readouterr().err
+    for cmd in (["train", "--data", str(tmp_path), "--out", str(tmp_path / "m")],
+                ["benchmark", "--data", str(tmp_path), "--out", str(tmp_path)]):
+        assert main(cmd) == 2
+        assert "inside the dataset --data" in capsys.readouterr().err
 
 
 def test_cli_train_resumes(tiny, tmp_path, capsys):

@@ -76,6 +76,14 @@ def test_a_damaged_last_checkpoint_says_how_to_start_over(tmp_path, make_frames)
           log=lambda m: None)
 
 
+def test_an_unknown_device_is_one_line():
+    from dstenv.segment.train import resolve_device
+
+    with pytest.raises(ConfigError, match="device 'foo': not a torch device; use auto, cpu"):
+        resolve_device("foo")
+    assert resolve_device("cpu").type == "cpu"
+
+
 def test_bad_config_names_the_key(make_frames):
     with pytest.raises(ConfigError, match="unknown key 'epoch'"):
         train({"epoch": 3}, make_frames(2), progress=False)

@@ -46,8 +46,12 @@ def read_episodes(path: str, policy: str = "") -> tuple[str, dict[int, dict[str,
     p = Path(path)
     if not p.is_file():
         raise FileNotFoundError(f"{path}: no such file")
-    with p.open(newline="") as fh:
-        rows = list(csv.DictReader(fh))
+    try:
+        with p.open(newline="", encoding="utf-8") as fh:
+            rows = list(csv.DictReader(fh))
+    except (UnicodeDecodeError, csv.Error) as exc:
+        raise ValueError(f"{path}: not a CSV text file ({type(exc).__name__}); give an "
+                         "evaluate.py --csv file") from None
     need = {"policy", "seed", *OUTCOMES}
     if not rows or not need <= set(rows[0]):
         raise ValueError(f"{path}: not an evaluate.py --csv file (needs columns "
@@ -61,9 +65,19 @@ def read_episodes(path: str, policy: str = "") -> tuple[str, dict[int, dict[str,
     elif policy not in names:
         raise ValueError(f"{path}: no policy {policy!r}; it has: {'; '.join(names)}")
     out: dict[int, dict[str, bool]] = {}
-    for r in rows:
-        if r["policy"] == policy:
-            out[int(r["seed"])] = {k: r[k] == "True" for k in OUTCOMES}
+    for line, r in enumerate(rows, start=2):  # line 1 is the header
+        if r["policy"] != policy:
+            continue
+        try:
+            seed = int(r["seed"])
+        except (TypeError, ValueError):
+            raise ValueError(f"{path}, line {line}: seed {r['seed']!r} is not an integer") from None
+        bad = [k for k in OUTCOMES if r[k] not in ("True", "False")]
+        if bad:
+            raise ValueError(f"{path}, line {line}: {bad[0]} {r[bad[0]]!r} is not True or False")
+        if seed in out:
+            raise ValueError(f"{path}, line {line}: seed {seed} of {policy!r} a second time")
+        out[seed] = {k: r[k] == "True" for k in OUTCOMES}
     return policy, out
 
 

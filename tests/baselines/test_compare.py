@@ -59,3 +59,23 @@ def test_bad_files_are_named(tmp_path) -> None:
         compare.read_episodes(str(two), "z")
     assert compare.read_episodes(str(two), "y") == (
         "y", {1: {"success": False, "collision": True, "off_road": False}})
+
+
+@pytest.mark.parametrize("body, message", [
+    ("x,abc,True,False,False\n", "two.csv, line 2: seed 'abc' is not an integer"),
+    ("x,1,True,nope,False\n", "two.csv, line 2: collision 'nope' is not True or False"),
+    ("x,1,True,False,False\nx,1,False,False,False\n", "line 3: seed 1 of 'x' a second time"),
+    ("x,1,True\n", "line 2: collision None is not True or False"),
+])
+def test_bad_rows_are_named_with_their_line(tmp_path, body, message) -> None:
+    path = tmp_path / "two.csv"
+    path.write_text("policy,seed,success,collision,off_road\n" + body)
+    with pytest.raises(ValueError, match=message):
+        compare.read_episodes(str(path))
+
+
+def test_a_binary_file_is_named(tmp_path) -> None:
+    path = tmp_path / "bin.csv"
+    path.write_bytes(bytes(range(256)) * 4)
+    with pytest.raises(ValueError, match="bin.csv: not a CSV text file"):
+        compare.read_episodes(str(path))

@@ -86,15 +86,13 @@ class PPOPolicy:
             raise FileNotFoundError(f"{self.path}: missing its sidecar {sidecar.name}")
         try:
             self.meta: dict[str, Any] = json.loads(sidecar.read_text())
-            a = self.meta["args"]
-            a["extractor"]
+            extractor = self.meta["args"]["extractor"]
         except (ValueError, KeyError, TypeError):
             raise ValueError(f"{sidecar}: not the model.json of a ppo_grid.py run (bad JSON "
                              "or no 'args'); keep the pair that ppo_grid.py wrote") from None
         self.deterministic = deterministic
         self.temperature = float(temperature)
-        a = self.meta["args"]
-        self.name = f"PPO {a['extractor']} ({self.path.stem})" + (
+        self.name = f"PPO {extractor} ({self.path.stem})" + (
             f" T={self.temperature:g}" if self.temperature > 0 else "")
         self.model: Any = None
         self.rng = np.random.default_rng(0)

@@ -57,7 +57,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv,
 from torch import nn
 
 from rl_common import EnvArgs, atomic_write_bytes, atomic_write_text, machine_info, make_env, opt
-from rl_common import cli, parse_args, to_argv
+from rl_common import check_env_args, cli, parse_args, to_argv
 
 EXTRACTORS = ("grid-cnn", "route-cnn", "combined")
 
@@ -372,10 +372,10 @@ def train(args: Args) -> tuple[PPO, dict[str, Any]]:
     """Train PPO as ``args`` says; returns the model and the ``model.json`` content."""
     for flag, value, lo in (("--total-timesteps", args.total_timesteps, 1),
                             ("--n-envs", args.n_envs, 1), ("--n-steps", args.n_steps, 2),
-                            ("--batch-size", args.batch_size, 2),
-                            ("--max-episode-steps", args.max_episode_steps, 0)):
+                            ("--batch-size", args.batch_size, 2)):
         if value < lo:
             raise ValueError(f"{flag} {value}: must be at least {lo}")
+    check_env_args(args)
     taken = [n for n in RUN_FILES if (Path(args.out) / n).exists()]
     if taken:  # a finished or interrupted run would be overwritten in silence
         raise ValueError(f"--out {args.out}: holds a training run ({taken[0]}); choose another "

@@ -34,9 +34,11 @@ import numpy as np
 
 import dstenv  # noqa: F401  (registers the DSTGrid-* ids)
 from dstenv.io import atomic_write_bytes, atomic_write_text
+from dstenv.io import output_file as check_output_file
 
 __all__ = [
-    "opt", "parse_args", "to_argv", "EnvArgs", "env_config", "make_env", "Policy",
+    "opt", "parse_args", "to_argv", "EnvArgs", "env_config", "check_env_args", "make_env",
+    "output_file", "Policy",
     "EpisodeResult", "run_episode", "summarize", "report_run",
     "evaluate_policy", "write_results_csv",
     "atomic_write_bytes", "atomic_write_text", "machine_info", "cli",
@@ -143,18 +145,27 @@ def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
 
 
 def output_file(path: str, flag: str) -> None:
-    """Refuse, before any work, an output ``path`` that cannot become a file: a directory,
-    or a path under a file. Nothing is created (the writer makes its folder)."""
-    if not path:
-        return
-    out = Path(path)
-    if out.is_dir():
-        raise ValueError(f"{flag} {out}: is a directory; give a file name")
-    parent = out.parent
-    while not parent.exists() and parent != parent.parent:
-        parent = parent.parent
-    if not parent.is_dir():
-        raise ValueError(f"{flag} {out}: {parent} is a file, not a folder")
+    """:func:`dstenv.io.output_file` of an optional output (``""``: none)."""
+    if path:
+        check_output_file(path, flag)
+
+
+def check_env_args(args: EnvArgs) -> None:
+    """The environment arguments, checked before any env is built (a subprocess env
+    would report a bad one as a traceback).
+
+    Raises:
+        ValueError: an id that is not a registered DSTGrid one, a negative time limit.
+    """
+    import dstenv.envs  # noqa: F401  (registers the ids)
+
+    known = sorted(k for k in gym.registry if k.startswith("DSTGrid-"))
+    if args.env_id not in known:
+        raise ValueError(f"--env-id {args.env_id}: not a registered DSTGrid id; choose "
+                         f"from {', '.join(known)}")
+    if args.max_episode_steps < 0:
+        raise ValueError(f"--max-episode-steps {args.max_episode_steps}: must be at least 0 "
+                         "(0: the registration's)")
 
 
 def make_env(args: EnvArgs, overrides: dict[str, Any] | None = None, monitor: bool = False,
@@ -170,16 +181,7 @@ def make_env(args: EnvArgs, overrides: dict[str, Any] | None = None, monitor: bo
             ``info["episode"]``).
         wrap: applied to the env before ``Monitor`` (e.g. :func:`residual.wrap`).
     """
-    if not args.env_id.startswith("DSTGrid-") or args.env_id not in gym.registry:
-        import dstenv.envs  # noqa: F401  (registers the ids)
-
-        known = sorted(k for k in gym.registry if k.startswith("DSTGrid-"))
-        if args.env_id not in known:
-            raise ValueError(f"--env-id {args.env_id}: not a registered DSTGrid id; choose "
-                             f"from {', '.join(known)}")
-    if args.max_episode_steps < 0:
-        raise ValueError(f"--max-episode-steps {args.max_episode_steps}: must be >= 0 "
-                         "(0: the registration's)")
+    check_env_args(args)
     kwargs: dict[str, Any] = {"config": env_config(args, overrides)}
     if args.max_episode_steps > 0:
         kwargs["max_episode_steps"] = args.max_episode_steps

@@ -13,7 +13,6 @@ import importlib
 import json
 import time
 from collections.abc import Callable
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -67,23 +66,17 @@ def run_benchmark(name: str, args: argparse.Namespace) -> dict[str, Any]:
 
 
 def _cmd(args: argparse.Namespace) -> int:
-    from dstenv.config import CLIError
+    from dstenv.io import atomic_write_text, output_file
 
     names = list(BENCHMARKS) if args.name == "all" else [args.name]
-    if args.json:  # before minutes of timing, not after
-        out = Path(args.json)
-        if out.is_dir():
-            raise CLIError(f"--json {out}: is a directory; give a file name")
-        try:
-            out.parent.mkdir(parents=True, exist_ok=True)
-        except OSError as e:
-            raise CLIError(f"--json {out}: cannot create its folder ({e.strerror})") from None
+    if args.json:
+        output_file(args.json, "--json")  # before minutes of timing, not after
     results = {}
     for name in names:
         print(f"== bench {name}: {BENCHMARKS[name][1]}")
         results[name] = run_benchmark(name, args)
     if args.json:
-        Path(args.json).write_text(json.dumps(results, indent=2, default=float))
+        atomic_write_text(args.json, json.dumps(results, indent=2, default=float))
         print(f"wrote {args.json}")
     return 0
 

@@ -15,7 +15,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 __all__ = ["PARTIAL_SUFFIX", "partial_path", "atomic_path", "atomic_write_bytes",
-           "atomic_write_text", "fsync_file", "fsync_dir", "png_path"]
+           "atomic_write_text", "fsync_file", "fsync_dir", "output_file", "png_path"]
 
 #: suffix of a file being written; never a final file (readers and scans skip it)
 PARTIAL_SUFFIX = ".partial"
@@ -100,5 +100,23 @@ def png_path(path: str | Path, option: str = "--out") -> Path:
     out = Path(path)
     if out.suffix.lower() != ".png":
         raise ValueError(f"{option} {out}: the picture is a PNG; give a name ending in .png")
+    return out
+
+
+def output_file(path: str | Path, option: str) -> Path:
+    """Refuse, before any work, an output ``path`` that cannot become a file: a directory,
+    or a path under a file. Nothing is created (the atomic writers make the folder).
+
+    Raises:
+        ValueError: one line naming ``option``, the path and the fix.
+    """
+    out = Path(path)
+    if out.is_dir():
+        raise ValueError(f"{option} {out}: is a directory; give a file name")
+    parent = out.parent
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    if not parent.is_dir():
+        raise ValueError(f"{option} {out}: cannot create its folder ({parent} is a file)")
     return out
 

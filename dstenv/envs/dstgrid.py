@@ -299,14 +299,14 @@ class DSTGridEnv(gym.Env):
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         if self._frame is None:
             raise RuntimeError("DSTGridEnv.step: call reset() first")
-        if isinstance(self.action_space, spaces.Discrete) and not (
-                isinstance(action, (int, np.integer)) and not isinstance(action, bool)
-                and self.action_space.contains(int(action))) and not (
-                isinstance(action, np.ndarray) and action.shape == ()
-                and self.action_space.contains(int(action))):
-            # -1 was taken as the last action and 99 raised an IndexError
-            raise ValueError(f"DSTGridEnv.step: action {action!r} is not in {self.action_space} "
-                             f"({', '.join(self.get_action_meanings())})")
+        if isinstance(self.action_space, spaces.Discrete):
+            # an integer or a 0-d array inside the space (-1 was taken as the last action,
+            # 99 raised an IndexError)
+            scalar = ((isinstance(action, (int, np.integer)) and not isinstance(action, bool))
+                      or (isinstance(action, np.ndarray) and action.shape == ()))
+            if not (scalar and self.action_space.contains(int(action))):
+                raise ValueError(f"DSTGridEnv.step: action {action!r} is not in "
+                                 f"{self.action_space} ({', '.join(self.get_action_meanings())})")
         w = self._world
         repeat, held = self.config["action"]["repeat"], self._action.held(action)
         rcfg = self.config["reward"]

@@ -43,17 +43,18 @@ def _apart(out: str | None, data: str | None) -> None:
 def _train(args: argparse.Namespace) -> int:
     from dstenv.config import CLIError
     from dstenv.data import ShardDataset, StreamingDataset
-    from dstenv.segment.train import train
+    from dstenv.segment.train import default_train_config, train
 
     if Path(args.out).exists() and not Path(args.out).is_dir():
         raise CLIError(f"--out {args.out}: is a file; give a folder for the checkpoints")
     _apart(args.out, args.data)
+    defaults = default_train_config()  # --model and --inputs: None when not given
     cfg: dict[str, Any] = {
-        "model": args.model or "unet-light",
+        "model": args.model or defaults["model"],
         "model_kwargs": args.model_kwargs,
         "seed": args.seed,
         "device": args.device,
-        "inputs": args.inputs or "fcn10",
+        "inputs": args.inputs or defaults["inputs"],
         "labels": args.labels,
     }
     for key in ("epochs", "batch_size", "lr", "loss", "crop", "num_workers", "weight_power"):

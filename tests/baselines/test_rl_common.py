@@ -104,7 +104,8 @@ def test_atomic_write_leaves_no_temp_file(tmp_path) -> None:
      "--env-id DSTGrid-Nope-v0: not a registered DSTGrid id"),
     ("evaluate.py", ["--env-id", "CartPole-v1", "--policies", "random"],
      "not a registered DSTGrid id"),
-    ("evaluate.py", ["--max-episode-steps", "-3", "--policies", "random"], "must be >= 0"),
+    ("evaluate.py", ["--max-episode-steps", "-3", "--policies", "random"],
+     "--max-episode-steps -3: must be at least 0"),
     ("evaluate.py", ["--csv", ".", "--policies", "random"], "--csv .: is a directory"),
     ("evaluate.py", ["--policies", "random", "--checkpoints", "no-such.pt"],
      "--checkpoints: no such file"),  # before the random driver's episodes

@@ -39,8 +39,13 @@ pytest.importorskip("ray")
 HEAD_IP, WORKER_IP = "127.0.0.2", "127.0.0.3"
 RAY = [sys.executable, "-m", "ray.scripts.scripts"]
 DSTENV = [sys.executable, "-m", "dstenv.cli"]
-# 12 frames in 6 shards of 2: enough tasks for both nodes and for a kill mid-run
-SPEC = ["--frames", "12", "--seed", "5", "--split", "train", *TINY_ARGS]
+# 12 frames in 6 shards of 2: enough tasks for both nodes and for a kill mid-run. Two
+# thousand steps between kept frames make each shard take about a second, so shards
+# land about a second apart, and the kill after the first one lands mid-run (with
+# TINY_ARGS' 10 steps a shard took milliseconds and a slow driver could write all six
+# before the test saw the first: CI failed so once)
+SPEC = ["--frames", "12", "--seed", "5", "--split", "train", *TINY_ARGS,
+        "--episode-length", "4001", "--stride", "2000"]
 
 
 def _free_port() -> int:
@@ -143,7 +148,7 @@ def _wait_for_shard(out: Path, proc: subprocess.Popen) -> None:
     while not list(out.glob("train/*.h5")):
         assert proc.poll() is None, proc.communicate()[0]
         assert time.monotonic() < deadline, "no shard written in 300 s"
-        time.sleep(0.2)
+        time.sleep(0.02)
 
 
 def test_cluster_run_is_byte_identical_to_a_local_run(cluster, local_run, tmp_path):

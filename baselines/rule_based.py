@@ -89,8 +89,11 @@ class GridRuleDriver:
         obs_cfg = cfg["observation"]
         if obs_cfg["type"] != "dict" or obs_cfg["grid"] != "image":
             raise ValueError("GridRuleDriver: needs observation.type 'dict' with grid 'image'")
-        if env.unwrapped.get_action_meanings()[:3] != ["SLOWER", "IDLE", "FASTER"]:
-            raise ValueError("GridRuleDriver: needs the speed or discrete meta-actions")
+        kind = cfg["action"]["type"]  # a continuous action space has no meanings
+        if kind == "continuous" or \
+                env.unwrapped.get_action_meanings()[:3] != ["SLOWER", "IDLE", "FASTER"]:
+            raise ValueError(f"GridRuleDriver: needs the speed or discrete meta-actions, not "
+                             f"action.type {kind!r}")
         self.speeds = np.asarray(cfg["action"]["target_speeds"], np.float64)
         self.cell = float(cfg["grid"]["cell_size"])
         self.shape = (int(cfg["grid"]["height"]), int(cfg["grid"]["width"]))

@@ -76,10 +76,16 @@ def _generate(args: argparse.Namespace) -> int:
 
     overrides = parse_set(args.set or [])
     grid = overrides.setdefault("grid", {})
+    flags = {}
     if args.grid:
-        grid["height"], grid["width"] = args.grid
+        flags["height"] = ("--grid", args.grid[0])
+        flags["width"] = ("--grid", args.grid[1])
     if args.cell_size is not None:
-        grid["cell_size"] = args.cell_size
+        flags["cell_size"] = ("--cell-size", args.cell_size)
+    for key, (flag, value) in flags.items():
+        if key in grid and grid[key] != value:  # one of the two would be dropped unseen
+            raise CLIError(f"{flag} and --set grid.{key}={grid[key]} disagree: give one")
+        grid[key] = value
     config = scenario_config(args.scenario, overrides)
     if config.get("world", {}).get("map", {}).get("kind") == "osm" and not args.quiet:
         print("dstenv generate: note: this scenario has one fixed OSM map; its splits differ "

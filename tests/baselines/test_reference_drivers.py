@@ -60,6 +60,16 @@ def _obs(junction: float = 1.0, speed: float = 9.0, target: float = 9.0,
     return {"grid": grid, "ego": ego, "route": route}
 
 
+def test_grid_rule_driver_refuses_continuous_actions(small_config: dict) -> None:
+    # DSTGrid-Continuous-v0 with the grid driver was a TypeError traceback from
+    # get_action_meanings; evaluate.py and tune_rule.py print ValueErrors in one line
+    policy, env = rule_based.reference_driver(
+        "grid", EnvArgs(env_id="DSTGrid-Continuous-v0", env_config=json.dumps(small_config)))
+    with pytest.raises(ValueError, match="not action.type 'continuous'"):
+        policy.reset(env, 0)
+    env.close()
+
+
 def test_grid_rule_driver_reads_only_the_observation(small_config: dict) -> None:
     policy, env = rule_based.reference_driver("grid", EnvArgs(env_config=json.dumps(small_config)))
     assert isinstance(policy, GridRuleDriver)

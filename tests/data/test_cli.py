@@ -88,3 +88,14 @@ def test_generate_grid_must_be_n_or_hxw(tmp_path, capsys, grid):
         main(["generate", "--frames", "2", "--grid", grid, "--out", str(tmp_path / "o")])
     assert exc.value.code == 2 and "--grid" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("flags", [["--grid", "64", "--set", "grid.height=-1"],
+                                   ["--grid", "32x48", "--set", "grid.width=32"],
+                                   ["--cell-size", "0.5", "--set", "grid.cell_size=0.2"]])
+def test_generate_flag_and_set_must_agree(tmp_path, capsys, flags):
+    # before, --grid / --cell-size silently replaced the --set value
+    assert main(["generate", "--frames", "2", "--out", str(tmp_path / "o"), *flags]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "disagree: give one" in err and flags[0] in err
+    assert not (tmp_path / "o").exists()

@@ -109,6 +109,12 @@ def test_vgg16_weights_from_local_file(tmp_path):
         load_vgg16_weights(enc, tmp_path / "bad.pth")
     with pytest.raises(FileNotFoundError):
         build_model("fcn8s-vgg16", fc_channels=16, vgg16_weights=str(tmp_path / "none.pth"))
+    (tmp_path / "text.pth").write_text("not weights\n")  # a traceback before
+    with pytest.raises(ValueError, match="text.pth: not a saved torch state dict"):
+        load_vgg16_weights(enc, tmp_path / "text.pth")
+    torch.save([1, 2], tmp_path / "list.pth")
+    with pytest.raises(ValueError, match="holds a list, not a state dict"):
+        load_vgg16_weights(enc, tmp_path / "list.pth")
 
 
 @pytest.mark.slow

@@ -109,13 +109,20 @@ def load_vgg16_weights(encoder: VGG16Encoder, path: str | Path) -> None:
 
     Raises:
         FileNotFoundError: if ``path`` does not exist.
-        ValueError: if a key is missing or a shape does not fit (e.g. ``fc_channels``
-            other than 4096 with a full VGG-16 file).
+        ValueError: if the file is no torch state dict, if a key is missing or a shape
+            does not fit (e.g. ``fc_channels`` other than 4096 with a full VGG-16 file).
     """
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"VGG-16 weights not found: {path}")
-    sd = torch.load(path, map_location="cpu", weights_only=True)
+    try:
+        sd = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # a text file, a truncated file, a pickle of other objects
+        raise ValueError(f"{path}: not a saved torch state dict ({type(exc).__name__}); "
+                         "expected torchvision's vgg16 weights (.pth)") from None
+    if not isinstance(sd, dict):
+        raise ValueError(f"{path}: holds a {type(sd).__name__}, not a state dict; expected "
+                         "torchvision's vgg16 weights (.pth)")
     own = encoder.state_dict()
     new = {}
     for key in own:

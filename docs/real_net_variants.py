@@ -29,6 +29,9 @@ from typing import Any
 #: variant -> overrides of the ``cpu`` preset (``real_net``, ``model_kwargs``) and of its
 #: drives' pipeline (``data_overrides``, merged into ``data.overrides``); the drives are
 #: treated as converted without a map (``real_map=False``), as 0003 is
+#: (a variant that does not set ``real_net.moving`` labels agents moving by the run's
+#: rule, "run", as the variants before 2026-12-06 were run; the main job's default has
+#: been "match" since)
 VARIANTS: dict[str, dict[str, Any]] = {
     # the main job's networks before real_net.map: the run's map settings
     "none": {"real_net": {"map": "run"}},
@@ -65,6 +68,13 @@ VARIANTS: dict[str, dict[str, Any]] = {
     # cars as a body on wheels for the 3-D LIDAR (dstenv.sensing.carshape)
     "no map car shape": {"real_net": {"map": "match"},
                          "data_overrides": {"lidar": {"hdl64": {"vehicle_shape": "car"}}}},
+    # agents labelled moving by KITTI's rule (10 cm a 0.1 s frame: 1 m/s) instead of the
+    # simulator's 0.1 m/s (real_net.moving "match", the main job's since 2026-12-06)
+    "no map kitti moving": {"real_net": {"map": "match", "moving": "match",
+                                         "seeds": [0, 1, 2, 3, 4, 5]}},
+    "no map past kitti moving": {"real_net": {"map": "match", "moving": "match",
+                                              "inputs": "fcn10+sensor+past",
+                                              "seeds": [0, 1, 2, 3, 4, 5]}},
 }
 
 
@@ -109,6 +119,7 @@ def main() -> None:
     resumed = []
     for name in names:
         var = {k: v for k, v in VARIANTS[name].items() if k != "data_overrides"}
+        var["real_net"] = {"moving": "run", **var.get("real_net", {})}
         cfg = preset_config("cpu", var)
         extra = VARIANTS[name].get("data_overrides", {})
         cfg["data"]["overrides"] = _merged(cfg["data"]["overrides"], extra)
@@ -167,13 +178,18 @@ def _train(cfg, manifest, work, name):
 
     out = work / "nets" / _slug(name)
     extra = _slug(json.dumps(cfg["data"]["overrides"], sort_keys=True))
-    data = work / "data" / f"{cfg['real_net']['map']}-{cfg['real_net']['frames']}-{extra}"
+    rn = cfg["real_net"]
+    data = work / "data" / f"{rn['map']}-{rn['frames']}-{rn['moving']}-{extra}"
     if data.is_dir() and not (out / "data").exists():
         out.mkdir(parents=True, exist_ok=True)
         shutil.copytree(data, out / "data")
+    from dstenv.kitti.objects import FRAME_INTERVAL
+
+    labels = manifest["meta"]["config"]["labels"]  # the real labels' moving rule
     ckpts, _ = train_real_networks({"config": cfg}, tuple(manifest["grid_shape"]),
                                    float(manifest["cell_size"]), out, log=lambda m: None,
-                                   real_map=False)
+                                   real_map=False,
+                                   real_moving=float(labels["threshold"]) / FRAME_INTERVAL)
     if not data.is_dir():
         shutil.copytree(out / "data", data)
     return ckpts

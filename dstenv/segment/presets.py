@@ -14,6 +14,7 @@ from dstenv.config import ConfigError, merge_config
 __all__ = [
     "PRESETS",
     "REAL_NET_MAPS",
+    "REAL_NET_MOVING",
     "REAL_NET_INPUTS",
     "PAPER_PROTOCOL",
     "check_config",
@@ -27,6 +28,8 @@ __all__ = [
 REAL_NET_MAPS = ("match", "run")
 #: ``real_net.inputs`` values (:data:`dstenv.data.datasets.INPUTS` that read the sensor)
 REAL_NET_INPUTS = ("fcn10+sensor", "fcn10+sensor+past")
+#: ``real_net.moving`` values (:func:`dstenv.segment.realnet.train_real_networks`)
+REAL_NET_MOVING = ("match", "run")
 
 
 def default_benchmark_config() -> dict[str, Any]:
@@ -87,6 +90,10 @@ def default_benchmark_config() -> dict[str, Any]:
             # the networks' input (dstenv.data.datasets): "fcn10+sensor", or with the
             # sensor grid of one second earlier too, "fcn10+sensor+past"
             "inputs": "fcn10+sensor",
+            # which agents the drives label moving: "match", the real labels' rule (KITTI's:
+            # faster than 10 cm a 0.1 s frame, 1 m/s); "run", the simulated run's
+            # (labels.moving_threshold, 0.1 m/s)
+            "moving": "match",
         },
         "curve": {
             "frames": [],  # training-set sizes, e.g. [140, 1400, 14000]
@@ -318,6 +325,9 @@ def check_config(cfg: Mapping[str, Any]) -> None:
     if rn["map"] not in REAL_NET_MAPS:
         raise ConfigError(f"real_net.map: unknown {rn['map']!r}; choose from "
                           + ", ".join(REAL_NET_MAPS))
+    if rn["moving"] not in REAL_NET_MOVING:
+        raise ConfigError(f"real_net.moving: unknown {rn['moving']!r}; choose from "
+                          + ", ".join(REAL_NET_MOVING))
     if rn["inputs"] not in REAL_NET_INPUTS:
         raise ConfigError(f"real_net.inputs: unknown {rn['inputs']!r}; choose from "
                           + ", ".join(REAL_NET_INPUTS))

@@ -252,10 +252,14 @@ def real_benchmark(
         from dstenv.data.manifest import load_manifest
         from dstenv.segment.realnet import train_real_networks
 
+        from dstenv.kitti.objects import FRAME_INTERVAL
+
         manifest = load_manifest(data)
-        more, facts = train_real_networks(sim, tuple(manifest["grid_shape"]),
-                                          float(manifest["cell_size"]), kdir / "real_net",
-                                          progress, log, real_map=osm is not None)
+        labels = manifest.get("meta", {}).get("config", {}).get("labels", {})
+        more, facts = train_real_networks(
+            sim, tuple(manifest["grid_shape"]), float(manifest["cell_size"]),
+            kdir / "real_net", progress, log, real_map=osm is not None,
+            real_moving=float(labels.get("threshold", 0.10)) / FRAME_INTERVAL)
         ckpts.update(more)
     cfg = default_benchmark_config()
     cfg.update(models=[], device="cpu", examples=min(int(sim["config"]["examples"]), 2))

@@ -20,6 +20,11 @@ for real drives"):
   ``real_net.map = "match"`` every simulated drive is then fused without a map too
   (the simulated run has a map in most drives), so the network never learns to lean on
   map evidence the real drives lack.
+* **What moves.** KITTI's labels call an object moving above 10 cm a 0.1 s frame
+  (1 m/s, :func:`dstenv.kitti.objects.moving_flags`); the simulator's above 0.1 m/s, so
+  a car creeping in a queue is moving there and static in KITTI. With
+  ``real_net.moving = "match"`` the drives label agents by the real labels' speed
+  (from the converted data's manifest).
 
 :func:`train_real_networks` generates the data (the simulated run's scenario,
 overrides and protocol; other map seeds) and trains one network per seed; it resumes
@@ -56,6 +61,7 @@ def train_real_networks(
     progress: bool = False,
     log: Callable[[str], None] = print,
     real_map: bool = False,
+    real_moving: float | None = None,
 ) -> tuple[dict[str, Path], dict[str, Any]]:
     """Generate simulated drives at the real data's grid and train the networks.
 
@@ -70,6 +76,9 @@ def train_real_networks(
             with ``real_net.map = "match"`` (the default) every simulated drive is
             fused without a map too (``gis.source = "none"``), as the network will
             read the real ones.
+        real_moving: the speed above which the real labels call an object moving
+            [m/s]; with ``real_net.moving = "match"`` the drives label agents by it
+            (``None``: the simulated run's rule).
 
     Returns:
         ``({row label: best.pt}, facts for results.json)``.
@@ -78,7 +87,7 @@ def train_real_networks(
         ValueError: a non-square grid.
     """
     from dstenv.data import ShardDataset
-    from dstenv.segment.benchmark import generate_data
+    from dstenv.segment.benchmark import _deep_update, generate_data
     from dstenv.segment.train import resolve_device, train
 
     cfg = sim["config"]
@@ -89,8 +98,15 @@ def train_real_networks(
     dcfg = {**cfg["data"], "frames": int(rn["frames"]), "grid": int(grid[0]),
             "seed": int(cfg["data"]["seed"]) + _SEED_OFFSET}
     no_map = rn.get("map", "match") == "match" and not real_map
+    # runs older than real_net.moving labelled by the run's rule
+    moving = real_moving if rn.get("moving", "run") == "match" else None
+    if moving is not None:
+        dcfg["overrides"] = _deep_update(dcfg["overrides"], {
+            "protocol": {"moving_rule": "speed"}, "labels": {"moving_threshold": moving}})
     log(f"real_net: generating {dcfg['frames']} simulated frames at {grid[0]} x {grid[1]} "
-        f"cells of {cell_size:g} m{' without a map' if no_map else ''} into {out / 'data'}")
+        f"cells of {cell_size:g} m{' without a map' if no_map else ''}"
+        + (f", moving above {moving:g} m/s" if moving is not None else "")
+        + f" into {out / 'data'}")
     generate_data(dcfg, cfg["protocol"], out / "data", progress, cell_size, no_map)
     timings = {"data_s": time.perf_counter() - t}
     inputs = rn.get("inputs", "fcn10+sensor")  # runs older than real_net.inputs: this one
@@ -115,6 +131,7 @@ def train_real_networks(
     facts = {"data": str(out / "data"), "grid": list(grid), "cell_size": cell_size,
              "frames": {s: len(d) for s, d in data.items()}, "seeds": seeds,
              "inputs": inputs, "labels": "kitti", "no_map": no_map,
+             "moving_threshold": moving,
              "checkpoints": {k: str(v) for k, v in ckpts.items()},
              "histories": histories, "timings_s": timings}
     return ckpts, facts

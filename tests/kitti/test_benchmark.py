@@ -248,8 +248,13 @@ def test_real_net_is_trained_for_the_real_grid_and_scored_on_it(kitti_root, sim_
     # "match"), though the tiny preset's own drives have one
     assert cfg["data"]["overrides"].get("gis", {}).get("source", "map") == "map"
     assert facts["no_map"] is True
+    # agents labelled moving by the real labels' rule (real_net.moving "match"): KITTI's
+    # 10 cm a 0.1 s frame = 1 m/s, not the simulator's 0.1 m/s
+    assert facts["moving_threshold"] == pytest.approx(1.0)
     for shard in sorted(rdata.rglob("*.h5")):
         with ShardReader(shard) as r:
+            assert r.attrs["config"]["labels"]["moving_threshold"] == pytest.approx(1.0)
+            assert r.attrs["config"]["protocol"]["moving_rule"] == "speed"
             assert r.attrs["config"]["gis"]["source"] == "none"
             assert not r.get(0, ["gis"])["gis"].any()  # vacuous GIS grid: all 0
     ckpt = load_checkpoint(facts["checkpoints"][label])

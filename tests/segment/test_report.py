@@ -124,6 +124,9 @@ def test_presets_validate():
     with pytest.raises(ConfigError, match="real_net.inputs: unknown 'fcn10'; choose from "
                                           "fcn10[+]sensor, fcn10[+]sensor[+]past"):
         _check(preset_config("tiny", {"real_net": {"inputs": "fcn10"}}))
+    with pytest.raises(ConfigError, match="real_net.moving: unknown 'kitti'; choose from "
+                                          "match, run"):
+        _check(preset_config("tiny", {"real_net": {"moving": "kitti"}}))
 
 
 def test_paper_protocol_names_missing_pipeline_keys():

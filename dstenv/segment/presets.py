@@ -88,8 +88,10 @@ def default_benchmark_config() -> dict[str, Any]:
             # without --osm), else the run's map settings; "run": always the run's
             "map": "match",
             # the networks' input (dstenv.data.datasets): "fcn10+sensor", or with the
-            # sensor grid of one second earlier too, "fcn10+sensor+past"
-            "inputs": "fcn10+sensor",
+            # sensor grid of one second earlier too, "fcn10+sensor+past" (the default
+            # since 2026-12-06: with moving "match", simulated validation drives read it
+            # better, six seeds each; docs/benchmark.md)
+            "inputs": "fcn10+sensor+past",
             # which agents the drives label moving: "match", the real labels' rule (KITTI's:
             # faster than 10 cm a 0.1 s frame, 1 m/s); "run", the simulated run's
             # (labels.moving_threshold, 0.1 m/s)

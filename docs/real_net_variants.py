@@ -10,7 +10,8 @@ fine-tuning frames, never scored: :func:`dstenv.segment.real.start_scores`) and
         --work /tmp/rnv --out docs/real-net-variants.json
 
 The variants draw the ``cpu`` preset's map seeds (600 frames unless a variant says
-otherwise), so ``no map`` is the main job's ``kitti-labels`` networks and ``none`` the
+otherwise), so ``no map past kitti moving`` (seeds 0-2) is the main job's
+``kitti-labels`` networks since 2026-12-06, ``no map`` the ones before and ``none`` the
 ones before ``real_net.map``. About 4-6 min a 600-frame variant on 2 cores; rerun to
 resume.
 """
@@ -29,9 +30,9 @@ from typing import Any
 #: variant -> overrides of the ``cpu`` preset (``real_net``, ``model_kwargs``) and of its
 #: drives' pipeline (``data_overrides``, merged into ``data.overrides``); the drives are
 #: treated as converted without a map (``real_map=False``), as 0003 is
-#: (a variant that does not set ``real_net.moving`` labels agents moving by the run's
-#: rule, "run", as the variants before 2026-12-06 were run; the main job's default has
-#: been "match" since)
+#: (a variant that does not set ``real_net.moving`` or ``inputs`` has "run" and
+#: "fcn10+sensor", the main job's until 2026-12-06, as the variants before were run;
+#: the main job's have been "match" and "fcn10+sensor+past" since)
 VARIANTS: dict[str, dict[str, Any]] = {
     # the main job's networks before real_net.map: the run's map settings
     "none": {"real_net": {"map": "run"}},
@@ -119,7 +120,7 @@ def main() -> None:
     resumed = []
     for name in names:
         var = {k: v for k, v in VARIANTS[name].items() if k != "data_overrides"}
-        var["real_net"] = {"moving": "run", **var.get("real_net", {})}
+        var["real_net"] = {"moving": "run", "inputs": "fcn10+sensor", **var.get("real_net", {})}
         cfg = preset_config("cpu", var)
         extra = VARIANTS[name].get("data_overrides", {})
         cfg["data"]["overrides"] = _merged(cfg["data"]["overrides"], extra)
@@ -141,18 +142,30 @@ def main() -> None:
             rows[key] = {"val_miou": round(vals[label], 3) if label in vals else None,
                          "static": round(iou["static"], 3), "moving": round(iou["moving"], 3),
                          "miou": round(row["visible"]["miou"], 3)}
+            if label in ckpts:  # what the simulated validation drives said of it
+                rows[key]["sim_val_miou"] = _sim_val(ckpts[label])
         print(f"{name}: {timings[name]:.0f} s", flush=True)
     out = {"command": "python docs/real_net_variants.py " + shlex.join(sys.argv[1:]),
            "date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
            "selection": f"mIoU over labelled cells of frames {args.val_from}-"
                         f"{args.val_from + args.val_frames - 1}",
+           "sim_val_miou": "best mIoU on the simulated validation drives during training",
            "scored": f"visible cells, frames {args.from_step}-", "variants": VARIANTS,
            "rows": rows, "timings_s": {k: round(v, 1) for k, v in timings.items()},
            "resumed": resumed}
     args.out.write_text(json.dumps(out, indent=1) + "\n")
     for k, v in rows.items():
-        print(f"{k:55s} val {v['val_miou']} static {v['static']:.3f} moving "
-              f"{v['moving']:.3f} mIoU {v['miou']:.3f}")
+        print(f"{k:55s} val {v['val_miou']} sim val {v.get('sim_val_miou')} static "
+              f"{v['static']:.3f} moving {v['moving']:.3f} mIoU {v['miou']:.3f}")
+
+
+def _sim_val(path: Path) -> float | None:
+    """The best validation mIoU on the simulated drives in ``path``'s training history
+    (the epoch ``best.pt`` holds), or ``None`` without validation."""
+    from dstenv.segment.checkpoint import load_checkpoint
+
+    done = [m for m in load_checkpoint(path)["history"]["val_miou"] if m is not None]
+    return round(max(done), 3) if done else None
 
 
 def _merged(base: dict, over: dict) -> dict:

@@ -76,6 +76,11 @@ VARIANTS: dict[str, dict[str, Any]] = {
     "no map past kitti moving": {"real_net": {"map": "match", "moving": "match",
                                               "inputs": "fcn10+sensor+past",
                                               "seeds": [0, 1, 2, 3, 4, 5]}},
+    # the same trained twice as long (10 epochs)
+    "no map past kitti moving 10 epochs": {"real_net": {"map": "match", "moving": "match",
+                                                        "inputs": "fcn10+sensor+past",
+                                                        "epochs": 10,
+                                                        "seeds": [0, 1, 2, 3, 4, 5]}},
 }
 
 

@@ -192,7 +192,7 @@ def _train(cfg, manifest, work, name):
     complete copy)."""
     import shutil
 
-    from dstenv.segment.realnet import train_real_networks
+    from dstenv.segment.realnet import real_moving_speed, train_real_networks
 
     out = work / "nets" / _slug(name)
     extra = _slug(json.dumps(cfg["data"]["overrides"], sort_keys=True))
@@ -201,13 +201,9 @@ def _train(cfg, manifest, work, name):
     if data.is_dir() and not (out / "data").exists():
         out.mkdir(parents=True, exist_ok=True)
         shutil.copytree(data, out / "data")
-    from dstenv.kitti.objects import FRAME_INTERVAL
-
-    labels = manifest["meta"]["config"]["labels"]  # the real labels' moving rule
     ckpts, _ = train_real_networks({"config": cfg}, tuple(manifest["grid_shape"]),
                                    float(manifest["cell_size"]), out, log=lambda m: None,
-                                   real_map=False,
-                                   real_moving=float(labels["threshold"]) / FRAME_INTERVAL)
+                                   real_map=False, real_moving=real_moving_speed(manifest))
     if not data.is_dir():
         shutil.copytree(out / "data", data)
     return ckpts

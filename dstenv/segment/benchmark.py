@@ -63,7 +63,8 @@ _CACHE_BYTES = 2 << 30
 
 
 def generate_data(dcfg: Mapping[str, Any], protocol: str, out: Path, progress: bool,
-                  cell_size: float | None = None, no_map: bool = False) -> None:
+                  cell_size: float | None = None, no_map: bool = False,
+                  moving_threshold: float | None = None) -> None:
     """Generate (or resume) a benchmark's shards into ``out``.
 
     Args:
@@ -75,6 +76,9 @@ def generate_data(dcfg: Mapping[str, Any], protocol: str, out: Path, progress: b
             scenario's (or the overrides').
         no_map: every drive without a map (``gis.source = "none"``), over
             ``dcfg["overrides"]``.
+        moving_threshold: [m/s] label an agent moving above this speed
+            (``protocol.moving_rule = "speed"``), over ``dcfg["overrides"]``; ``None``
+            keeps the configured rule.
     """
     from dstenv.data.generate import GenerateSpec, generate
     from dstenv.data.sampling import scenario_config
@@ -87,6 +91,9 @@ def generate_data(dcfg: Mapping[str, Any], protocol: str, out: Path, progress: b
         overrides = _deep_update(overrides, {"grid": {"cell_size": float(cell_size)}})
     if no_map:
         overrides = _deep_update(overrides, {"gis": {"source": "none"}})
+    if moving_threshold is not None:
+        overrides = _deep_update(overrides, {"protocol": {"moving_rule": "speed"},
+                                             "labels": {"moving_threshold": moving_threshold}})
     spec = GenerateSpec(
         config=scenario_config(dcfg["scenario"] or None, overrides or None),
         frames=int(dcfg["frames"]),

@@ -250,16 +250,13 @@ def real_benchmark(
     rn = sim["config"].get("real_net", {"frames": 0})  # runs older than real_net: none
     if int(rn["frames"]) > 0:
         from dstenv.data.manifest import load_manifest
-        from dstenv.segment.realnet import train_real_networks
-
-        from dstenv.kitti.objects import FRAME_INTERVAL
+        from dstenv.segment.realnet import real_moving_speed, train_real_networks
 
         manifest = load_manifest(data)
-        labels = manifest.get("meta", {}).get("config", {}).get("labels", {})
         more, facts = train_real_networks(
             sim, tuple(manifest["grid_shape"]), float(manifest["cell_size"]),
             kdir / "real_net", progress, log, real_map=osm is not None,
-            real_moving=float(labels.get("threshold", 0.10)) / FRAME_INTERVAL)
+            real_moving=real_moving_speed(manifest))
         ckpts.update(more)
     cfg = default_benchmark_config()
     cfg.update(models=[], device="cpu", examples=min(int(sim["config"]["examples"]), 2))

@@ -38,7 +38,7 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
-__all__ = ["REAL_NET", "real_net_label", "train_real_networks"]
+__all__ = ["REAL_NET", "real_net_label", "real_moving_speed", "train_real_networks"]
 
 #: name of the networks' rows (with ``(seed N)`` when several seeds are trained)
 REAL_NET = "kitti-labels"
@@ -51,6 +51,19 @@ def real_net_label(model: str, seed: int, seeds: int) -> str:
     """Row label of the network of ``seed`` (``seeds``: how many were trained)."""
     base = f"{model} {REAL_NET}"
     return base if seeds == 1 else f"{base} (seed {seed})"
+
+
+def real_moving_speed(manifest: Mapping[str, Any]) -> float:
+    """The speed above which converted real data's labels call an object moving [m/s]:
+    the converter's ``labels.threshold`` (per frame) over
+    :data:`~dstenv.kitti.objects.FRAME_INTERVAL`; the converter's default when
+    ``manifest`` does not record it."""
+    from dstenv.kitti.objects import FRAME_INTERVAL
+    from dstenv.kitti.sequence import default_config
+
+    labels = manifest.get("meta", {}).get("config", {}).get("labels", {})
+    threshold = labels.get("threshold", default_config()["labels"]["threshold"])
+    return float(threshold) / FRAME_INTERVAL
 
 
 def train_real_networks(
@@ -77,8 +90,8 @@ def train_real_networks(
             fused without a map too (``gis.source = "none"``), as the network will
             read the real ones.
         real_moving: the speed above which the real labels call an object moving
-            [m/s]; with ``real_net.moving = "match"`` the drives label agents by it
-            (``None``: the simulated run's rule).
+            [m/s] (:func:`real_moving_speed`); with ``real_net.moving = "match"`` the
+            drives label agents by it (``None``: the simulated run's rule).
 
     Returns:
         ``({row label: best.pt}, facts for results.json)``.
@@ -87,7 +100,7 @@ def train_real_networks(
         ValueError: a non-square grid.
     """
     from dstenv.data import ShardDataset
-    from dstenv.segment.benchmark import _deep_update, generate_data
+    from dstenv.segment.benchmark import generate_data
     from dstenv.segment.train import resolve_device, train
 
     cfg = sim["config"]
@@ -100,14 +113,11 @@ def train_real_networks(
     no_map = rn.get("map", "match") == "match" and not real_map
     # runs older than real_net.moving labelled by the run's rule
     moving = real_moving if rn.get("moving", "run") == "match" else None
-    if moving is not None:
-        dcfg["overrides"] = _deep_update(dcfg["overrides"], {
-            "protocol": {"moving_rule": "speed"}, "labels": {"moving_threshold": moving}})
     log(f"real_net: generating {dcfg['frames']} simulated frames at {grid[0]} x {grid[1]} "
         f"cells of {cell_size:g} m{' without a map' if no_map else ''}"
         + (f", moving above {moving:g} m/s" if moving is not None else "")
         + f" into {out / 'data'}")
-    generate_data(dcfg, cfg["protocol"], out / "data", progress, cell_size, no_map)
+    generate_data(dcfg, cfg["protocol"], out / "data", progress, cell_size, no_map, moving)
     timings = {"data_s": time.perf_counter() - t}
     inputs = rn.get("inputs", "fcn10+sensor")  # runs older than real_net.inputs: this one
     data = {s: ShardDataset(out / "data", split=s, inputs=inputs, labels="kitti")

@@ -6,6 +6,7 @@ imported only when a figure is drawn (Agg backend).
 
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 from typing import Any
 
@@ -32,6 +33,17 @@ CLASS_COLORS = as_float(CLASS_RGB)
 def score_text(x: float | None) -> str:
     """A score as the report's tables and the figures print it: 3 decimals, "-" if none."""
     return "-" if x is None else f"{x:.3f}"
+
+
+#: [characters] a row label longer than this is wrapped in a panel title (the KITTI
+#: rows' "unet-light kitti-labels (seed 0) (sim only)" ran into the next panel's)
+TITLE_WIDTH = 26
+
+
+def _title(label: str) -> str:
+    """``label`` as a panel title: unchanged up to :data:`TITLE_WIDTH` characters, else
+    wrapped onto lines of at most that many."""
+    return label if len(label) <= TITLE_WIDTH else "\n".join(textwrap.wrap(label, TITLE_WIDTH))
 
 
 def _plt():
@@ -78,7 +90,7 @@ def plot_confusions(results: dict[str, Any], path: str | Path, scope: str = "all
         ax.set_xticks(range(len(CLASSES)), short, rotation=45, ha="right", fontsize=7)
         ax.set_yticks(range(len(CLASSES)), short, fontsize=7)
         miou = seg[scope]["miou"]
-        ax.set_title(f"{label}\nmIoU {score_text(miou)}", fontsize=8)
+        ax.set_title(f"{_title(label)}\nmIoU {score_text(miou)}", fontsize=8)
         ax.set_xlabel("predicted", fontsize=7)
     axes[0][0].set_ylabel("true", fontsize=7)
     fig.suptitle(f"confusion matrices ({scope} cells)", fontsize=9)
@@ -139,7 +151,7 @@ def plot_examples(examples: list[dict[str, Any]], path: str | Path) -> Path:
         row[0].set_title(f"DST BetP(moving)\n{ex['title']}", fontsize=7)
         for ax, name in zip(row[1:], names):
             ax.imshow(_colorize(ex["predictions"][name]), interpolation="nearest")
-            ax.set_title(name, fontsize=7)
+            ax.set_title(_title(name), fontsize=7)
         row[-1].imshow(_colorize(ex["labels"]), interpolation="nearest")
         row[-1].set_title("ground truth", fontsize=7)
         for ax in row:

@@ -100,6 +100,11 @@ def test_figures_are_written(tmp_path):
         "labels": lab,
     }
     assert figures.plot_examples([ex, ex], tmp_path / "ex.png").stat().st_size > 1000
+    # long row labels wrap in the panel titles (the KITTI rows ran into each other);
+    # the simulated rows' short ones stay as they are, so their figures do not change
+    assert figures._title("unet-light no-map") == "unet-light no-map"
+    assert figures._title("unet-light kitti-labels (seed 0) (sim only)") == (
+        "unet-light kitti-labels\n(seed 0) (sim only)")
     seg = res["segmenters"]["unet-light"]
     res["curve"] = [{"train_frames": n, **seg} for n in (140, 1400)]
     assert figures.plot_size_curve(res, tmp_path / "c.png").stat().st_size > 1000

@@ -89,9 +89,9 @@ class Args(EnvArgs):
                                    "logged episodes keep the env's own rewards")
     vf_coef: float = opt(0.5, "value loss weight")
     torch_threads: int = opt(1, "torch CPU threads (envs use the other cores)")
-    residual: str = opt("", "'' (none) | grid: PPO on top of the grid rule driver "
-                            "(residual.py): action 0 takes the rule driver's action, "
-                            "k >= 1 the env's action k - 1")
+    residual: str = opt("", "'' (none) | grid | grid-tuned: PPO on top of the grid rule "
+                            "driver, default or tuned (residual.py): action 0 takes the "
+                            "rule driver's action, k >= 1 the env's action k - 1")
     residual_p_rule: float = opt(0.9, "--residual grid: the fresh policy's probability "
                                       "of action 0 (the rule driver)")
     warm_start: str = opt("", "'' (none) | grid: DAgger from the grid rule driver before "

@@ -25,7 +25,7 @@ from typing import Any
 import gymnasium as gym
 from gymnasium import spaces
 
-RESIDUALS = ("", "grid")
+RESIDUALS = ("", "grid", "grid-tuned")
 
 
 class RuleResidual(gym.Wrapper):
@@ -34,16 +34,18 @@ class RuleResidual(gym.Wrapper):
     Args:
         env: an env the grid rule driver can drive (``"dict"`` observation with an
             image grid, the speed or discrete meta-actions).
+        tuned: drive on top of the tuned rule driver (``rule_based.TUNED_PARAMS``, the
+            ``grid-tuned`` driver) instead of the one with default parameters.
     """
 
-    def __init__(self, env: gym.Env) -> None:
-        from rule_based import GridRuleDriver
+    def __init__(self, env: gym.Env, tuned: bool = False) -> None:
+        from rule_based import TUNED_PARAMS, GridRuleDriver
 
         super().__init__(env)
         if not isinstance(env.action_space, spaces.Discrete):
             raise ValueError(f"--residual grid: needs a Discrete action space, "
                              f"got {env.action_space}")
-        self.driver = GridRuleDriver()
+        self.driver = GridRuleDriver(**(TUNED_PARAMS if tuned else {}))
         self.action_space = spaces.Discrete(int(env.action_space.n) + 1)
         self._obs: Any = None
 
@@ -74,10 +76,11 @@ class RuleResidual(gym.Wrapper):
 
 
 def wrap(env: gym.Env, residual: str) -> gym.Env:
-    """``env`` itself (``residual == ""``) or wrapped in :class:`RuleResidual` (``"grid"``)."""
+    """``env`` itself (``residual == ""``) or wrapped in :class:`RuleResidual` on the
+    grid rule driver (``"grid"``) or the tuned one (``"grid-tuned"``)."""
     if residual not in RESIDUALS:
-        raise ValueError(f"--residual: expected '' or grid, got {residual!r}")
-    return RuleResidual(env) if residual == "grid" else env
+        raise ValueError(f"--residual: expected '', grid or grid-tuned, got {residual!r}")
+    return RuleResidual(env, tuned=residual == "grid-tuned") if residual else env
 
 
 def prefer_rule(model: Any, p_rule: float) -> float:

@@ -38,7 +38,8 @@ DRIVERS = ("grid", "grid-tuned", "autopilot", "constant")
 #: the defaults and the five best on seeds 20050-20249; this is the ``best`` row of
 #: ``benchmarks/search/rule-driver-stage2.json`` (a test checks that they agree). The
 #: others keep their defaults.
-TUNED_PARAMS: dict[str, float] = {"junction_range": 30.0, "corridor": 1.4, "margin": 6.0}
+TUNED_PARAMS: dict[str, float] = {"give_way_line": 3.0, "give_way_speed": 1.5,
+                                   "give_way_moving": 0.5, "give_way_side": 30.0, "margin": 6.0}
 #: ``--env-config`` the autopilot driver adds: the world's own driver.
 AUTOPILOT_CONFIG: dict[str, Any] = {"action": {"type": "autopilot"}}
 
@@ -67,20 +68,39 @@ class GridRuleDriver:
     * bend: the route turns by more than ``bend_angle`` rad within ``bend_range`` m:
       at most the middle speed;
     * junction within ``junction_range`` m: at most the middle speed unless its
-      signal shows green; a red light closer than the braking distance: stop.
+      signal shows green; a red light closer than the braking distance: stop;
+    * give way (``give_way``): at a yield or stop junction, once the line is within
+      ``give_way_line`` m plus the braking distance, it moves on only while slower
+      than ``give_way_speed`` m/s and the junction area shows no moving cell
+      (BetP(moving) above ``give_way_moving`` from 3 m before the line to
+      ``give_way_ahead`` m past it, within ``give_way_side`` m either side of the
+      ego's axis), else it stops: it creeps up to the line, looking into the side
+      streets that the corner buildings hid, as a driver does. Without it the driver
+      entered such junctions at the middle speed and met the cross traffic that has
+      the right of way there (most of its collisions).
 
     Args:
-        corridor, occupied, margin, brake, bend_angle, bend_range, junction_range: as above.
+        corridor, occupied, margin, brake, bend_angle, bend_range, junction_range,
+        give_way_line, give_way_speed, give_way_moving, give_way_ahead,
+        give_way_side: as above.
+        give_way: apply the give-way rule (False: the driver before it).
     """
 
     name = "rule-based (grid)"
 
     def __init__(self, corridor: float = 1.4, occupied: float = 0.5, margin: float = 4.0,
                  brake: float = 2.4, bend_angle: float = 0.35, bend_range: float = 25.0,
-                 junction_range: float = 20.0) -> None:
+                 junction_range: float = 20.0, give_way_line: float = 2.0,
+                 give_way_speed: float = 0.6, give_way_moving: float = 0.35,
+                 give_way_ahead: float = 14.0, give_way_side: float = 20.0,
+                 give_way: bool = True) -> None:
         self.corridor, self.occupied, self.margin, self.brake = corridor, occupied, margin, brake
         self.bend_angle, self.bend_range = bend_angle, bend_range
         self.junction_range = junction_range
+        self.give_way = bool(give_way)
+        self.give_way_line, self.give_way_speed = give_way_line, give_way_speed
+        self.give_way_moving = give_way_moving
+        self.give_way_ahead, self.give_way_side = give_way_ahead, give_way_side
 
     def reset(self, env: gym.Env, seed: int) -> None:
         from dstenv.envs.navigation import EGO_FEATURES, JUNCTION_RANGE, SPEED_SCALE
@@ -100,6 +120,9 @@ class GridRuleDriver:
         self.route_scale = obs_cfg["route_points"] * obs_cfg["route_spacing"]
         self.ego_index = {name: i for i, name in enumerate(EGO_FEATURES)}
         self.speed_scale, self.junction_scale = SPEED_SCALE, JUNCTION_RANGE
+        h, w = self.shape  # ego-frame coordinates of the cells: x forward, y left [m]
+        self._cell_x = ((h // 2 - np.arange(h)) * self.cell)[:, None]
+        self._cell_y = np.abs((w // 2 - np.arange(w)) * self.cell)[None, :]
 
     def _route_path(self, route: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Route from the ego, 0.5 m apart: ego-frame points ``(M, 2)`` and their
@@ -131,6 +154,13 @@ class GridRuleDriver:
         near = hit.any(1)
         return float(dist[np.argmax(near)]) if near.any() else float("inf")
 
+    def _junction_clear(self, grid: np.ndarray, line: float) -> bool:
+        """No moving cell in the junction area of a line ``line`` m ahead (see the
+        class doc: ``(4, H, W) uint8`` image grid)."""
+        area = ((self._cell_x > max(line - 3.0, 1.0)) & (self._cell_x < line + self.give_way_ahead)
+                & (self._cell_y < self.give_way_side))
+        return not (area & (grid[3] > 255.0 * self.give_way_moving)).any()
+
     def _bend_ahead(self, path: np.ndarray, dist: np.ndarray) -> bool:
         ahead = path[dist <= self.bend_range]
         if len(ahead) < 3:
@@ -158,6 +188,12 @@ class GridRuleDriver:
             want = min(want, middle)
             if ego[k["control_signal"]] > 0.5 and junction <= v * v / (2 * self.brake) + 3.0:
                 want = float(self.speeds.min())  # a red light
+            give_way = ego[k["control_yield"]] > 0.5 or ego[k["control_stop"]] > 0.5
+            if (self.give_way and give_way
+                    and 0.0 < junction <= self.give_way_line + v * v / (2 * self.brake) + 0.5
+                    and not (v < self.give_way_speed
+                             and self._junction_clear(obs["grid"], junction))):
+                want = float(self.speeds.min())  # stop; creep on only when slow and clear
         if want < target - 1e-6:
             return 0  # SLOWER
         if want > target + 1e-6:

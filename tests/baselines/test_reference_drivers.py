@@ -45,14 +45,14 @@ def test_autopilot_driver_drives_like_the_world_autopilot(small_config: dict) ->
 
 
 def _obs(junction: float = 1.0, speed: float = 9.0, target: float = 9.0,
-         route_y: float = 0.0) -> dict:
+         route_y: float = 0.0, control: str = "none") -> dict:
     from dstenv.envs.navigation import EGO_FEATURES, SPEED_SCALE
 
     ego = np.zeros(len(EGO_FEATURES), np.float32)
     ego[EGO_FEATURES.index("speed")] = speed / SPEED_SCALE
     ego[EGO_FEATURES.index("target_speed")] = target / SPEED_SCALE
     ego[EGO_FEATURES.index("junction_dist")] = junction
-    ego[EGO_FEATURES.index("control_none")] = 1.0
+    ego[EGO_FEATURES.index(f"control_{control}")] = 1.0
     k = np.arange(1, 9)
     route = np.stack([k * 5.0 / 40.0, np.full(8, route_y)], 1).reshape(-1).astype(np.float32)
     grid = np.zeros((4, 40, 40), np.uint8)
@@ -93,6 +93,46 @@ def test_grid_rule_driver_reads_only_the_observation(small_config: dict) -> None
     route[2:, 1] = np.linspace(0.1, 0.6, 6)  # the route turns left after 10 m
     assert policy.act(bend, {}) == 0
     assert policy.act(_obs(junction=10.0 / 60.0), {}) == 0  # a junction 10 m ahead
+
+
+def test_grid_rule_driver_gives_way_at_yield_and_stop_lines(small_config: dict) -> None:
+    policy, env = rule_based.reference_driver("grid", EnvArgs(env_config=json.dumps(small_config)))
+    env.reset(seed=0)
+    policy.reset(env, 0)
+    env.close()
+    assert policy.cell == 1.0 and policy.shape == (40, 40)  # row 20 - x is x m ahead
+    line = 2.0 / 60.0  # the junction's line 2 m ahead
+    for control in ("yield", "stop"):
+        # at 4.5 m/s (4.2 m to stop) the line is in the give-way zone: stop
+        assert policy.act(_obs(line, 4.5, 4.5, control=control), {}) == 0
+        # stopped and nothing moving in the junction area: creep on
+        assert policy.act(_obs(line, 0.3, 0.0, control=control), {}) == 2
+        crossing = _obs(line, 0.3, 0.0, control=control)
+        crossing["grid"][3, 20 - 5, 20 + 12] = 255  # a car 5 m ahead, 12 m to the right
+        assert policy.act(crossing, {}) == 1  # hold at 0
+        behind = _obs(line, 0.3, 0.0, control=control)
+        behind["grid"][3, 20 + 3, 20 + 12] = 255  # behind the ego: not in the junction area
+        assert policy.act(behind, {}) == 2
+        faint = _obs(line, 0.3, 0.0, control=control)
+        faint["grid"][3, 20 - 5, 20 + 12] = 80  # BetP(moving) 0.31 <= give_way_moving
+        assert policy.act(faint, {}) == 2
+        # rolling faster than give_way_speed: stop first, even with the area clear
+        assert policy.act(_obs(line, 1.0, 4.5, control=control), {}) == 0
+    # no give-way control, or the rule off: the junction's middle speed is kept
+    assert policy.act(_obs(line, 4.5, 4.5, control="none"), {}) == 1
+    green = _obs(line, 4.5, 4.5, control="signal")
+    from dstenv.envs.navigation import EGO_FEATURES
+
+    green["ego"][EGO_FEATURES.index("signal_green")] = 1.0
+    assert policy.act(green, {}) == 2  # a green light: no junction rule at all
+    off = GridRuleDriver(give_way=False)
+    env2 = rule_based.reference_driver("grid", EnvArgs(env_config=json.dumps(small_config)))[1]
+    env2.reset(seed=0)
+    off.reset(env2, 0)
+    env2.close()
+    assert off.act(_obs(line, 4.5, 4.5, control="yield"), {}) == 1
+    # a line further than its zone (2 m + braking distance + 0.5 m): the junction's rules
+    assert policy.act(_obs(10.0 / 60.0, 4.5, 4.5, control="yield"), {}) == 1
 
 
 def test_rule_based_main(env_flags: list[str]) -> None:

@@ -49,6 +49,14 @@ def test_rule_action_and_overrides_drive_the_env_as_named(env_flags: list[str]) 
         wrapped.step(4)
     with pytest.raises(ValueError, match="--residual"):
         wrap(plain, "autopilot")
+    from rule_based import TUNED_PARAMS
+
+    tuned = wrap(make_env(args), "grid-tuned")
+    assert isinstance(tuned, RuleResidual) and tuned is not plain
+    for key, value in TUNED_PARAMS.items():
+        assert getattr(tuned.driver, key) == value
+    assert wrapped.driver.give_way_line == GridRuleDriver().give_way_line
+    tuned.close()
     plain.close()
     wrapped.close()
 

@@ -34,10 +34,10 @@ from rl_common import cli, report_run
 DRIVERS = ("grid", "grid-tuned", "autopilot", "constant")
 #: :class:`GridRuleDriver` parameters chosen on validation seeds in PPO's config (collision
 #: -30, off-road -10, ``action.repeat = 3``, 200 decisions) by ``tune_rule.py`` in two
-#: stages: 18 settings on seeds 20000-20049 (``benchmarks/search/rule-driver.json``), then
+#: stages: 48 settings on seeds 20000-20049 (``benchmarks/search/rule-driver.json``), then
 #: the defaults and the five best on seeds 20050-20249; this is the ``best`` row of
 #: ``benchmarks/search/rule-driver-stage2.json`` (a test checks that they agree). The
-#: others keep their defaults.
+#: others keep their defaults. (The driver before the give-way rule: ``rule-driver-v1*.json``.)
 TUNED_PARAMS: dict[str, float] = {"give_way_line": 3.0, "give_way_speed": 1.5,
                                    "give_way_moving": 0.5, "give_way_side": 30.0, "margin": 6.0}
 #: ``--env-config`` the autopilot driver adds: the world's own driver.

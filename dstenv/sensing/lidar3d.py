@@ -69,6 +69,11 @@ SURFACES: tuple[str, ...] = ("road", "kerb", "building", "agent", "clutter")
 #: Mean reflectance per surface code (KITTI's median return is ~0.28).
 REFLECTANCE: np.ndarray = np.array([0.22, 0.30, 0.35, 0.40, 0.25])
 _ROAD, _KERB, _BUILDING, _AGENT, _CLUTTER = range(5)
+#: Blocks of ``2**DIST_SHIFT`` cells a side for the ground walk's distance bound
+#: (:func:`~dstenv.sensing.cast3d.raised_distance`): 2 x 2 blocks cut the bound's cost
+#: per fresh map ~3x (18 -> 6 ms on the default city's 5.7 M cells) for ~2 % more time
+#: in the ground walk of a sweep; the returns are the same.
+DIST_SHIFT = 1
 
 
 @dataclass
@@ -188,7 +193,7 @@ class Hdl64:
             self._walls = _building_table(world_map)
             self._clutter = _clutter_table(world_map)
             self._raster = np.ascontiguousarray(world_map.raster, dtype=np.uint8)
-            self._dist = raised_distance(self._raster, MapClass.INTERMEDIATE)
+            self._dist = raised_distance(self._raster, MapClass.INTERMEDIATE, DIST_SHIFT)
             self._map = world_map
         boxes = _box_table(agents, self._clutter, c["vehicle_shape"] == "car")
         edges, starts, circles, heights = self._walls
@@ -201,7 +206,7 @@ class Hdl64:
                    best, surf, idx)
         cast_walls(edges, starts, circles, heights, _BUILDING, *cols, ox, oy, ux, uy,
                    self.slope, self._neg_slope, mount, h_max, best, surf, idx)
-        cast_ground(self._raster, self._dist, np.uint8(MapClass.INTERMEDIATE),
+        cast_ground(self._raster, self._dist, DIST_SHIFT, np.uint8(MapClass.INTERMEDIATE),
                     float(world_map.origin[0]), float(world_map.origin[1]),
                     float(world_map.resolution), float(world_map.kerb_height), ox, oy, ux, uy,
                     self.slope, mount, h_max, best, surf, idx)

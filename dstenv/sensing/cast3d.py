@@ -84,19 +84,20 @@ def _any_raised(raster, raised, b):  # pragma: no cover - numba
     h, w = raster.shape
     hb, wb = (h + b - 1) // b, (w + b - 1) // b
     out = np.empty((hb, wb), np.uint8)
-    rows = np.empty(wb * b, np.uint8)  # the block row's cells, OR-ed over its rows
+    rows = np.zeros(wb * b, np.uint8)  # the block row's cells, OR-ed over its rows
     for bi in range(hb):
-        rows[:] = 0
-        for i in range(bi * b, min(bi * b + b, h)):
+        r = raster[bi * b]
+        for j in range(w):
+            rows[j] = r[j] == raised
+        for i in range(bi * b + 1, min(bi * b + b, h)):
             r = raster[i]
             for j in range(w):
                 rows[j] |= r[j] == raised
         o = out[bi]
-        for bj in range(wb):
-            v = np.uint8(0)
-            for j in range(bj * b, bj * b + b):
-                v |= rows[j]
-            o[bj] = v
+        o[:] = 0
+        for k in range(b):  # strided, so that LLVM vectorises it
+            for bj in range(wb):
+                o[bj] |= rows[bj * b + k]
     return out
 
 

@@ -22,6 +22,10 @@ from dstenv.frame import Frame
 from dstenv.grid import relative_pose
 from dstenv.pipeline import Pipeline, WorldSource
 from dstenv.pipeline import default_config as pipeline_config
+from dstenv.sim.lanes import Control
+
+#: Junction controls at which the ego has to give way (``reward.give_way``).
+GIVE_WAY = (Control.YIELD, Control.STOP)
 
 __all__ = ["DSTGridEnv"]
 
@@ -91,7 +95,10 @@ class DSTGridEnv(gym.Env):
     ``hard_brake_threshold``), ``arrived`` (once, scenes with a destination),
     ``junction_speed`` (per step, the speed above ``junction_speed_limit`` while the
     next junction on the route is within ``junction_range`` and not green; off by
-    default: a shaping term that states the rule driver's junction rule).
+    default: a shaping term that states the rule driver's junction rule), ``give_way``
+    (once, on entering a yield or stop junction without having slowed to
+    ``give_way_speed`` within ``give_way_range`` of its entry: the traffic rule broken
+    by not giving way; off by default).
 
     ## Starting State
 
@@ -188,6 +195,7 @@ class DSTGridEnv(gym.Env):
         self._world = world
         self._window: HumanWindow | None = None
         self._frame: Frame | None = None
+        self._slowest = float("inf")
         self._last_info: dict[str, Any] = {}
         self._configure()
 
@@ -290,6 +298,7 @@ class DSTGridEnv(gym.Env):
                                                    self.config["source"])
         self._accel = 0.0
         self._progress = 0.0
+        self._slowest = float("inf")  # lowest speed near a give-way line (reward.give_way)
         zero = StepOutcome(0.0, self._world.ego_speed, 0.0, False, False)
         info = self._info(reward_terms(zero, self.config["reward"]), False)
         if self.render_mode == "human":
@@ -315,6 +324,14 @@ class DSTGridEnv(gym.Env):
         for k in range(repeat):  # the action once, then held (meta-actions: IDLE)
             prev_pose, prev_speed, prev_time = self._frame.ego_pose, w.ego_speed, w.time
             prev_route = getattr(w, "route_progress", None)
+            give_way = rcfg["give_way"] != 0.0 and hasattr(w, "next_junction")
+            if give_way:  # before a yield or stop junction's entry
+                before, control, _ = w.next_junction()
+                give_way = before > 0.0 and control in GIVE_WAY
+                if not give_way:
+                    self._slowest = float("inf")
+                elif before <= rcfg["give_way_range"]:
+                    self._slowest = min(self._slowest, prev_speed)
             world_action = self._controller.world_action(action if k == 0 else held)
             self._frame = self.pipeline.step(world_action)
             dt = max(w.time - prev_time, 1e-9)
@@ -326,9 +343,13 @@ class DSTGridEnv(gym.Env):
             junction, green = float("inf"), False
             if rcfg["junction_speed"] != 0.0 and hasattr(w, "next_junction"):
                 junction, _, green = w.next_junction()
+            entered = give_way and w.next_junction()[0] == 0.0  # now inside it
             out = StepOutcome(float(progress), float(w.ego_speed),
                               (prev_speed - w.ego_speed) / dt, bool(w.collision),
-                              bool(w.off_road), arrived, float(junction), bool(green))
+                              bool(w.off_road), arrived, float(junction), bool(green),
+                              bool(entered), self._slowest)
+            if entered:
+                self._slowest = float("inf")
             for name, value in reward_terms(out, rcfg).items():
                 terms[name] = terms.get(name, 0.0) + value
             terminated = out.collision or out.off_road or arrived

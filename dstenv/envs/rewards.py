@@ -32,6 +32,12 @@ def default_reward_config() -> dict[str, Any]:
         "junction_speed": 0.0,
         "junction_speed_limit": 4.5,  # [m/s]
         "junction_range": 20.0,  # [m] route distance to the junction's entry (0 inside it)
+        # [-] once, on entering a yield or stop junction without having slowed to
+        # give_way_speed within give_way_range of its entry: the traffic rule the ego
+        # breaks when it does not give way (0: off, the default)
+        "give_way": 0.0,
+        "give_way_speed": 1.5,  # [m/s]
+        "give_way_range": 5.0,  # [m] before the entry
     }
 
 
@@ -48,6 +54,10 @@ class StepOutcome:
         junction_dist: route distance to the next junction's entry after the step [m]
             (0 inside one, ``inf`` when the route holds none or it is not known).
         junction_green: whether a green signal lets the ego through that junction.
+        entered_give_way: the step took the ego into a junction whose control is yield
+            or stop (it was before the entry, now it is inside).
+        slowest_approach: the ego's lowest speed over the steps that began within
+            ``give_way_range`` of that junction's entry [m/s] (``inf``: none).
     """
 
     progress: float
@@ -58,6 +68,8 @@ class StepOutcome:
     arrived: bool = False
     junction_dist: float = float("inf")
     junction_green: bool = False
+    entered_give_way: bool = False
+    slowest_approach: float = float("inf")
 
 
 def reward_terms(out: StepOutcome, cfg: dict[str, Any]) -> dict[str, float]:
@@ -69,7 +81,7 @@ def reward_terms(out: StepOutcome, cfg: dict[str, Any]) -> dict[str, float]:
 
     Returns:
         ``{"progress", "speed", "collision", "off_road", "hard_brake", "arrived",
-        "junction_speed"}`` -> float.
+        "junction_speed", "give_way"}`` -> float.
     """
     target = cfg["target_speed"]
     speed_frac = min(max(out.speed, 0.0) / target, 1.0) if target > 0 else 0.0
@@ -84,6 +96,8 @@ def reward_terms(out: StepOutcome, cfg: dict[str, Any]) -> dict[str, float]:
         "hard_brake": cfg["hard_brake"] * float(out.decel > cfg["hard_brake_threshold"]),
         "arrived": cfg["arrived"] * float(out.arrived),
         "junction_speed": cfg["junction_speed"] * over,
+        "give_way": cfg["give_way"] * float(out.entered_give_way
+                                            and out.slowest_approach > cfg["give_way_speed"]),
     }
 
 
@@ -92,8 +106,10 @@ _W = between(-1e3, 1e3)  # a reward weight: finite and not absurd
 #: The ``reward`` section of the env configuration.
 SECTION = Section(default_reward_config, {
     "progress": _W, "speed": _W, "collision": _W, "off_road": _W, "hard_brake": _W,
-    "arrived": _W, "junction_speed": _W,
+    "arrived": _W, "junction_speed": _W, "give_way": _W,
     "junction_speed_limit": between(0.0, 60.0, "m/s"),
+    "give_way_speed": between(0.0, 60.0, "m/s"),
+    "give_way_range": between(0.0, 1e3, "m"),
     "junction_range": between(0.0, 1e3, "m"),
     "target_speed": between(0.0, 60.0, "m/s", lo_open=True),
     "hard_brake_threshold": between(0.0, 20.0, "m/s^2"),

@@ -98,3 +98,62 @@ def test_junction_speed_term_in_the_env():
             break
     env.close()
     assert paid > 0
+
+
+def test_give_way_term_hand_computed():
+    assert default_reward_config()["give_way"] == 0.0  # off by default
+    cfg = {**default_reward_config(), "give_way": -5.0}
+    fast = StepOutcome(0.9, 4.5, 0.0, False, False, junction_dist=0.0, entered_give_way=True,
+                       slowest_approach=3.0)
+    assert reward_terms(fast, cfg)["give_way"] == -5.0
+    # slowed to give_way_speed before the line: given way, whatever the speed inside
+    slowed = StepOutcome(0.9, 4.5, 0.0, False, False, junction_dist=0.0,
+                         entered_give_way=True, slowest_approach=1.5)
+    assert reward_terms(slowed, cfg)["give_way"] == 0.0
+    inside = StepOutcome(0.9, 4.5, 0.0, False, False, junction_dist=0.0,
+                         slowest_approach=3.0)  # not entered on this step
+    assert reward_terms(inside, cfg)["give_way"] == 0.0
+
+
+def test_give_way_term_in_the_env():
+    """Paid exactly on the steps that take the ego into a yield or stop junction when it
+    did not slow to give_way_speed over the steps that began within give_way_range of the
+    entry (the world's next junction tells where); a driver that stops first never pays."""
+    import gymnasium as gym
+
+    import dstenv  # noqa: F401
+    from dstenv.envs.dstgrid import GIVE_WAY
+
+    from .conftest import SMALL_CITY
+
+    reward = {"give_way": -5.0, "give_way_speed": 1.5, "give_way_range": 5.0}
+    paid = entered_slow = 0
+    for seed in range(4, 10):
+        for stop_first in (False, True):
+            env = gym.make("DSTGrid-v0", config={**SMALL_CITY, "reward": reward})
+            env.reset(seed=seed)
+            world = env.unwrapped.pipeline.world
+            slowest = float("inf")
+            for _ in range(250):
+                before, control, _ = world.next_junction()
+                gw = before > 0.0 and control in GIVE_WAY
+                if not gw:
+                    slowest = float("inf")
+                elif before <= 5.0:
+                    slowest = min(slowest, world.ego_speed)
+                # FASTER; the careful driver creeps (below ~1 m/s) within 20 m of a
+                # give-way line
+                action = 0 if stop_first and gw and before <= 20.0 and world.ego_speed > 1.0 \
+                    else 2
+                _, _, terminated, truncated, info = env.step(action)
+                entered = gw and world.next_junction()[0] == 0.0
+                want = -5.0 if entered and slowest > 1.5 else 0.0
+                assert info["rewards"]["give_way"] == want
+                paid += want < 0
+                entered_slow += entered and want == 0.0
+                if entered:
+                    slowest = float("inf")
+                if terminated or truncated:
+                    break
+            env.close()
+    assert paid > 0 and entered_slow > 0

@@ -2,7 +2,7 @@
 
 The ground walk of the 3-D LIDAR jumps by a lower bound of the distance to the
 nearest raised cell, computed once per fresh map over blocks of ``2**shift`` cells
-(:func:`dstenv.sensing.cast3d.raised_distance`). This generates the paper-protocol
+(:func:`dstenv.sensing.raised.raised_distance`). This generates the paper-protocol
 3-D row of issue 16's goal table (stride 10, one worker, episodes of 200 steps with a
 fresh map each, ``dstenv generate``'s serial path) with each shift in turn, in one
 process, and prints the CPU ms per stored frame of every round and their medians::

@@ -17,7 +17,7 @@ from dstenv.envs.navigation import ego_vector, navigation_spaces, route_points
 from dstenv.envs.observation import SECTION as OBSERVATION_SECTION
 from dstenv.envs.observation import observation_mode
 from dstenv.envs.render import HumanWindow, render_frame
-from dstenv.envs.rewards import StepOutcome, default_reward_config, reward_terms
+from dstenv.envs.rewards import GiveWayWatch, StepOutcome, default_reward_config, reward_terms
 from dstenv.frame import Frame
 from dstenv.grid import relative_pose
 from dstenv.pipeline import Pipeline, WorldSource
@@ -195,7 +195,7 @@ class DSTGridEnv(gym.Env):
         self._world = world
         self._window: HumanWindow | None = None
         self._frame: Frame | None = None
-        self._slowest = float("inf")
+        self._give_way = GiveWayWatch()
         self._last_info: dict[str, Any] = {}
         self._configure()
 
@@ -298,7 +298,7 @@ class DSTGridEnv(gym.Env):
                                                    self.config["source"])
         self._accel = 0.0
         self._progress = 0.0
-        self._slowest = float("inf")  # lowest speed near a give-way line (reward.give_way)
+        self._give_way.reset()
         zero = StepOutcome(0.0, self._world.ego_speed, 0.0, False, False)
         info = self._info(reward_terms(zero, self.config["reward"]), False)
         if self.render_mode == "human":
@@ -325,13 +325,9 @@ class DSTGridEnv(gym.Env):
             prev_pose, prev_speed, prev_time = self._frame.ego_pose, w.ego_speed, w.time
             prev_route = getattr(w, "route_progress", None)
             give_way = rcfg["give_way"] != 0.0 and hasattr(w, "next_junction")
-            if give_way:  # before a yield or stop junction's entry
+            if give_way:
                 before, control, _ = w.next_junction()
-                give_way = before > 0.0 and control in GIVE_WAY
-                if not give_way:
-                    self._slowest = float("inf")
-                elif before <= rcfg["give_way_range"]:
-                    self._slowest = min(self._slowest, prev_speed)
+                self._give_way.before(before, control in GIVE_WAY, prev_speed, rcfg)
             world_action = self._controller.world_action(action if k == 0 else held)
             self._frame = self.pipeline.step(world_action)
             dt = max(w.time - prev_time, 1e-9)
@@ -343,13 +339,12 @@ class DSTGridEnv(gym.Env):
             junction, green = float("inf"), False
             if rcfg["junction_speed"] != 0.0 and hasattr(w, "next_junction"):
                 junction, _, green = w.next_junction()
-            entered = give_way and w.next_junction()[0] == 0.0  # now inside it
+            entered, slowest = (self._give_way.after(w.next_junction()[0]) if give_way
+                                else (False, float("inf")))
             out = StepOutcome(float(progress), float(w.ego_speed),
                               (prev_speed - w.ego_speed) / dt, bool(w.collision),
                               bool(w.off_road), arrived, float(junction), bool(green),
-                              bool(entered), self._slowest)
-            if entered:
-                self._slowest = float("inf")
+                              bool(entered), slowest)
             for name, value in reward_terms(out, rcfg).items():
                 terms[name] = terms.get(name, 0.0) + value
             terminated = out.collision or out.off_road or arrived

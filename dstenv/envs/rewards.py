@@ -12,7 +12,7 @@ from typing import Any
 
 from dstenv.config import Section, between
 
-__all__ = ["default_reward_config", "StepOutcome", "reward_terms", "SECTION"]
+__all__ = ["default_reward_config", "StepOutcome", "reward_terms", "GiveWayWatch", "SECTION"]
 
 
 def default_reward_config() -> dict[str, Any]:
@@ -99,6 +99,40 @@ def reward_terms(out: StepOutcome, cfg: dict[str, Any]) -> dict[str, float]:
         "give_way": cfg["give_way"] * float(out.entered_give_way
                                             and out.slowest_approach > cfg["give_way_speed"]),
     }
+
+
+class GiveWayWatch:
+    """The ego's approach to a yield or stop junction, for the ``give_way`` term: the
+    lowest speed over the steps that began within ``give_way_range`` of its entry, and
+    whether a step took the ego inside. Call :meth:`before` and :meth:`after` around
+    every world step (:meth:`reset` with the episode)."""
+
+    def __init__(self) -> None:
+        self.slowest = float("inf")  # [m/s]
+        self._armed = False
+
+    def reset(self) -> None:
+        """Forget the approach (a new episode)."""
+        self.slowest, self._armed = float("inf"), False
+
+    def before(self, dist: float, gives_way: bool, speed: float, cfg: dict[str, Any]) -> None:
+        """Before a step: ``dist`` [m] to the next junction's entry (0 inside), whether
+        its control makes the ego give way, the ego's ``speed`` [m/s], the ``reward``
+        section."""
+        self._armed = dist > 0.0 and gives_way
+        if not self._armed:
+            self.slowest = float("inf")
+        elif dist <= cfg["give_way_range"]:
+            self.slowest = min(self.slowest, speed)
+
+    def after(self, dist: float) -> tuple[bool, float]:
+        """After the step, ``dist`` [m] to the next junction's entry: ``(entered,
+        slowest)`` for :class:`StepOutcome`'s ``entered_give_way`` and
+        ``slowest_approach``."""
+        entered, slowest = self._armed and dist == 0.0, self.slowest
+        if entered:
+            self.slowest = float("inf")
+        return entered, slowest
 
 
 _W = between(-1e3, 1e3)  # a reward weight: finite and not absurd

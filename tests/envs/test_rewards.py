@@ -157,3 +157,22 @@ def test_give_way_term_in_the_env():
                     break
             env.close()
     assert paid > 0 and entered_slow > 0
+
+
+def test_give_way_watch_tracks_the_slowest_approach_speed():
+    from dstenv.envs.rewards import GiveWayWatch
+
+    cfg = {**default_reward_config(), "give_way_range": 5.0}
+    w = GiveWayWatch()
+    for dist, speed in ((12.0, 9.0), (6.0, 6.0), (4.5, 4.0), (2.0, 1.2), (0.8, 2.5)):
+        w.before(dist, True, speed, cfg)  # 9 and 6 m/s: before the range
+        assert w.after(dist - 1.0) == (False, 1.2 if dist <= 2.0 else (4.0 if dist < 5 else
+                                                                       float("inf")))
+    w.before(0.5, True, 3.0, cfg)
+    assert w.after(0.0) == (True, 1.2)  # entered: the slowest of the approach
+    assert w.slowest == float("inf")  # and forgotten
+    w.before(3.0, False, 0.5, cfg)  # a junction without give-way control: nothing kept
+    assert w.after(0.0) == (False, float("inf"))
+    w.before(3.0, True, 0.5, cfg)
+    w.reset()
+    assert w.slowest == float("inf") and w.after(0.0) == (False, float("inf"))

@@ -27,13 +27,9 @@ import numpy as np
 from dstenv.kitti.poses import Trajectory
 from dstenv.kitti.readers import Calibration, Labels
 
-__all__ = ["Boxes", "boxes_in_velodyne", "world_centres", "moving_flags", "MOVING_RULES",
-           "FRAME_INTERVAL"]
+__all__ = ["Boxes", "boxes_in_velodyne", "world_centres", "moving_flags", "MOVING_RULES"]
 
 MOVING_RULES: tuple[str, ...] = ("paper", "smoothed")
-#: [s] between two KITTI scans (10 Hz): a rule's ``threshold`` per frame interval over
-#: this is the speed above which an object counts as moving (10 cm -> 1 m/s)
-FRAME_INTERVAL: float = 0.1
 
 
 @dataclass

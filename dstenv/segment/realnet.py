@@ -55,15 +55,14 @@ def real_net_label(model: str, seed: int, seeds: int) -> str:
 
 def real_moving_speed(manifest: Mapping[str, Any]) -> float:
     """The speed above which converted real data's labels call an object moving [m/s]:
-    the converter's ``labels.threshold`` (per frame) over
-    :data:`~dstenv.kitti.objects.FRAME_INTERVAL`; the converter's default when
+    the converter's ``labels.threshold`` (per frame) times
+    :data:`~dstenv.kitti.sequence.FRAME_RATE`; the converter's default when
     ``manifest`` does not record it."""
-    from dstenv.kitti.objects import FRAME_INTERVAL
-    from dstenv.kitti.sequence import default_config
+    from dstenv.kitti.sequence import FRAME_RATE, default_config
 
     labels = manifest.get("meta", {}).get("config", {}).get("labels", {})
     threshold = labels.get("threshold", default_config()["labels"]["threshold"])
-    return float(threshold) / FRAME_INTERVAL
+    return float(threshold) * FRAME_RATE
 
 
 def train_real_networks(

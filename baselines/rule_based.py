@@ -175,9 +175,10 @@ class GridRuleDriver:
         path, dist = self._route_path(obs["route"])
         room = self._obstacle_distance(obs["grid"], path, dist) - self.margin
         stop_dist = self.speeds ** 2 / (2 * self.brake)
+        braking = v * v / (2 * self.brake)  # the current speed's stopping distance [m]
         fits = self.speeds[stop_dist <= max(room, 0.0)]
         want = float(fits.max()) if len(fits) else float(self.speeds.min())
-        if v * v / (2 * self.brake) >= room:  # the current speed no longer stops in time
+        if braking >= room:  # the current speed no longer stops in time
             want = float(self.speeds.min())
         middle = float(self.speeds[len(self.speeds) // 2])
         if self._bend_ahead(path, dist):
@@ -186,11 +187,11 @@ class GridRuleDriver:
         green = ego[k["signal_green"]] > 0.5
         if junction <= self.junction_range and not green:
             want = min(want, middle)
-            if ego[k["control_signal"]] > 0.5 and junction <= v * v / (2 * self.brake) + 3.0:
+            if ego[k["control_signal"]] > 0.5 and junction <= braking + 3.0:
                 want = float(self.speeds.min())  # a red light
-            give_way = ego[k["control_yield"]] > 0.5 or ego[k["control_stop"]] > 0.5
-            if (self.give_way and give_way
-                    and 0.0 < junction <= self.give_way_line + v * v / (2 * self.brake) + 0.5
+            yields = ego[k["control_yield"]] > 0.5 or ego[k["control_stop"]] > 0.5
+            if (self.give_way and yields
+                    and 0.0 < junction <= self.give_way_line + braking + 0.5
                     and not (v < self.give_way_speed
                              and self._junction_clear(obs["grid"], junction))):
                 want = float(self.speeds.min())  # stop; creep on only when slow and clear

@@ -337,9 +337,9 @@ class DSTGridEnv(gym.Env):
                 progress = relative_pose(prev_pose, self._frame.ego_pose)[0]
             arrived = bool(getattr(w, "route_done", False))
             junction, green = float("inf"), False
-            if rcfg["junction_speed"] != 0.0 and hasattr(w, "next_junction"):
-                junction, _, green = w.next_junction()
-            entered, slowest = (self._give_way.after(w.next_junction()[0]) if give_way
+            if (rcfg["junction_speed"] != 0.0 or give_way) and hasattr(w, "next_junction"):
+                junction, _, green = w.next_junction()  # once, for both terms
+            entered, slowest = (self._give_way.after(junction) if give_way
                                 else (False, float("inf")))
             out = StepOutcome(float(progress), float(w.ego_speed),
                               (prev_speed - w.ego_speed) / dt, bool(w.collision),

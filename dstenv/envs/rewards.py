@@ -11,8 +11,13 @@ from dataclasses import dataclass
 from typing import Any
 
 from dstenv.config import Section, between
+from dstenv.sim.lanes import Control
 
-__all__ = ["default_reward_config", "StepOutcome", "reward_terms", "GiveWayWatch", "SECTION"]
+__all__ = ["default_reward_config", "StepOutcome", "reward_terms", "GiveWayWatch", "GIVE_WAY",
+           "SECTION"]
+
+#: Junction controls at which the ego has to give way (``reward.give_way``).
+GIVE_WAY = (Control.YIELD, Control.STOP)
 
 
 def default_reward_config() -> dict[str, Any]:

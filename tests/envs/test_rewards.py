@@ -122,7 +122,7 @@ def test_give_way_term_in_the_env():
     import gymnasium as gym
 
     import dstenv  # noqa: F401
-    from dstenv.envs.dstgrid import GIVE_WAY
+    from dstenv.envs.rewards import GIVE_WAY
 
     from .conftest import SMALL_CITY
 

@@ -102,7 +102,8 @@ class Args(EnvArgs):
     checkpoint_every: int = opt(10_000, "save the model every this many steps; 0 = at "
                                         "the end only")
     keep_checkpoints: bool = opt(False, "keep every checkpoint as model_<steps>.pt (+ .json) "
-                                        "beside model.pt, which each one overwrites")
+                                        "beside model.pt, which each one overwrites; with "
+                                        "--warm-start also the policy right after it")
     tensorboard: bool = opt(False, "also log to tensorboard (needs the tensorboard extra)")
     out: str = opt("runs/ppo_grid", "output directory")
     verbose: int = opt(1, "0: quiet, 1: stable-baselines3 log table on stdout")
@@ -189,12 +190,17 @@ class TrainingLog(BaseCallback):
         every = self.args.checkpoint_every
         if every > 0 and self.num_timesteps - self._last_ckpt >= every:
             self._last_ckpt = self.num_timesteps
-            save(self.model, self.out, self.args, self.elapsed, self.warm)
-            if self.args.keep_checkpoints:
-                steps = self.offset + self.num_timesteps
-                for ext in (".pt", ".json"):
-                    shutil.copyfile(self.out / f"model{ext}", self.out / f"model_{steps}{ext}")
+            self.checkpoint(self.model)
         return True
+
+    def checkpoint(self, model: PPO) -> None:
+        """Save ``model.pt`` now; with ``--keep-checkpoints`` also as ``model_<env
+        steps>.pt`` (+ ``.json``)."""
+        save(model, self.out, self.args, self.elapsed, self.warm)
+        if self.args.keep_checkpoints:
+            steps = self.offset + model.num_timesteps
+            for ext in (".pt", ".json"):
+                shutil.copyfile(self.out / f"model{ext}", self.out / f"model_{steps}{ext}")
 
     @property
     def elapsed(self) -> float:
@@ -405,6 +411,7 @@ def train(args: Args) -> tuple[PPO, dict[str, Any]]:
             log.warm = warm_start(args, model, env, log)
             log.offset = log.warm["timesteps"]
             ppo_steps -= log.offset
+            log.checkpoint(model)  # the imitation policy alone, before PPO
         model.learn(total_timesteps=max(ppo_steps, 0), callback=log, progress_bar=False)
         save(model, out, args, log.elapsed, log.warm)
     finally:

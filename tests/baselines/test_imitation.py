@@ -57,7 +57,7 @@ def test_warm_started_run_counts_its_steps(env_flags: list[str], tmp_path) -> No
                           "--batch-size", "32", "--n-epochs", "1", "--total-timesteps", "184",
                           "--map-pool", "2", "--verbose", "0", "--warm-start", "grid",
                           "--warm-start-steps", "120", "--warm-start-rounds", "2",
-                          "--out", str(out)])
+                          "--checkpoint-every", "0", "--keep-checkpoints", "--out", str(out)])
     warm = meta["warm_start"]
     assert warm["timesteps"] == 120 and [r["expert_share"] for r in warm["rounds"]] == [
         1.0, 0.5]
@@ -72,6 +72,10 @@ def test_warm_started_run_counts_its_steps(env_flags: list[str], tmp_path) -> No
     assert steps == sorted(steps) and steps[-1] <= 184
     assert min(int(r["timesteps"]) for r in rows if r["phase"] == "ppo") > 120
     assert json.loads((out / "model.json").read_text())["env_steps"] == 184
+    # the imitation policy alone is kept, as it was before PPO
+    before_ppo = json.loads((out / "model_120.json").read_text())
+    assert before_ppo["env_steps"] == 120 and before_ppo["timesteps"] == 0
+    assert (out / "model_120.pt").is_file()
 
 
 @pytest.mark.parametrize("flags, match", [

@@ -21,7 +21,7 @@ import time
 import numpy as np
 
 from dstenv.grid import GridSpec
-from dstenv.sensing import cast3d, cloud, draws, ground, lidar3d, ransac
+from dstenv.sensing import cast3d, cloud, draws, ground, lidar3d, ransac, scene3d
 from dstenv.sensing.polar import prepare_points
 from dstenv.sim.bench import BENCH_CONFIG
 from dstenv.sim.types import MapClass
@@ -55,7 +55,7 @@ def timed(name, fn, *args, **kwargs):
 def sweep_stages():
     ox, oy, az, ux, uy = timed("sweep: column poses", lidar3d._column_poses, pose,
                                float(world.ego_speed), 0.0, hdl._tau, hdl.azimuth, hdl.mount)
-    boxes = timed("sweep: box table", lidar3d._box_table, world.agents, hdl._clutter,
+    boxes = timed("sweep: box table", scene3d.box_table, world.agents, hdl._clutter,
                   c["vehicle_shape"] == "car")
     best, surf, idx = hdl._best, hdl._surf, hdl._idx
     timed("sweep: fill", best.fill, np.inf)

@@ -15,7 +15,7 @@ Model (per return on an ``agent`` surface; other surfaces keep every return)::
     strength s = rho cos(theta) (fade_range / r)^2
     P(detected) = Phi(ln(s) / fade_sigma)
 
-``rho`` is the surface's mean reflectance (:data:`dstenv.sensing.lidar3d.REFLECTANCE`,
+``rho`` is the surface's mean reflectance (:data:`dstenv.sensing.scene3d.REFLECTANCE`,
 0.40 for agents), ``fade_range`` [m] the range at which a unit-reflectivity surface
 met head-on is detected half the time (HDL-64E data sheet: cars, ~0.8, to 120 m and
 pavement, ~0.1, to 50 m at normal incidence give 134-158 m), ``fade_sigma`` the

@@ -48,7 +48,6 @@ import numba
 import numpy as np
 
 from dstenv.grid import GridSpec
-from dstenv.sensing.carshape import car_part_rows
 from dstenv.sensing.cast3d import cast_boxes, cast_ground, cast_walls, column_index
 from dstenv.sensing.cloud import cloud_sensor_grid, ray_config
 from dstenv.sensing.config import lidar_config
@@ -61,15 +60,12 @@ from dstenv.sensing.draws import (
 from dstenv.sensing.fading import fade_returns
 from dstenv.sensing.ground import ground_config
 from dstenv.sensing.raised import raised_distance
-from dstenv.sim.types import AgentKind, Agents, MapClass, WorldMap
+from dstenv.sensing.scene3d import (AGENT, BUILDING, REFLECTANCE, SURFACES, box_table,
+                                    building_table, clutter_table)
+from dstenv.sim.types import Agents, MapClass, WorldMap
 
 __all__ = ["Hdl64", "Cloud", "SURFACES", "REFLECTANCE"]
 
-#: Surface codes of :attr:`Cloud.surface`.
-SURFACES: tuple[str, ...] = ("road", "kerb", "building", "agent", "clutter")
-#: Mean reflectance per surface code (KITTI's median return is ~0.28).
-REFLECTANCE: np.ndarray = np.array([0.22, 0.30, 0.35, 0.40, 0.25])
-_ROAD, _KERB, _BUILDING, _AGENT, _CLUTTER = range(5)
 #: Blocks of ``2**DIST_SHIFT`` cells a side for the ground walk's distance bound
 #: (:func:`~dstenv.sensing.raised.raised_distance`): 2 x 2 blocks cut the bound's cost
 #: per fresh map ~3x (18 -> 6 ms on the default city's 5.7 M cells) for ~2 % more time
@@ -191,12 +187,12 @@ class Hdl64:
         ox, oy, world_az, ux, uy = _column_poses(pose, float(speed), float(yaw_rate), self._tau,
                                                  self.azimuth, self.mount)
         if self._map is not world_map:  # static geometry, flattened once per map
-            self._walls = _building_table(world_map)
-            self._clutter = _clutter_table(world_map)
+            self._walls = building_table(world_map)
+            self._clutter = clutter_table(world_map)
             self._raster = np.ascontiguousarray(world_map.raster, dtype=np.uint8)
             self._dist = raised_distance(self._raster, MapClass.INTERMEDIATE, DIST_SHIFT)
             self._map = world_map
-        boxes = _box_table(agents, self._clutter, c["vehicle_shape"] == "car")
+        boxes = box_table(agents, self._clutter, c["vehicle_shape"] == "car")
         edges, starts, circles, heights = self._walls
         best, surf, idx = self._best, self._surf, self._idx  # reused: no page faults
         best.fill(np.inf)  # surf and idx are written with every finite best
@@ -205,7 +201,7 @@ class Hdl64:
         cols = column_index(ox, oy, world_az)
         cast_boxes(boxes, *cols, ox, oy, ux, uy, self.slope, self._neg_slope, mount, h_max,
                    best, surf, idx)
-        cast_walls(edges, starts, circles, heights, _BUILDING, *cols, ox, oy, ux, uy,
+        cast_walls(edges, starts, circles, heights, BUILDING, *cols, ox, oy, ux, uy,
                    self.slope, self._neg_slope, mount, h_max, best, surf, idx)
         cast_ground(self._raster, self._dist, DIST_SHIFT, np.uint8(MapClass.INTERMEDIATE),
                     float(world_map.origin[0]), float(world_map.origin[1]),
@@ -229,7 +225,7 @@ class Hdl64:
         keep = beam_dropout(k_drop, n, float(c["dropout"]))
         if c["fade_range"] > 0:
             boxes, ox, oy, ux, uy = geometry
-            fade_returns(keep, k_fade, best, surf, idx, boxes, _AGENT, float(REFLECTANCE[_AGENT]),
+            fade_returns(keep, k_fade, best, surf, idx, boxes, AGENT, float(REFLECTANCE[AGENT]),
                          ox, oy, ux, uy, self.slope, self._sec_el, float(c["fade_range"]),
                          float(c["fade_sigma"]))
         pts = np.empty((n, 4), np.float32)
@@ -338,79 +334,3 @@ def _column_poses(pose, speed, yaw_rate, tau, azimuth, mount):  # pragma: no cov
         ux[j] = math.cos(a)
         uy[j] = math.sin(a)
     return ox, oy, world_az, ux, uy
-
-
-def _box_table(agents: Agents, clutter: np.ndarray, car_shape: bool = False) -> np.ndarray:
-    """``(K, 11)`` rows ``cx, cy, cos, sin, half_l, half_w, z_lo, z_hi, surface, index, r``:
-    the agents, then the map's ``clutter`` rows (:func:`_clutter_table`), then, with
-    ``car_shape`` (``vehicle_shape = "car"``), the cars' other parts
-    (:func:`dstenv.sensing.carshape.car_part_rows`; row ``i`` stays agent ``i``'s)."""
-    if not len(agents):
-        return clutter
-    f64 = np.float64
-    xy, yaw = np.ascontiguousarray(agents.xy, f64), np.asarray(agents.yaw, f64)
-    length, width = np.asarray(agents.length, f64), np.asarray(agents.width, f64)
-    height = np.asarray(agents.height, f64)
-    rows = _agent_rows(xy, yaw, length, width, height, clutter)
-    if not car_shape:
-        return rows
-    is_car = np.asarray(agents.kind) == AgentKind.CAR
-    extra = car_part_rows(xy, yaw, length, width, height, is_car, float(_AGENT), rows)
-    return np.concatenate([rows, extra]) if len(extra) else rows
-
-
-@numba.njit(cache=True)
-def _agent_rows(xy, yaw, length, width, height, clutter):  # pragma: no cover - numba
-    """The agents' box rows above ``clutter``'s, in one call (the values of NumPy's
-    ``cos``, ``sin`` and ``hypot``, which are the C library's, as numba's)."""
-    n = xy.shape[0]
-    out = np.empty((n + clutter.shape[0], 11))
-    for i in range(n):
-        out[i, 0] = xy[i, 0]
-        out[i, 1] = xy[i, 1]
-        out[i, 2] = math.cos(yaw[i])
-        out[i, 3] = math.sin(yaw[i])
-        out[i, 4] = length[i] / 2
-        out[i, 5] = width[i] / 2
-        out[i, 6] = 0.0
-        out[i, 7] = height[i]
-        out[i, 8] = _AGENT
-        out[i, 9] = i
-        out[i, 10] = math.hypot(length[i], width[i]) / 2
-    out[n:] = clutter
-    return out
-
-
-def _clutter_table(world_map: WorldMap) -> np.ndarray:
-    """``(K, 11)`` box rows of the map's clutter (see :func:`_box_table`)."""
-    obs = world_map.obstacles
-    if obs is None or not len(obs):
-        return np.zeros((0, 11))
-    n = len(obs)
-    return np.ascontiguousarray(np.column_stack([
-        obs.xy, np.cos(obs.yaw), np.sin(obs.yaw), obs.length / 2, obs.width / 2,
-        obs.z_min, obs.z_max, np.full(n, _CLUTTER), np.arange(n),
-        np.hypot(obs.length, obs.width) / 2]), dtype=np.float64)
-
-
-def _building_table(world_map: WorldMap) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Edges ``(E, 4)`` (``x0, y0, x1, y1``; polygons closed, zero-length edges dropped),
-    ``starts (B+1,)``, circles ``(B, 3)`` (vertex mean, farthest vertex) and heights;
-    vectorised over all vertices (~7x faster than per building, the same arrays)."""
-    polys = [np.asarray(p, dtype=np.float64) for p in world_map.buildings]
-    heights = np.asarray(world_map.building_heights, np.float64)
-    if not polys:
-        return np.zeros((0, 4)), np.zeros(1, np.int64), np.zeros((0, 3)), heights
-    n = np.array([len(p) for p in polys], np.int64)
-    pts = np.concatenate(polys)
-    first = np.concatenate([[0], np.cumsum(n)[:-1]])
-    nxt = np.arange(len(pts)) + 1  # each vertex's successor, the last one's the first
-    nxt[first + n - 1] = first
-    e = np.concatenate([pts, pts[nxt]], axis=1)
-    keep = np.any(e[:, :2] != e[:, 2:], axis=1)
-    owner = np.repeat(np.arange(len(polys)), n)
-    starts = np.zeros(len(polys) + 1, np.int64)
-    np.cumsum(np.bincount(owner[keep], minlength=len(polys)), out=starts[1:])
-    centre = np.stack([p.mean(axis=0) for p in polys])  # numpy's own sum order per polygon
-    radius = np.maximum.reduceat(np.hypot(*(pts - centre[owner]).T), first)
-    return np.ascontiguousarray(e[keep]), starts, np.column_stack([centre, radius]), heights

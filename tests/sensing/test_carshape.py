@@ -7,7 +7,8 @@ import pytest
 
 from dstenv.config import ConfigError
 from dstenv.sensing import carshape as cs
-from dstenv.sensing.lidar3d import SURFACES, Hdl64, _box_table
+from dstenv.sensing.lidar3d import SURFACES, Hdl64
+from dstenv.sensing.scene3d import box_table
 from dstenv.sim.types import AgentKind
 
 from .worlds import agents, rect_map
@@ -33,8 +34,8 @@ def test_box_table_rows_and_default_is_the_prism():
     ag.kind[1] = AgentKind.CYCLIST
     clutter = np.zeros((3, 11))
     clutter[:, 9] = np.arange(3)
-    prisms = _box_table(ag, clutter)
-    shaped = _box_table(ag, clutter, car_shape=True)
+    prisms = box_table(ag, clutter)
+    shaped = box_table(ag, clutter, car_shape=True)
     assert prisms.shape == (5, 11) and shaped.shape == (5 + 4, 11)  # one car: 4 parts more
     assert np.array_equal(shaped[1:5], prisms[1:5])  # the cyclist and the clutter as before
     # row 0 stays the car's: its long lower box, narrower by the corner cut, on the sills
@@ -56,7 +57,7 @@ def test_box_table_rows_and_default_is_the_prism():
 def test_a_van_has_no_cabin_and_keeps_its_roof():
     ag = agents((10.0, 0.0, 0.0, 5.5, 2.1, 0.0))
     ag.height[:] = 2.6
-    t = _box_table(ag, np.zeros((0, 11)), car_shape=True)
+    t = box_table(ag, np.zeros((0, 11)), car_shape=True)
     assert t[0, 7] == pytest.approx(2.6) and t[1, 7] == pytest.approx(2.6)
     assert t[2, 6] == t[2, 7] == pytest.approx(2.6)  # the empty cabin: zero height
 

@@ -186,14 +186,14 @@ def test_column_poses_are_the_numpy_formulas_bit_for_bit(yaw_rate):
 
 
 def test_building_table_by_hand():
-    from dstenv.sensing.lidar3d import _building_table
+    from dstenv.sensing.scene3d import building_table
     from dstenv.sim.types import WorldMap
 
     square = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [0.0, 2.0]])
     tri = np.array([[10.0, 0.0], [13.0, 0.0], [13.0, 0.0], [10.0, 4.0]])  # a repeated vertex
     wm = WorldMap(raster=np.zeros((4, 4), np.uint8), origin=np.zeros(2), resolution=1.0,
                   buildings=[square, tri], building_heights=np.array([6.0, 9.0]))
-    edges, starts, circles, heights = _building_table(wm)
+    edges, starts, circles, heights = building_table(wm)
     np.testing.assert_array_equal(edges, [[0, 0, 2, 0], [2, 0, 2, 2], [2, 2, 0, 2], [0, 2, 0, 0],
                                           [10, 0, 13, 0], [13, 0, 10, 4], [10, 4, 10, 0]])
     np.testing.assert_array_equal(starts, [0, 4, 7])
@@ -201,6 +201,6 @@ def test_building_table_by_hand():
     centre = tri.mean(axis=0)  # (11.5, 1.0)
     np.testing.assert_allclose(circles[1], [*centre, np.hypot(*(tri - centre).T).max()])
     np.testing.assert_array_equal(heights, [6.0, 9.0])
-    empty = _building_table(WorldMap(raster=np.zeros((4, 4), np.uint8), origin=np.zeros(2),
+    empty = building_table(WorldMap(raster=np.zeros((4, 4), np.uint8), origin=np.zeros(2),
                                      resolution=1.0))
     assert empty[0].shape == (0, 4) and empty[1].tolist() == [0] and empty[2].shape == (0, 3)

@@ -1,7 +1,7 @@
 """A feature extractor that reads the perception grid *along the route* (PPO, ``--extractor
 route-cnn``).
 
-:class:`~ppo_grid.GridCNN` has to find on its own, in 84 x 84 cells, which few cells
+:class:`~extractors.GridCNN` has to find on its own, in 84 x 84 cells, which few cells
 lie on the route ahead, from 16 route coordinates it sees as plain numbers; a
 hand-written driver (``rule_based.py``) just looks there. This extractor gives the
 policy the same look without giving it anything the observation does not hold:
@@ -15,7 +15,7 @@ policy the same look without giving it anything the observation does not hold:
   :mod:`dstenv.grid` (forward up, ego cell ``(H // 2, W // 2)``), giving a
   ``(C x lateral, samples)`` profile of the route ahead;
 * two 1-D convolutions along the route read that profile, and their output joins
-  :class:`~ppo_grid.GridCNN`'s (the whole grid: cross traffic, junction corners) and
+  :class:`~extractors.GridCNN`'s (the whole grid: cross traffic, junction corners) and
   the ``ego`` / ``route`` vectors before the last layer.
 
 The geometry (``cell_size`` [m] and the route scale ``route_points * route_spacing``
@@ -31,6 +31,8 @@ from gymnasium import spaces
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from torch import nn
 from torch.nn import functional as F
+
+from extractors import GridCNN
 
 #: lateral offsets of the route profile, left positive [m]
 LATERAL: tuple[float, ...] = (-2.0, -1.0, 0.0, 1.0, 2.0)
@@ -73,7 +75,7 @@ def sample_grid(grid: torch.Tensor, points: torch.Tensor, cell_size: float) -> t
 
 
 class RouteGridCNN(BaseFeaturesExtractor):
-    """:class:`~ppo_grid.GridCNN` plus a 1-D CNN over the grid read along the route.
+    """:class:`~extractors.GridCNN` plus a 1-D CNN over the grid read along the route.
 
     Args:
         observation_space: a ``Dict`` with ``"grid"`` ``(C, H, W)`` and ``"route"``
@@ -86,8 +88,6 @@ class RouteGridCNN(BaseFeaturesExtractor):
     def __init__(self, observation_space: spaces.Space, features_dim: int = 128,
                  cell_size: float = 1.0, route_scale: float = 40.0,
                  per_segment: int = 5) -> None:
-        from ppo_grid import GridCNN
-
         super().__init__(observation_space, features_dim)
         if (not isinstance(observation_space, spaces.Dict)
                 or "route" not in observation_space.spaces):

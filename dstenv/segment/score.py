@@ -50,7 +50,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from dstenv.data.datasets import network_input, past_rows, past_sensor
+from dstenv.data.inputs import network_input, past_rows, past_sensor
 from dstenv.dst.frame import CLASSES
 from dstenv.dst.params import DSTParams
 from dstenv.frame import IGNORE_INDEX

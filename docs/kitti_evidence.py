@@ -256,7 +256,8 @@ def sim_tallies(cfg: dict, drives: int, seed0: int) -> tuple[Tally, Tally]:
     """Tallies of ``drives`` 6 s autopilot drives (frames at steps 10, 20, ..., 50):
     inside the camera view and over the whole grid."""
     from dstenv.data.sampling import iter_frames
-    from dstenv.pipeline import Pipeline, camera_mask
+    from dstenv.grid import camera_mask
+    from dstenv.pipeline import Pipeline
     from dstenv.sim.types import AgentKind
 
     spec = GridSpec(GRID, GRID, CELL)

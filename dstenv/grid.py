@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["GridSpec", "relative_pose", "SECTION"]
+__all__ = ["GridSpec", "relative_pose", "SECTION", "camera_mask"]
 
 
 @dataclass(frozen=True)
@@ -153,3 +153,19 @@ def _section() -> "object":
 
 #: The ``grid`` section of the configuration (:func:`dstenv.config.build_config`).
 SECTION = _section()
+
+
+def camera_mask(spec: GridSpec, fov_deg: float) -> np.ndarray:
+    """Cells inside a forward camera's horizontal field of view (an ideal camera at the
+    ego, as the simulated drives' ``protocol.camera_fov``; KITTI's own, from its
+    calibration: :func:`dstenv.kitti.grids.camera_fov`).
+
+    Args:
+        spec: grid geometry (the camera at the ego cell, looking along +x).
+        fov_deg: full horizontal field of view [deg], in (0, 180).
+
+    Returns:
+        ``(H, W) bool``: cell centres ahead of the ego within ``fov_deg / 2`` of +x.
+    """
+    x, y = spec.cell_centers()
+    return (x > 0) & (np.abs(np.arctan2(y, x)) <= np.deg2rad(fov_deg) / 2)

@@ -43,7 +43,7 @@ from dstenv.config import Section, Validated, between, build_config, one_of
 from dstenv.dst import DSTParams
 from dstenv.dst.tracker import GridTracker
 from dstenv.frame import IGNORE_INDEX, Frame
-from dstenv.grid import GridSpec
+from dstenv.grid import GridSpec, camera_mask
 from dstenv.sensing.config import gis_is_exact
 from dstenv.sensing.gis import MapError, gis_grid
 from dstenv.sensing.labels import ignore_object_edges, label_grid, visible_mask
@@ -392,17 +392,3 @@ class Pipeline:
             return float(cfg["labels"]["moving_threshold"])
         dt = float(cfg["world"]["dt"]) if cfg["source"] == "city" else 0.1
         return KITTI_DISPLACEMENT / (dt * cfg["protocol"]["update_every"])
-
-
-def camera_mask(spec: GridSpec, fov_deg: float) -> np.ndarray:
-    """Cells inside a forward camera's horizontal field of view.
-
-    Args:
-        spec: grid geometry (the camera at the ego cell, looking along +x).
-        fov_deg: full horizontal field of view [deg], in (0, 180).
-
-    Returns:
-        ``(H, W) bool``: cell centres ahead of the ego within ``fov_deg / 2`` of +x.
-    """
-    x, y = spec.cell_centers()
-    return (x > 0) & (np.abs(np.arctan2(y, x)) <= np.deg2rad(fov_deg) / 2)

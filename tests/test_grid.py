@@ -36,3 +36,18 @@ def test_cell_centres_roundtrip():
 def test_rejects_bad_spec():
     with pytest.raises(ValueError, match="cell_size"):
         GridSpec(4, 4, 0.0)
+
+
+def test_camera_mask_is_the_forward_wedge():
+    from dstenv.grid import camera_mask
+
+    spec = GridSpec(7, 7, 1.0)  # ego at (3, 3); row 0 is 3 m ahead
+    got = camera_mask(spec, 90.0)
+    want = np.zeros((7, 7), bool)
+    for i in range(3):  # x = 3 - i ahead; |y| <= x within 45 deg
+        x = 3 - i
+        want[i, 3 - x:3 + x + 1] = True
+    np.testing.assert_array_equal(got, want)
+    narrow = camera_mask(spec, 30.0)  # only the straight-ahead column at 15 deg
+    assert narrow.sum() == 3 and narrow[:3, 3].all()
+    assert not camera_mask(spec, 179.0)[3:].any()  # nothing level with or behind the ego

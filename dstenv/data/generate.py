@@ -12,13 +12,9 @@ shards made with other settings. ``DIR/manifest.json`` is written last.
 
 from __future__ import annotations
 
-import concurrent.futures as cf
 import contextlib
 import dataclasses
 import json
-import multiprocessing
-import os
-import queue as queue_mod
 import sys
 from collections.abc import Callable, Mapping
 from concurrent.futures.process import BrokenProcessPool
@@ -28,7 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from dstenv.data.codec import DEFLATE_ENGINES
-from dstenv.data.lifeline import die_with_parent, sigterm_as_interrupt
+from dstenv.data.lifeline import sigterm_as_interrupt
 from dstenv.data.lock import DatasetLocked, dataset_lock
 from dstenv.data.manifest import (
     MANIFEST_NAME,
@@ -40,7 +36,7 @@ from dstenv.data.manifest import (
 )
 from dstenv.data.sampling import SPLIT_BUCKETS, SPLITS, episode_seeds, frame_steps, iter_frames
 from dstenv.data.shards import (
-    FORMAT_VERSION, ShardError, ShardReader, ShardWriter, partial_path,
+    FORMAT_VERSION, ShardError, ShardReader, ShardWriter,
 )
 
 __all__ = ["GenerateError", "GenerateSpec", "ShardTask", "plan", "write_shard", "generate"]
@@ -189,21 +185,6 @@ def write_shard(task: ShardTask, out: str | Path,
     return shard_entry(out, out / task.file)
 
 
-# -- local worker processes ------------------------------------------------------------
-
-_QUEUE: Any = None
-
-
-def _init_worker(q: Any, parent: int) -> None:
-    global _QUEUE
-    die_with_parent(parent)  # a killed `dstenv generate` must not leave workers writing shards
-    _QUEUE = q
-
-
-def _worker_task(task: ShardTask, out: str) -> dict[str, Any]:
-    return write_shard(task, out, progress=_QUEUE.put if _QUEUE is not None else None)
-
-
 def _existing(out: Path, task: ShardTask) -> dict[str, Any] | None:
     """Manifest entry of a finished shard for ``task``, or None if it must be (re)made.
 
@@ -325,7 +306,9 @@ def _generate(spec: GenerateSpec, out: Path, workers: int, ray_address: str | No
             elif workers == 1 or len(todo) <= 1:
                 results = _run_serial(todo, out, bar.update)
             else:
-                results = _run_pool(todo, out, workers, bar.update)
+                from dstenv.data.pool_backend import run_pool
+
+                results = run_pool(todo, out, workers, bar.update)
     except GenerateError:
         raise
     except BrokenProcessPool:
@@ -347,63 +330,3 @@ def _generate(spec: GenerateSpec, out: Path, workers: int, ray_address: str | No
 def _run_serial(todo: list[ShardTask], out: Path, update: Callable[[int], None]
                 ) -> dict[str, dict[str, Any]]:
     return {t.file: write_shard(t, out, update) for t in todo}
-
-
-#: thread pools of numerical libraries, one thread per worker process: K workers on K
-#: cores must not each start K threads (unless the user set these variables)
-_ONE_THREAD = ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS",
-               "MKL_NUM_THREADS")
-
-
-def _run_pool(todo: list[ShardTask], out: Path, workers: int, update: Callable[[int], None]
-              ) -> dict[str, dict[str, Any]]:
-    saved = {k: os.environ.get(k) for k in _ONE_THREAD}
-    os.environ.update({k: "1" for k, v in saved.items() if v is None})
-    try:  # spawned workers inherit the environment when they start
-        return _run_pool_env(todo, out, workers, update)
-    finally:
-        for k, v in saved.items():
-            if v is None:
-                os.environ.pop(k, None)
-
-
-def _run_pool_env(todo: list[ShardTask], out: Path, workers: int,
-                  update: Callable[[int], None]) -> dict[str, dict[str, Any]]:
-    ctx = multiprocessing.get_context("spawn")
-    q = ctx.Queue()
-    results: dict[str, dict[str, Any]] = {}
-
-    def drain() -> None:
-        n = 0
-        try:
-            while True:
-                n += q.get_nowait()
-        except queue_mod.Empty:
-            pass
-        if n:
-            update(n)
-
-    try:
-        with cf.ProcessPoolExecutor(min(workers, len(todo)), mp_context=ctx,
-                                    initializer=_init_worker, initargs=(q, os.getpid())) as ex:
-            pending = {ex.submit(_worker_task, t, str(out)): t for t in todo}
-            try:
-                while pending:
-                    finished, _ = cf.wait(pending, timeout=0.25, return_when=cf.FIRST_COMPLETED)
-                    drain()
-                    for fut in finished:
-                        task = pending.pop(fut)
-                        results[task.file] = fut.result()
-            except BaseException:
-                for fut in pending:
-                    fut.cancel()
-                # stop the shards still running now rather than finishing them
-                for proc in list(getattr(ex, "_processes", {}).values()):
-                    proc.terminate()
-                raise
-    except BaseException:
-        for task in todo:  # workers are gone: their unfinished files are garbage
-            partial_path(out / task.file).unlink(missing_ok=True)
-        raise
-    drain()
-    return results

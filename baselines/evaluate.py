@@ -92,7 +92,10 @@ class PPOPolicy:
                              "or no 'args'); keep the pair that ppo_grid.py wrote") from None
         self.deterministic = deterministic
         self.temperature = float(temperature)
-        self.name = f"PPO {extractor} ({self.path.stem})" + (
+        # a warm start saved before PPO took a step is the imitation policy alone
+        learner = ("DAgger" if self.meta.get("warm_start") and not self.meta.get("timesteps")
+                   else "PPO")
+        self.name = f"{learner} {extractor} ({self.path.stem})" + (
             f" T={self.temperature:g}" if self.temperature > 0 else "")
         self.model: Any = None
         self.rng = np.random.default_rng(0)
@@ -147,11 +150,19 @@ def _pct(x: float) -> str:
     return f"{100 * x:.0f} %"
 
 
+def _env_steps(meta: dict[str, Any]) -> str:
+    """Every env step of the training run, a warm start's included (``model.json``'s
+    ``env_steps``; ``timesteps`` counts PPO's alone)."""
+    steps = int(meta.get("env_steps", meta["timesteps"]))
+    warm = int((meta.get("warm_start") or {}).get("timesteps", 0))
+    return f"{steps:,} steps" + (f" ({warm:,} of them imitation)" if warm else "")
+
+
 def _budget(meta: dict[str, Any] | None) -> str:
     if meta is None:
         return "-"
     minutes = meta["wall_time_s"] / 60
-    return f"{meta['timesteps']:,} steps, {minutes:.{1 if minutes < 10 else 0}f} min"
+    return f"{_env_steps(meta)}, {minutes:.{1 if minutes < 10 else 0}f} min"
 
 
 def results_markdown(rows: list[tuple[str, dict[str, float], dict[str, Any] | None]],
@@ -182,9 +193,10 @@ def results_markdown(rows: list[tuple[str, dict[str, float], dict[str, Any] | No
         if meta is None:
             continue
         tm = meta["machine"]
-        lines += ["", f"Training of {name}: {meta['timesteps']:,} steps in "
+        steps = int(meta.get("env_steps", meta["timesteps"]))
+        lines += ["", f"Training of {name}: {_env_steps(meta)} in "
                   f"{meta['wall_time_s'] / 60:.1f} min wall time "
-                  f"({meta['timesteps'] / max(meta['wall_time_s'], 1e-9):.0f} steps/s), "
+                  f"({steps / max(meta['wall_time_s'], 1e-9):.0f} steps/s), "
                   f"{tm['cpu']} ({tm['cores']} cores, {tm['torch_threads']} torch threads), "
                   f"finished {meta['finished_utc']} UTC:", "", "```",
                   meta.get("command") or "(command not recorded)", "```"]

@@ -79,3 +79,25 @@ def test_temperature_sampling_is_seeded_and_sharpens(tmp_path, env_flags: list[s
     assert hot.name.endswith("T=1")
     with pytest.raises(ValueError, match="--temperature"):
         evaluate.PPOPolicy(out / "model.pt", temperature=-1.0)
+
+
+def test_budget_counts_a_warm_starts_steps():
+    from evaluate import _budget
+
+    plain = {"timesteps": 450_048, "wall_time_s": 3300.0}
+    assert _budget(plain) == "450,048 steps, 55 min"
+    warm = {"timesteps": 0, "env_steps": 100_000, "wall_time_s": 894.3,
+            "warm_start": {"timesteps": 100_000}}
+    assert _budget(warm) == "100,000 steps (100,000 of them imitation), 15 min"
+    assert _budget(None) == "-"
+
+
+def test_an_imitation_checkpoint_is_named_for_its_learner():
+    from pathlib import Path
+
+    from evaluate import PPOPolicy
+
+    root = Path(__file__).resolve().parents[2] / "baselines" / "checkpoints"
+    warm = PPOPolicy(root / "dagger_occluded_route_s0_100k.pt")  # saved before PPO's first step
+    assert warm.name == "DAgger route-cnn (dagger_occluded_route_s0_100k)"
+    assert PPOPolicy(root / "ppo_occluded_route_s0_450k.pt").name.startswith("PPO route-cnn")

@@ -1,8 +1,8 @@
 """Shard tasks on local worker processes (``dstenv generate --workers K``; the Ray twin
 is :mod:`dstenv.data.ray_backend`).
 
-Workers are spawned (not forked: numba and HDF5 state does not survive a fork), each
-with one thread per numerical library, and die with the parent process; each task
+Workers are spawned (``multiprocessing``'s "spawn" context), each with one thread per
+numerical library, and die with the parent process; each task
 writes its shard atomically (:func:`dstenv.data.generate.write_shard`), and frames done
 are reported through a queue to the progress bar.
 """

@@ -15,7 +15,10 @@ pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="Li
 
 
 def _start(out: Path) -> subprocess.Popen:
-    cmd = [sys.executable, "-m", "dstenv.cli", "generate", "--frames", "4000", "--grid", "32",
+    # far more work than the seconds before the kill: 4000 frames took ~5 s in all on the
+    # 2-core machine once the traffic step got faster, so a SIGTERM sent 3 s after the
+    # workers started could meet a run already past its cleanup (exit -15, not 143)
+    cmd = [sys.executable, "-m", "dstenv.cli", "generate", "--frames", "40000", "--grid", "32",
            "--episode-length", "400", "--stride", "1", "--frames-per-shard", "1000",
            "--workers", "2", "--quiet", "--out", str(out)]
     return subprocess.Popen(cmd, start_new_session=True, stdout=subprocess.PIPE,

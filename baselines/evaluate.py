@@ -150,12 +150,16 @@ def _pct(x: float) -> str:
     return f"{100 * x:.0f} %"
 
 
-def _env_steps(meta: dict[str, Any]) -> str:
+def _env_step_count(meta: dict[str, Any]) -> int:
     """Every env step of the training run, a warm start's included (``model.json``'s
     ``env_steps``; ``timesteps`` counts PPO's alone)."""
-    steps = int(meta.get("env_steps", meta["timesteps"]))
+    return int(meta.get("env_steps", meta["timesteps"]))
+
+
+def _env_steps(meta: dict[str, Any]) -> str:
+    """:func:`_env_step_count` as text, naming the warm start's share."""
     warm = int((meta.get("warm_start") or {}).get("timesteps", 0))
-    return f"{steps:,} steps" + (f" ({warm:,} of them imitation)" if warm else "")
+    return f"{_env_step_count(meta):,} steps" + (f" ({warm:,} of them imitation)" if warm else "")
 
 
 def _budget(meta: dict[str, Any] | None) -> str:
@@ -193,10 +197,9 @@ def results_markdown(rows: list[tuple[str, dict[str, float], dict[str, Any] | No
         if meta is None:
             continue
         tm = meta["machine"]
-        steps = int(meta.get("env_steps", meta["timesteps"]))
         lines += ["", f"Training of {name}: {_env_steps(meta)} in "
                   f"{meta['wall_time_s'] / 60:.1f} min wall time "
-                  f"({steps / max(meta['wall_time_s'], 1e-9):.0f} steps/s), "
+                  f"({_env_step_count(meta) / max(meta['wall_time_s'], 1e-9):.0f} steps/s), "
                   f"{tm['cpu']} ({tm['cores']} cores, {tm['torch_threads']} torch threads), "
                   f"finished {meta['finished_utc']} UTC:", "", "```",
                   meta.get("command") or "(command not recorded)", "```"]

@@ -23,6 +23,7 @@ from dstenv.frame import Frame
 from dstenv.grid import relative_pose
 from dstenv.pipeline import Pipeline, WorldSource
 from dstenv.pipeline import default_config as pipeline_config
+
 __all__ = ["DSTGridEnv"]
 
 _ENV_SECTIONS = ("observation", "action", "reward", "info")

@@ -227,14 +227,13 @@ def cast_ground(raster, dist, shift, raised, x0, y0, res, kerb, ox, oy, ux, uy, 
     """The road (z = 0, surface 0) and ``raised`` raster cells (z = ``kerb``, surface 1):
     the first raised cell met while the beam is between the kerb top and the road,
     else the road. ``dist`` from :func:`dstenv.sensing.raised.raised_distance` with the
-    same ``shift`` lets
-    the walk jump: from a point of a cell whose block reads ``dist = e`` no raised cell
-    lies within ``d = e << shift`` cells, so the walk moves ``d`` cells (less a
-    micrometre) at once, and steps cell by cell only where ``d = 0``. Such a read also
-    clears ``d`` cells *behind* the point, and the channels of a column share its ray:
-    a later channel whose whole band lies in the stretch cleared by an earlier one's
-    read is road without a read (a quarter of the pass on the bench world; the same
-    results)."""
+    same ``shift`` lets the walk jump: from a point of a cell whose block reads
+    ``dist = e`` no raised cell lies within ``d = e << shift`` cells, so the walk moves
+    ``d`` cells (less a micrometre) at once, and steps cell by cell only where
+    ``d = 0``. Such a read also clears ``d`` cells *behind* the point, and the channels
+    of a column share its ray: a later channel whose whole band lies in the stretch
+    cleared by an earlier one's read is road without a read (a quarter of the pass on
+    the bench world; the same results)."""
     hm, wm = raster.shape
     n = slope.shape[0]
     t_top = np.empty(n)  # where each beam sinks below the kerb top, and meets the road

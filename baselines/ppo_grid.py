@@ -92,7 +92,8 @@ class Args(EnvArgs):
                             "rule driver's action, k >= 1 the env's action k - 1")
     residual_p_rule: float = opt(0.9, "--residual grid: the fresh policy's probability "
                                       "of action 0 (the rule driver)")
-    warm_start: str = opt("", "'' (none) | grid: DAgger from the grid rule driver before "
+    warm_start: str = opt("", "'' (none) | grid | grid-tuned: DAgger from the grid rule "
+                              "driver (default or tuned parameters) before "
                               "PPO (imitation.py); its env steps count in the budget")
     warm_start_steps: int = opt(24_000, "env steps of the warm start (all rounds and envs)")
     warm_start_rounds: int = opt(4, "DAgger rounds (round 0: the rule driver drives)")
@@ -287,8 +288,9 @@ def warm_start_steps_per_round(args: Args) -> int:
         ValueError: an unknown ``--warm-start``, or ``--warm-start-steps`` below one step
             per round and env or not below ``--total-timesteps``.
     """
-    if args.warm_start != "grid":
-        raise ValueError(f"--warm-start: expected '' or grid, got {args.warm_start!r}")
+    if args.warm_start not in ("grid", "grid-tuned"):
+        raise ValueError(f"--warm-start: expected '', grid or grid-tuned, got "
+                         f"{args.warm_start!r}")
     rounds = args.warm_start_rounds
     per_round = args.warm_start_steps // (rounds * args.n_envs) if rounds > 0 else 0
     if per_round < 1 or args.warm_start_steps >= args.total_timesteps:
@@ -299,14 +301,15 @@ def warm_start_steps_per_round(args: Args) -> int:
 
 
 def warm_start(args: Args, model: PPO, env: VecEnv, log: TrainingLog) -> dict[str, Any]:
-    """DAgger from the grid rule driver (:mod:`imitation`) on the training env;
-    returns its record for ``model.json`` (env steps, wall time, rounds)."""
+    """DAgger from the grid rule driver, default or tuned (:mod:`imitation`), on the
+    training env; returns its record for ``model.json`` (env steps, wall time, rounds)."""
     from imitation import dagger
-    from rule_based import GridRuleDriver
+    from rule_based import TUNED_PARAMS, GridRuleDriver
 
     rounds = args.warm_start_rounds
     per_round = warm_start_steps_per_round(args)
-    expert = GridRuleDriver()
+    tuned = args.warm_start == "grid-tuned"
+    expert = GridRuleDriver(**(TUNED_PARAMS if tuned else {}))
     probe = make_env(args, train_config(args))
     try:
         probe.reset(seed=args.seed)
@@ -318,7 +321,8 @@ def warm_start(args: Args, model: PPO, env: VecEnv, log: TrainingLog) -> dict[st
                     on_episode=lambda r, i, steps, ep: log.write_episode(steps, i, ep,
                                                                          f"dagger{r}"),
                     log=print if args.verbose else (lambda _: None))
-    return {"method": "dagger from the grid rule driver", "timesteps": result.timesteps,
+    method = "dagger from the grid rule driver" + (f" (tuned: {TUNED_PARAMS})" if tuned else "")
+    return {"method": method, "timesteps": result.timesteps,
             "wall_s": round(result.wall_s, 1), "rounds": result.rounds}
 
 

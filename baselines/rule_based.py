@@ -34,12 +34,13 @@ from rl_common import cli, report_run
 DRIVERS = ("grid", "grid-tuned", "autopilot", "constant")
 #: :class:`GridRuleDriver` parameters chosen on validation seeds in PPO's config (collision
 #: -30, off-road -10, ``action.repeat = 3``, 200 decisions) by ``tune_rule.py`` in two
-#: stages: 48 settings on seeds 20000-20049 (``benchmarks/search/rule-driver.json``), then
+#: stages: 16 settings on seeds 20000-20049 (``benchmarks/search/rule-driver.json``), then
 #: the defaults and the five best on seeds 20050-20249; this is the ``best`` row of
 #: ``benchmarks/search/rule-driver-stage2.json`` (a test checks that they agree). The
-#: others keep their defaults. (The driver before the give-way rule: ``rule-driver-v1*.json``.)
-TUNED_PARAMS: dict[str, float] = {"give_way_line": 3.0, "give_way_speed": 1.5,
-                                   "give_way_moving": 0.5, "give_way_side": 30.0, "margin": 6.0}
+#: others keep their defaults. (Earlier searches: ``rule-driver-v2*.json`` without
+#: ``corridor_static``, ``rule-driver-v1*.json`` before the give-way rule.)
+TUNED_PARAMS: dict[str, float] = {"corridor_static": 0.9, "give_way_line": 2.0,
+                                   "give_way_moving": 0.5, "margin": 6.0}
 #: ``--env-config`` the autopilot driver adds: the world's own driver.
 AUTOPILOT_CONFIG: dict[str, Any] = {"action": {"type": "autopilot"}}
 
@@ -65,6 +66,10 @@ class GridRuleDriver:
       BetP(static) + BetP(moving) exceeds ``occupied`` sets the distance to stop in;
       the wanted speed is the fastest whose braking distance at ``brake`` m/s^2 plus
       ``margin`` m fits before it, and the slowest once the current speed's does not;
+      a cell with more BetP(static) than BetP(moving) counts only within
+      ``corridor_static`` m (default: ``corridor``): with 1 m cells, the side of a car
+      parked 0.5 m clear of the ego's path lights the cells 1 m beside the route, and
+      at 1.4 m the driver waited behind such cars to the end of the episode;
     * bend: the route turns by more than ``bend_angle`` rad within ``bend_range`` m:
       at most the middle speed;
     * junction within ``junction_range`` m: at most the middle speed unless its
@@ -82,7 +87,8 @@ class GridRuleDriver:
     Args:
         corridor, occupied, margin, brake, bend_angle, bend_range, junction_range,
         give_way_line, give_way_speed, give_way_moving, give_way_ahead,
-        give_way_side: as above.
+        give_way_side, corridor_static: as above (``corridor_static`` ``None``: the
+        same as ``corridor``).
         give_way: apply the give-way rule (False: the driver before it).
     """
 
@@ -93,8 +99,9 @@ class GridRuleDriver:
                  junction_range: float = 20.0, give_way_line: float = 2.0,
                  give_way_speed: float = 0.6, give_way_moving: float = 0.35,
                  give_way_ahead: float = 14.0, give_way_side: float = 20.0,
-                 give_way: bool = True) -> None:
+                 give_way: bool = True, corridor_static: float | None = None) -> None:
         self.corridor, self.occupied, self.margin, self.brake = corridor, occupied, margin, brake
+        self.corridor_static = corridor if corridor_static is None else corridor_static
         self.bend_angle, self.bend_range = bend_angle, bend_range
         self.junction_range = junction_range
         self.give_way = bool(give_way)
@@ -142,7 +149,7 @@ class GridRuleDriver:
         occ = (grid[2].astype(np.float32) + grid[3]) / 255.0 > self.occupied
         h, w = self.shape
         i0, j0 = h // 2, w // 2
-        k = int(np.ceil(self.corridor / self.cell)) + 1
+        k = int(np.ceil(max(self.corridor, self.corridor_static) / self.cell)) + 1
         di, dj = np.meshgrid(np.arange(-k, k + 1), np.arange(-k, k + 1), indexing="ij")
         rows = np.rint(i0 - path[:, 0] / self.cell).astype(np.int64)[:, None] + di.ravel()
         cols = np.rint(j0 - path[:, 1] / self.cell).astype(np.int64)[:, None] + dj.ravel()
@@ -150,7 +157,10 @@ class GridRuleDriver:
         r, c = np.where(inside, rows, 0), np.where(inside, cols, 0)
         cx, cy = (i0 - r) * self.cell, (j0 - c) * self.cell
         d2 = (path[:, 0:1] - cx) ** 2 + (path[:, 1:2] - cy) ** 2  # (M, K)
-        hit = inside & occ[r, c] & (cx > 2.0) & (d2 < self.corridor ** 2)
+        # a static-dominant cell blocks only within ``corridor_static`` of the route
+        static = grid[2] > grid[3]
+        reach = np.where(static[r, c], self.corridor_static, self.corridor)
+        hit = inside & occ[r, c] & (cx > 2.0) & (d2 < reach ** 2)
         near = hit.any(1)
         return float(dist[np.argmax(near)]) if near.any() else float("inf")
 

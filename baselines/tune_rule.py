@@ -9,9 +9,8 @@ configuration's result, so that the choice can be checked and redone::
     python baselines/tune_rule.py \\
         --env-config '{"reward":{"collision":-30,"off_road":-10},"action":{"repeat":3}}' \\
         --max-episode-steps 200 --episodes 50 --seed 20000 --workers 2 \\
-        --grid '{"give_way_line": [1.5, 2, 3], "give_way_speed": [0.6, 1.5],
-                 "give_way_moving": [0.35, 0.5], "give_way_side": [20, 30],
-                 "margin": [4, 6]}' \\
+        --grid '{"corridor_static": [0.9, 1.4], "give_way_line": [2, 3],
+                 "give_way_moving": [0.35, 0.5], "margin": [4, 6]}' \\
         --out benchmarks/search/rule-driver.json
 
 Selection: the highest success rate minus collision rate on the validation seeds

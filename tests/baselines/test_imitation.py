@@ -51,14 +51,16 @@ def test_fit_learns_labels_and_returns(env_flags: list[str]) -> None:
     assert after["value_rmse"] < 0.5 * before["value_rmse"]
 
 
-def test_warm_started_run_counts_its_steps(env_flags: list[str], tmp_path) -> None:
+@pytest.mark.parametrize("expert", ["grid", "grid-tuned"])
+def test_warm_started_run_counts_its_steps(env_flags: list[str], tmp_path, expert: str) -> None:
     out = tmp_path / "ws"
     meta = ppo_grid.main([*env_flags, "--n-envs", "2", "--vec-env", "dummy", "--n-steps", "32",
                           "--batch-size", "32", "--n-epochs", "1", "--total-timesteps", "184",
-                          "--map-pool", "2", "--verbose", "0", "--warm-start", "grid",
+                          "--map-pool", "2", "--verbose", "0", "--warm-start", expert,
                           "--warm-start-steps", "120", "--warm-start-rounds", "2",
                           "--checkpoint-every", "0", "--keep-checkpoints", "--out", str(out)])
     warm = meta["warm_start"]
+    assert ("tuned" in warm["method"]) == (expert == "grid-tuned")
     assert warm["timesteps"] == 120 and [r["expert_share"] for r in warm["rounds"]] == [
         1.0, 0.5]
     assert warm["rounds"][1]["samples"] == 120

@@ -158,20 +158,23 @@ def test_obstacle_distance_window_equals_the_brute_force_search() -> None:
         occ = (grid[2].astype(np.float32) + grid[3]) / 255.0 > d.occupied
         rows, cols = np.nonzero(occ)
         cells = np.stack([(d.shape[0] // 2 - rows) * d.cell, (d.shape[1] // 2 - cols) * d.cell], 1)
-        cells = cells[cells[:, 0] > 2.0]
+        reach = np.where(grid[2][rows, cols] > grid[3][rows, cols], d.corridor_static, d.corridor)
+        keep = cells[:, 0] > 2.0
+        cells, reach = cells[keep], reach[keep]
         if len(cells) == 0:
             return float("inf")
-        near = (((path[:, None, :] - cells[None]) ** 2).sum(-1) < d.corridor ** 2).any(1)
+        near = (((path[:, None, :] - cells[None]) ** 2).sum(-1) < reach[None] ** 2).any(1)
         return float(dist[np.argmax(near)]) if near.any() else float("inf")
 
     rng = np.random.default_rng(0)
     found = 0
     for _ in range(400):
-        d = GridRuleDriver(corridor=float(rng.choice([0.7, 1.4, 2.3])))
+        d = GridRuleDriver(corridor=float(rng.choice([0.7, 1.4, 2.3])),
+                           corridor_static=rng.choice([None, 0.5, 0.9, 1.8]))
         d.cell, d.shape = float(rng.choice([1.0, 0.5, 0.33])), (84, 84)
         grid = np.zeros((4, 84, 84), np.uint8)
         m = rng.random((84, 84)) < rng.choice([0.002, 0.02, 0.1])
-        grid[2][m], grid[3][m] = rng.integers(60, 256, m.sum()), rng.integers(0, 120, m.sum())
+        grid[2][m], grid[3][m] = rng.integers(60, 256, m.sum()), rng.integers(0, 256, m.sum())
         n = int(rng.integers(2, 120))
         heading = np.cumsum(rng.normal(0.0, 0.05, n))
         path = np.cumsum(np.stack([np.cos(heading), np.sin(heading)], 1), 0) * rng.uniform(0.2, 1.5)
@@ -180,3 +183,27 @@ def test_obstacle_distance_window_equals_the_brute_force_search() -> None:
         assert got == brute(d, grid, path, dist)
         found += np.isfinite(got)
     assert 50 < found < 390  # both outcomes are exercised
+
+
+def test_static_cells_beside_the_route_block_only_within_corridor_static() -> None:
+    """A parked car's side 1 m beside a straight route: its static cells stop the driver
+    at the default corridor (1.4 m), not with ``corridor_static = 0.9``; the same cells
+    moving stop it either way, and a static cell on the route always does."""
+    import numpy as np
+
+    from rule_based import GridRuleDriver
+
+    path = np.stack([np.arange(0.0, 30.0, 0.5), np.zeros(60)], 1)
+    dist = path[:, 0].copy()
+    for static, moving, lateral, narrow_blocks in ((230, 0, 1, False), (0, 230, 1, True),
+                                                   (230, 0, 0, True)):
+        grid = np.zeros((4, 84, 84), np.uint8)
+        rows, col = 42 - np.arange(10, 15), 42 - lateral  # 10-14 m ahead, ``lateral`` m left
+        grid[2][rows, col], grid[3][rows, col] = static, moving
+        for kw, blocks in (({}, True), ({"corridor_static": 0.9}, narrow_blocks)):
+            d = GridRuleDriver(**kw)
+            d.cell, d.shape = 1.0, (84, 84)
+            got = d._obstacle_distance(grid, path, dist)
+            reach = 0.9 if kw and static else 1.4  # the first path point within reach
+            first = dist[((path[:, 0] - 10.0) ** 2 + lateral ** 2 < reach ** 2).argmax()]
+            assert got == (first if blocks else float("inf")), (static, moving, lateral, kw)

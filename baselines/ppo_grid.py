@@ -304,12 +304,12 @@ def warm_start(args: Args, model: PPO, env: VecEnv, log: TrainingLog) -> dict[st
     """DAgger from the grid rule driver, default or tuned (:mod:`imitation`), on the
     training env; returns its record for ``model.json`` (env steps, wall time, rounds)."""
     from imitation import dagger
-    from rule_based import TUNED_PARAMS, GridRuleDriver
+    from rule_based import TUNED_PARAMS, grid_driver
 
     rounds = args.warm_start_rounds
     per_round = warm_start_steps_per_round(args)
     tuned = args.warm_start == "grid-tuned"
-    expert = GridRuleDriver(**(TUNED_PARAMS if tuned else {}))
+    expert = grid_driver(tuned)
     probe = make_env(args, train_config(args))
     try:
         probe.reset(seed=args.seed)

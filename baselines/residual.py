@@ -39,13 +39,13 @@ class RuleResidual(gym.Wrapper):
     """
 
     def __init__(self, env: gym.Env, tuned: bool = False) -> None:
-        from rule_based import TUNED_PARAMS, GridRuleDriver
+        from rule_based import grid_driver
 
         super().__init__(env)
         if not isinstance(env.action_space, spaces.Discrete):
             raise ValueError(f"--residual grid: needs a Discrete action space, "
                              f"got {env.action_space}")
-        self.driver = GridRuleDriver(**(TUNED_PARAMS if tuned else {}))
+        self.driver = grid_driver(tuned)
         self.action_space = spaces.Discrete(int(env.action_space.n) + 1)
         self._obs: Any = None
 

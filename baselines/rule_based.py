@@ -240,14 +240,21 @@ class ConstantPolicy:
         return self.action
 
 
+def grid_driver(tuned: bool = False) -> GridRuleDriver:
+    """The grid rule driver with its default parameters (``grid``) or
+    :data:`TUNED_PARAMS` (``grid-tuned``, named so in tables): the one home of that
+    choice for the reference drivers, residual PPO and the DAgger warm start."""
+    if not tuned:
+        return GridRuleDriver()
+    driver = GridRuleDriver(**TUNED_PARAMS)
+    driver.name = "rule-based (grid, tuned)"
+    return driver
+
+
 def reference_driver(name: str, args: EnvArgs, constant_action: int = 2) -> tuple[Any, gym.Env]:
     """A reference driver by name and the env it drives."""
-    if name == "grid":
-        return GridRuleDriver(), make_env(args)
-    if name == "grid-tuned":
-        driver = GridRuleDriver(**TUNED_PARAMS)
-        driver.name = "rule-based (grid, tuned)"
-        return driver, make_env(args)
+    if name in ("grid", "grid-tuned"):
+        return grid_driver(name == "grid-tuned"), make_env(args)
     if name == "autopilot":
         return AutopilotPolicy(), make_env(args, AUTOPILOT_CONFIG)
     if name == "constant":

@@ -98,6 +98,8 @@ class Args(EnvArgs):
     warm_start_steps: int = opt(24_000, "env steps of the warm start (all rounds and envs)")
     warm_start_rounds: int = opt(4, "DAgger rounds (round 0: the rule driver drives)")
     warm_start_epochs: int = opt(3, "epochs of the supervised fit after each round")
+    anchor: bool = opt(False, "with --warm-start: PPO's entropy bonus becomes a KL penalty "
+                              "to the warm-started policy (anchor.py), --ent-coef its weight")
     checkpoint_every: int = opt(10_000, "save the model every this many steps; 0 = at "
                                         "the end only")
     keep_checkpoints: bool = opt(False, "keep every checkpoint as model_<steps>.pt (+ .json) "
@@ -350,6 +352,9 @@ def train(args: Args) -> tuple[PPO, dict[str, Any]]:
             raise ValueError("--norm-reward with --warm-start: the warm start fits the value "
                              "head to the env's own returns; use one of the two")
         warm_start_steps_per_round(args)  # bad flags fail before any env is built
+    if args.anchor and (not args.warm_start or args.ent_coef <= 0):
+        raise ValueError("--anchor: needs --warm-start (the policy it stays near) and "
+                         f"--ent-coef > 0 (the KL's weight; got {args.ent_coef})")
     torch.set_num_threads(args.torch_threads)
     out = Path(args.out)
     env = make_vec_env(args)
@@ -368,6 +373,10 @@ def train(args: Args) -> tuple[PPO, dict[str, Any]]:
             log.offset = log.warm["timesteps"]
             ppo_steps -= log.offset
             log.checkpoint(model)  # the imitation policy alone, before PPO
+            if args.anchor:
+                from anchor import anchor_to
+
+                anchor_to(model.policy)
         model.learn(total_timesteps=max(ppo_steps, 0), callback=log, progress_bar=False)
         save(model, out, args, log.elapsed, log.warm)
     finally:

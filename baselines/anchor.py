@@ -1,0 +1,60 @@
+"""Keep PPO near its warm start: a KL penalty to the imitation policy in place of the
+entropy bonus.
+
+After DAgger (:mod:`imitation`) the policy drives about as well as its teacher; PPO
+with its own reward then drifts, and on the validation seeds that drift made it worse
+(``baselines/README.md``). The usual fix in fine-tuning a pretrained policy (e.g. the
+KL to the pretrained model in Baker et al., "Video PreTraining", NeurIPS 2022) is a
+penalty on the divergence from it. Here it replaces PPO's entropy bonus, of which it
+is the generalisation: with ``H`` the entropy and ``U`` the uniform policy,
+``-H(pi) = KL(pi || U) - log |A|``, so the bonus pulls the policy towards uniform;
+with the anchor ``pi_0`` the same term pulls it towards ``pi_0``::
+
+    loss = policy_loss + ent_coef * mean(KL(pi(.|s) || pi_0(.|s))) + vf_coef * value_loss
+
+:func:`anchor_to` makes stable-baselines3's PPO do exactly this without copying its
+training loop: PPO adds ``-ent_coef * mean(entropy)`` from the policy's
+``evaluate_actions``, and the anchored policy reports ``-KL`` as that entropy (so
+``train/entropy_loss`` in ``progress.csv`` logs the mean KL).
+"""
+
+from __future__ import annotations
+
+import copy
+from typing import Callable
+
+import torch
+from stable_baselines3.common.policies import ActorCriticPolicy
+from torch.distributions import kl_divergence
+
+__all__ = ["anchor_to", "kl_to_anchor"]
+
+
+def kl_to_anchor(policy: ActorCriticPolicy, anchor: ActorCriticPolicy,
+                 obs: torch.Tensor | dict[str, torch.Tensor]) -> torch.Tensor:
+    """``KL(policy(.|s) || anchor(.|s))`` per observation, ``(B,)``; differentiable in
+    ``policy`` only (the anchor is evaluated without gradients)."""
+    with torch.no_grad():
+        target = anchor.get_distribution(obs).distribution
+    return kl_divergence(policy.get_distribution(obs).distribution, target)
+
+
+def anchor_to(policy: ActorCriticPolicy) -> ActorCriticPolicy:
+    """Freeze a copy of ``policy`` as its anchor and make its ``evaluate_actions``
+    report ``-KL(policy || anchor)`` as the entropy (see the module docstring).
+
+    The anchor is held outside the policy's modules: ``policy.state_dict()`` (the
+    checkpoint) is unchanged. Returns the frozen anchor.
+    """
+    anchor = copy.deepcopy(policy)
+    anchor.set_training_mode(False)
+    for p in anchor.parameters():
+        p.requires_grad_(False)
+    evaluate: Callable = policy.evaluate_actions
+
+    def evaluate_actions(obs, actions):  # type: ignore[no-untyped-def]
+        values, log_prob, _ = evaluate(obs, actions)
+        return values, log_prob, -kl_to_anchor(policy, anchor, obs)
+
+    policy.evaluate_actions = evaluate_actions  # type: ignore[method-assign]
+    return anchor

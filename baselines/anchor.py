@@ -15,7 +15,9 @@ with the anchor ``pi_0`` the same term pulls it towards ``pi_0``::
 :func:`anchor_to` makes stable-baselines3's PPO do exactly this without copying its
 training loop: PPO adds ``-ent_coef * mean(entropy)`` from the policy's
 ``evaluate_actions``, and the anchored policy reports ``-KL`` as that entropy (so
-``train/entropy_loss`` in ``progress.csv`` logs the mean KL).
+``train/entropy_loss`` in ``progress.csv`` logs the mean KL). The KL reuses the action
+distribution that ``evaluate_actions`` builds (no second forward pass of the policy);
+only the frozen anchor runs once more, without gradients.
 """
 
 from __future__ import annotations
@@ -51,10 +53,23 @@ def anchor_to(policy: ActorCriticPolicy) -> ActorCriticPolicy:
     for p in anchor.parameters():
         p.requires_grad_(False)
     evaluate: Callable = policy.evaluate_actions
+    to_dist: Callable = policy._get_action_dist_from_latent
+    last: list = []  # the distribution evaluate_actions built: no second forward pass
+
+    def keep_dist(latent_pi):  # type: ignore[no-untyped-def]
+        last[:] = [to_dist(latent_pi)]
+        return last[0]
 
     def evaluate_actions(obs, actions):  # type: ignore[no-untyped-def]
+        last.clear()
         values, log_prob, _ = evaluate(obs, actions)
-        return values, log_prob, -kl_to_anchor(policy, anchor, obs)
+        if len(last) != 1:  # a stable-baselines3 that builds it another way
+            raise RuntimeError("anchor_to: evaluate_actions did not build one action "
+                               "distribution through _get_action_dist_from_latent")
+        with torch.no_grad():
+            target = anchor.get_distribution(obs).distribution
+        return values, log_prob, -kl_divergence(last[0].distribution, target)
 
+    policy._get_action_dist_from_latent = keep_dist  # type: ignore[method-assign]
     policy.evaluate_actions = evaluate_actions  # type: ignore[method-assign]
     return anchor

@@ -44,6 +44,7 @@ def test_kl_is_zero_at_the_anchor_and_pulls_back(model_and_obs) -> None:
     manual = (p * (p.log() - q.log())).sum(-1)
     assert (manual > 0.05).all()
     torch.testing.assert_close(-ent, manual)
+    assert torch.equal(-ent, kl_to_anchor(policy, anchor, obs))  # the same as a 2nd pass
     torch.testing.assert_close(log_prob, p[:, 0].log())
     # PPO's entropy loss, -mean(entropy) = mean(KL), minimised: back to the anchor
     opt = torch.optim.Adam(policy.action_net.parameters(), lr=0.05)

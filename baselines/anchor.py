@@ -26,19 +26,26 @@ import copy
 from typing import Callable
 
 import torch
+from stable_baselines3.common.distributions import Distribution
 from stable_baselines3.common.policies import ActorCriticPolicy
 from torch.distributions import kl_divergence
 
 __all__ = ["anchor_to", "kl_to_anchor"]
 
 
+def _kl(dist: Distribution, anchor: ActorCriticPolicy,
+        obs: torch.Tensor | dict[str, torch.Tensor]) -> torch.Tensor:
+    """``KL(dist || anchor(.|obs))``, ``(B,)``; the anchor runs without gradients."""
+    with torch.no_grad():
+        target = anchor.get_distribution(obs).distribution
+    return kl_divergence(dist.distribution, target)
+
+
 def kl_to_anchor(policy: ActorCriticPolicy, anchor: ActorCriticPolicy,
                  obs: torch.Tensor | dict[str, torch.Tensor]) -> torch.Tensor:
     """``KL(policy(.|s) || anchor(.|s))`` per observation, ``(B,)``; differentiable in
     ``policy`` only (the anchor is evaluated without gradients)."""
-    with torch.no_grad():
-        target = anchor.get_distribution(obs).distribution
-    return kl_divergence(policy.get_distribution(obs).distribution, target)
+    return _kl(policy.get_distribution(obs), anchor, obs)
 
 
 def anchor_to(policy: ActorCriticPolicy) -> ActorCriticPolicy:
@@ -66,9 +73,7 @@ def anchor_to(policy: ActorCriticPolicy) -> ActorCriticPolicy:
         if len(last) != 1:  # a stable-baselines3 that builds it another way
             raise RuntimeError("anchor_to: evaluate_actions did not build one action "
                                "distribution through _get_action_dist_from_latent")
-        with torch.no_grad():
-            target = anchor.get_distribution(obs).distribution
-        return values, log_prob, -kl_divergence(last[0].distribution, target)
+        return values, log_prob, -_kl(last[0], anchor, obs)
 
     policy._get_action_dist_from_latent = keep_dist  # type: ignore[method-assign]
     policy.evaluate_actions = evaluate_actions  # type: ignore[method-assign]

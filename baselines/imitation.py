@@ -34,7 +34,11 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.vec_env import VecEnv
 from torch import nn
 
-__all__ = ["DaggerLog", "dagger", "discounted_returns"]
+__all__ = ["DEAD_SPREAD", "DaggerLog", "dagger", "discounted_returns"]
+
+#: a fit whose held-out logits vary less than this across observations has a policy
+#: that ignores its input (logged as such; a fresh policy's spread is ~1e-3, a trained one's ~1)
+DEAD_SPREAD = 1e-5
 
 
 @dataclass
@@ -103,7 +107,10 @@ def _fit(model: PPO, data: dict[str, np.ndarray], returns: np.ndarray, epochs: i
          lr: float, batch: int, rng: np.random.Generator) -> dict[str, float]:
     """Fit the action head to the labels, then the value head to ``returns``; returns
     the held-out (last 10 %) label accuracy, its class-balanced twin (mean recall over
-    the classes present) and the value error."""
+    the classes present), the value error and ``logit_spread``, the logits' standard
+    deviation over the held-out observations (mean over actions): ~0 when the policy
+    answers every observation alike, as when the features grew until the policy MLP's
+    first tanh layer saturated (a fit at too high a rate; see :data:`DEAD_SPREAD`)."""
     policy = model.policy
     keys = [k for k in data if k != "label"]
     n = len(data["label"])
@@ -144,12 +151,14 @@ def _fit(model: PPO, data: dict[str, np.ndarray], returns: np.ndarray, epochs: i
     policy.set_training_mode(False)
     with torch.no_grad():
         o = obs(val_idx)
-        pred = policy.get_distribution(o).distribution.logits.argmax(1).numpy()
+        logits = policy.get_distribution(o).distribution.logits
+        pred = logits.argmax(1).numpy()
         v = policy.predict_values(o).flatten().numpy()
     truth = data["label"][val_idx]
     recall = [float((pred[truth == c] == c).mean()) for c in np.unique(truth)]
     return {"accuracy": float((pred == truth).mean()), "balanced_accuracy": float(np.mean(recall)),
-            "value_rmse": float(np.sqrt(np.mean((v - returns[val_idx]) ** 2)))}
+            "value_rmse": float(np.sqrt(np.mean((v - returns[val_idx]) ** 2))),
+            "logit_spread": float(logits.std(0).mean()) if len(val_idx) > 1 else float("nan")}
 
 
 def dagger(model: PPO, venv: VecEnv, expert: Any, rounds: int, steps_per_round: int,
@@ -207,6 +216,9 @@ def dagger(model: PPO, venv: VecEnv, expert: Any, rounds: int, steps_per_round: 
         log(f"dagger round {r} (rule driver's share {0.5 ** r:.2f}): {len(ended)} episodes, "
             f"success {success:.2f}, collision {collision:.2f}; {len(returns)} labels, "
             f"held-out accuracy {stats['accuracy']:.3f} (balanced "
-            f"{stats['balanced_accuracy']:.3f}), value rmse {stats['value_rmse']:.2f}")
+            f"{stats['balanced_accuracy']:.3f}), value rmse {stats['value_rmse']:.2f}"
+            + ("; the policy ignores its input (logit spread "
+               f"{stats['logit_spread']:.1e}): lower --warm-start-lr"
+               if stats["logit_spread"] < DEAD_SPREAD else ""))
     result.wall_s = time.monotonic() - start
     return result

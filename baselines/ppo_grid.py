@@ -98,6 +98,7 @@ class Args(EnvArgs):
     warm_start_steps: int = opt(24_000, "env steps of the warm start (all rounds and envs)")
     warm_start_rounds: int = opt(4, "DAgger rounds (round 0: the rule driver drives)")
     warm_start_epochs: int = opt(3, "epochs of the supervised fit after each round")
+    warm_start_lr: float = opt(1e-3, "Adam learning rate of the supervised fits")
     anchor: bool = opt(False, "with --warm-start: PPO's entropy bonus becomes a KL penalty "
                               "to the warm-started policy (anchor.py), --ent-coef its weight")
     checkpoint_every: int = opt(10_000, "save the model every this many steps; 0 = at "
@@ -287,12 +288,15 @@ def warm_start_steps_per_round(args: Args) -> int:
     """Vector steps per DAgger round of ``args``' warm start.
 
     Raises:
-        ValueError: an unknown ``--warm-start``, or ``--warm-start-steps`` below one step
-            per round and env or not below ``--total-timesteps``.
+        ValueError: an unknown ``--warm-start``, ``--warm-start-steps`` below one step
+            per round and env or not below ``--total-timesteps``, or a
+            ``--warm-start-lr`` that is not positive.
     """
     if args.warm_start not in ("grid", "grid-tuned"):
         raise ValueError(f"--warm-start: expected '', grid or grid-tuned, got "
                          f"{args.warm_start!r}")
+    if not args.warm_start_lr > 0:
+        raise ValueError(f"--warm-start-lr {args.warm_start_lr}: must be positive")
     rounds = args.warm_start_rounds
     per_round = args.warm_start_steps // (rounds * args.n_envs) if rounds > 0 else 0
     if per_round < 1 or args.warm_start_steps >= args.total_timesteps:
@@ -319,7 +323,7 @@ def warm_start(args: Args, model: PPO, env: VecEnv, log: TrainingLog) -> dict[st
     finally:
         probe.close()
     result = dagger(model, env, expert, rounds, per_round, epochs=args.warm_start_epochs,
-                    seed=args.seed,
+                    lr=args.warm_start_lr, seed=args.seed,
                     on_episode=lambda r, i, steps, ep: log.write_episode(steps, i, ep,
                                                                          f"dagger{r}"),
                     log=print if args.verbose else (lambda _: None))

@@ -9,7 +9,9 @@ import numpy as np
 import pytest
 
 import ppo_grid
-from imitation import _fit, discounted_returns
+import torch
+
+from imitation import DEAD_SPREAD, _fit, discounted_returns
 from ppo_grid import Args, build_model, make_vec_env
 from rl_common import parse_args
 
@@ -51,6 +53,35 @@ def test_fit_learns_labels_and_returns(env_flags: list[str]) -> None:
     assert after["value_rmse"] < 0.5 * before["value_rmse"]
 
 
+def test_fit_reports_a_policy_that_ignores_its_input(env_flags: list[str]) -> None:
+    """The failure of a fit at too high a rate (seed 2 of the anchored recipe, 2026-12-06):
+    features ~300x their initial size saturate the policy MLP's first tanh layer, so every
+    observation gets the same logits; ``logit_spread`` says so, a fresh policy's does not."""
+    args = parse_args(Args, [*env_flags, "--n-envs", "1", "--vec-env", "dummy"])
+    env = make_vec_env(args)
+    try:
+        model = build_model(args, env)
+        space = env.observation_space
+        rng = np.random.default_rng(0)
+        n = 200
+        data = {k: rng.uniform(0, 1, (n, *space[k].shape)).astype(space[k].dtype)
+                for k in space.spaces}
+        data["label"] = rng.integers(0, 3, n)
+        returns = np.zeros(n, np.float32)
+        fresh = _fit(model, data, returns, epochs=0, lr=1e-3, batch=64,
+                     rng=np.random.default_rng(0))
+        with torch.no_grad():
+            # every unit of the first tanh layer pinned at +-1 whatever the input
+            first = model.policy.mlp_extractor.policy_net[0]
+            first.bias.copy_(1e4 * torch.sign(torch.randn_like(first.bias)))
+        saturated = _fit(model, data, returns, epochs=0, lr=1e-3, batch=64,
+                         rng=np.random.default_rng(0))
+    finally:
+        env.close()
+    assert fresh["logit_spread"] > 10 * DEAD_SPREAD
+    assert saturated["logit_spread"] < DEAD_SPREAD
+
+
 @pytest.mark.parametrize("expert", ["grid", "grid-tuned"])
 def test_warm_started_run_counts_its_steps(env_flags: list[str], tmp_path, expert: str) -> None:
     out = tmp_path / "ws"
@@ -84,6 +115,8 @@ def test_warm_started_run_counts_its_steps(env_flags: list[str], tmp_path, exper
     (["--warm-start", "autopilot"], "--warm-start"),
     (["--warm-start", "grid", "--warm-start-steps", "1"], "--warm-start-steps"),
     (["--warm-start", "grid", "--warm-start-steps", "500"], "--warm-start-steps"),
+    (["--warm-start", "grid", "--warm-start-steps", "60", "--warm-start-lr", "0"],
+     "--warm-start-lr"),
 ])
 def test_bad_warm_start_flags(env_flags: list[str], tmp_path, flags: list[str],
                               match: str) -> None:

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import csv
 import json
+from contextlib import contextmanager
+from typing import Any, Iterator
 
 import numpy as np
 import pytest
@@ -26,19 +28,28 @@ def test_discounted_returns_stop_at_episode_ends() -> None:
     np.testing.assert_allclose(g[:, 1], [3.0, 2.0, 4.0])
 
 
-def test_fit_learns_labels_and_returns(env_flags: list[str]) -> None:
-    """Labels that follow the ego speed feature, returns that follow it too: the fit
-    must reach them on held-out rows (an untrained policy guesses ~1/3)."""
+@contextmanager
+def _model_and_data(env_flags: list[str], n: int) -> Iterator[tuple[Any, dict[str, np.ndarray]]]:
+    """A fresh PPO model on a one-env dummy vector env of ``env_flags`` and ``n``
+    observations: its vectors uniform in [0, 1], its grid empty (a street with nothing
+    on it); the env is closed afterwards."""
     args = parse_args(Args, [*env_flags, "--n-envs", "1", "--vec-env", "dummy"])
     env = make_vec_env(args)
     try:
-        model = build_model(args, env)
         space = env.observation_space
         rng = np.random.default_rng(0)
-        n = 600
         data = {k: rng.uniform(0, 1, (n, *space[k].shape)).astype(space[k].dtype)
                 for k in space.spaces if k != "grid"}
-        data["grid"] = np.zeros((n, *space["grid"].shape), np.uint8)  # an empty street
+        data["grid"] = np.zeros((n, *space["grid"].shape), np.uint8)
+        yield build_model(args, env), data
+    finally:
+        env.close()
+
+
+def test_fit_learns_labels_and_returns(env_flags: list[str]) -> None:
+    """Labels that follow the ego speed feature, returns that follow it too: the fit
+    must reach them on held-out rows (an untrained policy guesses ~1/3)."""
+    with _model_and_data(env_flags, 600) as (model, data):
         speed = data["ego"][:, 0]
         data["label"] = np.digitize(speed, [1 / 3, 2 / 3])  # 0, 1, 2 by speed
         returns = (10.0 * speed).astype(np.float32)
@@ -46,8 +57,6 @@ def test_fit_learns_labels_and_returns(env_flags: list[str]) -> None:
                       rng=np.random.default_rng(0))
         after = _fit(model, data, returns, epochs=30, lr=3e-3, batch=64,
                      rng=np.random.default_rng(0))
-    finally:
-        env.close()
     assert before["accuracy"] < 0.6
     assert after["accuracy"] > 0.85
     assert after["value_rmse"] < 0.5 * before["value_rmse"]
@@ -57,17 +66,9 @@ def test_fit_reports_a_policy_that_ignores_its_input(env_flags: list[str]) -> No
     """The failure of a fit at too high a rate (seed 2 of the anchored recipe, 2026-12-06):
     features ~300x their initial size saturate the policy MLP's first tanh layer, so every
     observation gets the same logits; ``logit_spread`` says so, a fresh policy's does not."""
-    args = parse_args(Args, [*env_flags, "--n-envs", "1", "--vec-env", "dummy"])
-    env = make_vec_env(args)
-    try:
-        model = build_model(args, env)
-        space = env.observation_space
-        rng = np.random.default_rng(0)
-        n = 200
-        data = {k: rng.uniform(0, 1, (n, *space[k].shape)).astype(space[k].dtype)
-                for k in space.spaces}
-        data["label"] = rng.integers(0, 3, n)
-        returns = np.zeros(n, np.float32)
+    with _model_and_data(env_flags, 200) as (model, data):
+        data["label"] = np.arange(200) % 3
+        returns = np.zeros(200, np.float32)
         fresh = _fit(model, data, returns, epochs=0, lr=1e-3, batch=64,
                      rng=np.random.default_rng(0))
         with torch.no_grad():
@@ -76,8 +77,6 @@ def test_fit_reports_a_policy_that_ignores_its_input(env_flags: list[str]) -> No
             first.bias.copy_(1e4 * torch.sign(torch.randn_like(first.bias)))
         saturated = _fit(model, data, returns, epochs=0, lr=1e-3, batch=64,
                          rng=np.random.default_rng(0))
-    finally:
-        env.close()
     assert fresh["logit_spread"] > 10 * DEAD_SPREAD
     assert saturated["logit_spread"] < DEAD_SPREAD
 

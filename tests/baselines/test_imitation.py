@@ -9,10 +9,9 @@ from typing import Any, Iterator
 
 import numpy as np
 import pytest
-
-import ppo_grid
 import torch
 
+import ppo_grid
 from imitation import DEAD_SPREAD, _fit, discounted_returns
 from ppo_grid import Args, build_model, make_vec_env
 from rl_common import parse_args

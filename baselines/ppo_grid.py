@@ -98,9 +98,8 @@ class Args(EnvArgs):
     warm_start_steps: int = opt(24_000, "env steps of the warm start (all rounds and envs)")
     warm_start_rounds: int = opt(4, "DAgger rounds (round 0: the rule driver drives)")
     warm_start_epochs: int = opt(3, "epochs of the supervised fit after each round")
-    warm_start_lr: float = opt(3e-4, "Adam learning rate of the supervised fits (runs "
-                                     "before 2026-12-06 used 1e-3: at 1e-3 a six-epoch fit "
-                                     "can saturate the policy, baselines/README.md)")
+    warm_start_lr: float = opt(3e-4, "Adam rate of the supervised fits (1e-3 before "
+                                     "2026-12-06 saturated a six-epoch fit)")
     anchor: bool = opt(False, "with --warm-start: PPO's entropy bonus becomes a KL penalty "
                               "to the warm-started policy (anchor.py), --ent-coef its weight")
     checkpoint_every: int = opt(10_000, "save the model every this many steps; 0 = at "

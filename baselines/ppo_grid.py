@@ -294,8 +294,7 @@ def warm_start_steps_per_round(args: Args) -> int:
             ``--warm-start-lr`` that is not positive.
     """
     if args.warm_start not in ("grid", "grid-tuned"):
-        raise ValueError(f"--warm-start: expected '', grid or grid-tuned, got "
-                         f"{args.warm_start!r}")
+        raise ValueError(f"--warm-start: expected '', grid or grid-tuned, got {args.warm_start!r}")
     if not args.warm_start_lr > 0:
         raise ValueError(f"--warm-start-lr {args.warm_start_lr}: must be positive")
     rounds = args.warm_start_rounds

@@ -15,7 +15,11 @@ action. DAgger (Ross, Gordon & Bagnell, AISTATS 2011) uses that:
    (cross-entropy, each class weighted by its inverse frequency, at most 10x: the rule
    driver holds its target speed in ~93 % of steps, and the rare SLOWER before an
    obstacle is what matters), then its value head to the discounted returns of the episodes
-   (features frozen), so that PPO starts with a value baseline of the same policy.
+   (features frozen), so that PPO starts with a value baseline of the same policy;
+4. a fit after which the policy answers every observation alike (its logits' spread
+   below :data:`DEAD_SPREAD`: at too high a rate the features grow until the policy
+   MLP's tanh layer saturates) is undone and redone at a tenth of the rate, which the
+   later rounds keep (at most ``retries`` times).
 
 PPO then continues from this policy with its own reward. Every env step of the
 warm start counts in the training budget: :func:`dagger` returns their number and
@@ -24,6 +28,7 @@ warm start counts in the training budget: :func:`dagger` returns their number an
 
 from __future__ import annotations
 
+import copy
 import time
 from dataclasses import dataclass, field
 from typing import Any, Callable
@@ -163,6 +168,7 @@ def _fit(model: PPO, data: dict[str, np.ndarray], returns: np.ndarray, epochs: i
 
 def dagger(model: PPO, venv: VecEnv, expert: Any, rounds: int, steps_per_round: int,
            epochs: int = 3, lr: float = 1e-3, batch: int = 256, seed: int = 0,
+           retries: int = 2,
            on_episode: Callable[[int, int, int, dict[str, Any]], None] | None = None,
            log: Callable[[str], None] = print) -> DaggerLog:
     """Warm-start ``model``'s policy by DAgger from ``expert`` (see the module docstring).
@@ -176,6 +182,8 @@ def dagger(model: PPO, venv: VecEnv, expert: Any, rounds: int, steps_per_round: 
         rounds: DAgger rounds (round 0 is the expert's own driving).
         steps_per_round: vector steps per round (``venv.num_envs`` env steps each).
         epochs, lr, batch: the supervised fit after each round (Adam).
+        retries: refits of a round whose fitted policy ignores its input, each from the
+            weights before that fit at a tenth of the rate (kept for later rounds).
         seed: seed of the minibatch order.
         on_episode: called with ``(round, env index, env steps so far,
             info["episode"])`` for every
@@ -206,11 +214,20 @@ def dagger(model: PPO, venv: VecEnv, expert: Any, rounds: int, steps_per_round: 
                                           model.gamma).reshape(-1)
         data = {k: np.concatenate([data[k], v]) if data else v for k, v in part.items()}
         returns = np.concatenate([returns, part_returns])
+        before = copy.deepcopy(model.policy.state_dict())
         stats = _fit(model, data, returns, epochs, lr, batch, rng)
+        refits = 0
+        while stats["logit_spread"] < DEAD_SPREAD and refits < retries:
+            log(f"dagger round {r}: the fitted policy ignores its input (logit spread "
+                f"{stats['logit_spread']:.1e} at rate {lr:g}): refitting at {lr / 10:g}")
+            model.policy.load_state_dict(before)
+            lr, refits = lr / 10, refits + 1
+            stats = _fit(model, data, returns, epochs, lr, batch, rng)
         success = float(np.mean([ep["is_success"] for ep in ended])) if ended else float("nan")
         collision = float(np.mean([ep["collision"] for ep in ended])) if ended else float("nan")
         row = {"round": r, "expert_share": 0.5 ** r, "samples": len(returns),
                "episodes": len(ended), "success": success, "collision": collision, **stats,
+               "fit_lr": lr, "refits": refits,
                "wall_s": round(time.monotonic() - start, 1)}
         result.rounds.append(row)
         log(f"dagger round {r} (rule driver's share {0.5 ** r:.2f}): {len(ended)} episodes, "

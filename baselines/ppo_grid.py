@@ -82,9 +82,8 @@ class Args(EnvArgs):
     gae_lambda: float = opt(0.95, "GAE lambda")
     clip_range: float = opt(0.2, "PPO clip range")
     ent_coef: float = opt(0.01, "entropy bonus")
-    norm_reward: bool = opt(False, "scale rewards by a running std of the discounted "
-                                   "return (SB3 VecNormalize, observations untouched); the "
-                                   "logged episodes keep the env's own rewards")
+    norm_reward: bool = opt(False, "scale rewards by a running std of the return (SB3 "
+                                   "VecNormalize); the logged episodes keep the env's own")
     vf_coef: float = opt(0.5, "value loss weight")
     torch_threads: int = opt(1, "torch CPU threads (envs use the other cores)")
     residual: str = opt("", "'' (none) | grid | grid-tuned: PPO on top of the grid rule "
@@ -92,14 +91,14 @@ class Args(EnvArgs):
                             "rule driver's action, k >= 1 the env's action k - 1")
     residual_p_rule: float = opt(0.9, "--residual grid: the fresh policy's probability "
                                       "of action 0 (the rule driver)")
-    warm_start: str = opt("", "'' (none) | grid | grid-tuned: DAgger from the grid rule "
-                              "driver (default or tuned parameters) before "
-                              "PPO (imitation.py); its env steps count in the budget")
+    warm_start: str = opt("", "'' (none) | grid | grid-tuned: DAgger from the grid rule driver "
+                              "before PPO (imitation.py); its steps count in the budget")
     warm_start_steps: int = opt(24_000, "env steps of the warm start (all rounds and envs)")
     warm_start_rounds: int = opt(4, "DAgger rounds (round 0: the rule driver drives)")
     warm_start_epochs: int = opt(3, "epochs of the supervised fit after each round")
     warm_start_lr: float = opt(3e-4, "Adam rate of the supervised fits (1e-3 before "
                                      "2026-12-06 saturated a six-epoch fit)")
+    warm_start_retries: int = opt(2, "refits at a tenth of the rate of a blind DAgger fit")
     anchor: bool = opt(False, "with --warm-start: PPO's entropy bonus becomes a KL penalty "
                               "to the warm-started policy (anchor.py), --ent-coef its weight")
     checkpoint_every: int = opt(10_000, "save the model every this many steps; 0 = at "
@@ -323,7 +322,7 @@ def warm_start(args: Args, model: PPO, env: VecEnv, log: TrainingLog) -> dict[st
     finally:
         probe.close()
     result = dagger(model, env, expert, rounds, per_round, epochs=args.warm_start_epochs,
-                    lr=args.warm_start_lr, seed=args.seed,
+                    lr=args.warm_start_lr, seed=args.seed, retries=args.warm_start_retries,
                     on_episode=lambda r, i, steps, ep: log.write_episode(steps, i, ep,
                                                                          f"dagger{r}"),
                     log=print if args.verbose else (lambda _: None))
@@ -340,7 +339,8 @@ def train(args: Args) -> tuple[PPO, dict[str, Any]]:
     """Train PPO as ``args`` says; returns the model and the ``model.json`` content."""
     for flag, value, lo in (("--total-timesteps", args.total_timesteps, 1),
                             ("--n-envs", args.n_envs, 1), ("--n-steps", args.n_steps, 2),
-                            ("--batch-size", args.batch_size, 2)):
+                            ("--batch-size", args.batch_size, 2),
+                            ("--warm-start-retries", args.warm_start_retries, 0)):
         if value < lo:
             raise ValueError(f"{flag} {value}: must be at least {lo}")
     check_env_args(args)

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 import torch
 
+import imitation
 import ppo_grid
 from imitation import DEAD_SPREAD, _fit, discounted_returns
 from ppo_grid import Args, build_model, make_vec_env
@@ -80,6 +81,42 @@ def test_fit_reports_a_policy_that_ignores_its_input(env_flags: list[str]) -> No
     assert saturated["logit_spread"] < DEAD_SPREAD
 
 
+@pytest.mark.parametrize("retries", [2, 0])
+def test_a_blind_fit_is_undone_and_redone_at_a_tenth_of_the_rate(
+        env_flags: list[str], tmp_path, monkeypatch, retries: int) -> None:
+    """Round 0's first fit ends blind (its tanh layer pinned, as a fit at too high a rate
+    leaves it): the warm start restores the weights from before that fit and refits at a
+    tenth of the rate, which round 1 keeps; ``--warm-start-retries 0`` keeps the blind fit."""
+    calls: list[float] = []
+
+    def blinding_fit(model: Any, data: Any, returns: Any, epochs: int, lr: float,
+                     batch: int, rng: Any) -> dict[str, float]:
+        calls.append(lr)
+        if len(calls) == 1:
+            with torch.no_grad():
+                first = model.policy.mlp_extractor.policy_net[0]
+                first.bias.copy_(1e4 * torch.sign(torch.randn_like(first.bias)))
+            return _fit(model, data, returns, 0, lr, batch, rng)
+        return _fit(model, data, returns, epochs, lr, batch, rng)
+
+    monkeypatch.setattr(imitation, "_fit", blinding_fit)
+    meta = ppo_grid.main([*env_flags, "--n-envs", "2", "--vec-env", "dummy", "--n-steps", "32",
+                          "--batch-size", "32", "--n-epochs", "1", "--total-timesteps", "184",
+                          "--map-pool", "2", "--verbose", "0", "--warm-start", "grid",
+                          "--warm-start-steps", "120", "--warm-start-rounds", "2",
+                          "--warm-start-lr", "1e-3", "--warm-start-retries", str(retries),
+                          "--checkpoint-every", "0", "--out", str(tmp_path / "ws")])
+    first, second = meta["warm_start"]["rounds"]
+    if retries:
+        assert calls == pytest.approx([1e-3, 1e-4, 1e-4])
+        assert (first["refits"], second["refits"]) == (1, 0)
+        assert first["fit_lr"] == second["fit_lr"] == pytest.approx(1e-4)
+        assert first["logit_spread"] > 10 * DEAD_SPREAD
+    else:
+        assert calls == pytest.approx([1e-3, 1e-3]) and first["refits"] == 0
+        assert first["logit_spread"] < DEAD_SPREAD
+
+
 @pytest.mark.parametrize("expert", ["grid", "grid-tuned"])
 def test_warm_started_run_counts_its_steps(env_flags: list[str], tmp_path, expert: str) -> None:
     out = tmp_path / "ws"
@@ -115,6 +152,8 @@ def test_warm_started_run_counts_its_steps(env_flags: list[str], tmp_path, exper
     (["--warm-start", "grid", "--warm-start-steps", "500"], "--warm-start-steps"),
     (["--warm-start", "grid", "--warm-start-steps", "60", "--warm-start-lr", "0"],
      "--warm-start-lr"),
+    (["--warm-start", "grid", "--warm-start-steps", "60", "--warm-start-retries", "-1"],
+     "--warm-start-retries"),
 ])
 def test_bad_warm_start_flags(env_flags: list[str], tmp_path, flags: list[str],
                               match: str) -> None:

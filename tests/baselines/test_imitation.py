@@ -46,6 +46,14 @@ def _model_and_data(env_flags: list[str], n: int) -> Iterator[tuple[Any, dict[st
         env.close()
 
 
+def _pin_first_tanh(model: Any) -> None:
+    """Pin every unit of the policy MLP's first tanh layer at +-1 whatever the input
+    (what a fit at too high a rate does to it)."""
+    with torch.no_grad():
+        first = model.policy.mlp_extractor.policy_net[0]
+        first.bias.copy_(1e4 * torch.sign(torch.randn_like(first.bias)))
+
+
 def test_fit_learns_labels_and_returns(env_flags: list[str]) -> None:
     """Labels that follow the ego speed feature, returns that follow it too: the fit
     must reach them on held-out rows (an untrained policy guesses ~1/3)."""
@@ -71,10 +79,7 @@ def test_fit_reports_a_policy_that_ignores_its_input(env_flags: list[str]) -> No
         returns = np.zeros(200, np.float32)
         fresh = _fit(model, data, returns, epochs=0, lr=1e-3, batch=64,
                      rng=np.random.default_rng(0))
-        with torch.no_grad():
-            # every unit of the first tanh layer pinned at +-1 whatever the input
-            first = model.policy.mlp_extractor.policy_net[0]
-            first.bias.copy_(1e4 * torch.sign(torch.randn_like(first.bias)))
+        _pin_first_tanh(model)
         saturated = _fit(model, data, returns, epochs=0, lr=1e-3, batch=64,
                          rng=np.random.default_rng(0))
     assert fresh["logit_spread"] > 10 * DEAD_SPREAD
@@ -93,9 +98,7 @@ def test_a_blind_fit_is_undone_and_redone_at_a_tenth_of_the_rate(
                      batch: int, rng: Any) -> dict[str, float]:
         calls.append(lr)
         if len(calls) == 1:
-            with torch.no_grad():
-                first = model.policy.mlp_extractor.policy_net[0]
-                first.bias.copy_(1e4 * torch.sign(torch.randn_like(first.bias)))
+            _pin_first_tanh(model)
             return _fit(model, data, returns, 0, lr, batch, rng)
         return _fit(model, data, returns, epochs, lr, batch, rng)
 

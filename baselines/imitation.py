@@ -81,8 +81,10 @@ def _rollout(venv: VecEnv, model: PPO, expert: Any, steps: int, beta: float,
     buf: dict[str, list[np.ndarray]] = {k: [] for k in keys}
     labels, rewards, dones = [], [], []
     n = venv.num_envs
+    infos = list(venv.reset_infos)  # the info of each env's current observation
     for t in range(steps):
-        label = np.array([expert.act({k: obs[k][i] for k in keys}, {}) for i in range(n)])
+        label = np.array([expert.act({k: obs[k][i] for k in keys}, infos[i])
+                          for i in range(n)])
         for k in keys:
             buf[k].append(obs[k].copy())
         labels.append(label)
@@ -96,6 +98,8 @@ def _rollout(venv: VecEnv, model: PPO, expert: Any, steps: int, beta: float,
         for i, info in enumerate(infos):
             if "episode" in info:
                 on_episode(i, (t + 1) * n, info["episode"])
+        # a finished episode's env was reset: its observation is the new episode's
+        infos = [venv.reset_infos[i] if done[i] else infos[i] for i in range(n)]
     out = {k: np.concatenate(v) for k, v in buf.items()}  # step-major: row t * n + i
     out["label"] = np.concatenate(labels)
     out["rewards"] = np.stack(rewards).astype(np.float64)
@@ -176,8 +180,9 @@ def dagger(model: PPO, venv: VecEnv, expert: Any, rounds: int, steps_per_round: 
     Args:
         model: the PPO model whose policy is trained in place.
         venv: its vector env (the training env; reset at every round).
-        expert: a driver with ``act(obs, info) -> int`` on single observations (the
-            :class:`rule_based.GridRuleDriver`, already ``reset`` on an env of the same
+        expert: a driver with ``act(obs, info) -> int`` on single observations and the
+            ``info`` of each (the :class:`rule_based.GridRuleDriver` or
+            :class:`rule_based.CautiousDriver`, already ``reset`` on an env of the same
             config).
         rounds: DAgger rounds (round 0 is the expert's own driving).
         steps_per_round: vector steps per round (``venv.num_envs`` env steps each).

@@ -56,6 +56,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv,
 from extractors import GridCNN
 from rl_common import EnvArgs, atomic_write_bytes, atomic_write_text, machine_info, make_env, opt
 from rl_common import check_env_args, cli, parse_args, to_argv
+from rule_based import TEACHERS, teacher
 
 EXTRACTORS = ("grid-cnn", "route-cnn", "combined")
 
@@ -89,9 +90,8 @@ class Args(EnvArgs):
     residual: str = opt("", "'' (none) | grid | grid-tuned: PPO on top of the grid rule "
                             "driver, default or tuned (residual.py): action 0 takes the "
                             "rule driver's action, k >= 1 the env's action k - 1")
-    residual_p_rule: float = opt(0.9, "--residual grid: the fresh policy's probability "
-                                      "of action 0 (the rule driver)")
-    warm_start: str = opt("", "'' (none) | grid | grid-tuned: DAgger from the grid rule driver "
+    residual_p_rule: float = opt(0.9, "--residual: the fresh policy's P(action 0, the rule)")
+    warm_start: str = opt("", "'' (none) | grid | grid-tuned | cautious: DAgger from that driver "
                               "before PPO (imitation.py); its steps count in the budget")
     warm_start_steps: int = opt(24_000, "env steps of the warm start (all rounds and envs)")
     warm_start_rounds: int = opt(4, "DAgger rounds (round 0: the rule driver drives)")
@@ -101,8 +101,7 @@ class Args(EnvArgs):
     warm_start_retries: int = opt(2, "refits at a tenth of the rate of a blind DAgger fit")
     anchor: bool = opt(False, "with --warm-start: PPO's entropy bonus becomes a KL penalty "
                               "to the warm-started policy (anchor.py), --ent-coef its weight")
-    checkpoint_every: int = opt(10_000, "save the model every this many steps; 0 = at "
-                                        "the end only")
+    checkpoint_every: int = opt(10_000, "save the model every this many steps; 0: at the end")
     keep_checkpoints: bool = opt(False, "keep every checkpoint as model_<steps>.pt (+ .json) "
                                         "beside model.pt, which each one overwrites; with "
                                         "--warm-start also the policy right after it")
@@ -167,8 +166,9 @@ class TrainingLog(BaseCallback):
 
 
 def train_config(args: Args) -> dict[str, Any]:
-    """What training sets on the env under ``--env-config``: the map pool."""
-    return {"world": {"map": {"pool": args.map_pool}}}
+    """What training sets on the env under ``--env-config``: the map pool and what the
+    ``--warm-start`` teacher needs (``cautious``: ``info.autopilot``, off again for PPO)."""
+    return {"world": {"map": {"pool": args.map_pool}}, **TEACHERS.get(args.warm_start, {})}
 
 
 def make_vec_env(args: Args) -> VecEnv:
@@ -292,8 +292,9 @@ def warm_start_steps_per_round(args: Args) -> int:
             per round and env or not below ``--total-timesteps``, or a
             ``--warm-start-lr`` that is not positive.
     """
-    if args.warm_start not in ("grid", "grid-tuned"):
-        raise ValueError(f"--warm-start: expected '', grid or grid-tuned, got {args.warm_start!r}")
+    if args.warm_start not in TEACHERS:
+        raise ValueError(f"--warm-start: expected '' or one of {', '.join(TEACHERS)}, got "
+                         f"{args.warm_start!r}")
     if not args.warm_start_lr > 0:
         raise ValueError(f"--warm-start-lr {args.warm_start_lr}: must be positive")
     rounds = args.warm_start_rounds
@@ -306,15 +307,13 @@ def warm_start_steps_per_round(args: Args) -> int:
 
 
 def warm_start(args: Args, model: PPO, env: VecEnv, log: TrainingLog) -> dict[str, Any]:
-    """DAgger from the grid rule driver, default or tuned (:mod:`imitation`), on the
+    """DAgger from a teacher of :data:`rule_based.TEACHERS` (:mod:`imitation`), on the
     training env; returns its record for ``model.json`` (env steps, wall time, rounds)."""
     from imitation import dagger
-    from rule_based import TUNED_PARAMS, grid_driver
 
     rounds = args.warm_start_rounds
     per_round = warm_start_steps_per_round(args)
-    tuned = args.warm_start == "grid-tuned"
-    expert = grid_driver(tuned)
+    expert, method = teacher(args.warm_start)
     probe = make_env(args, train_config(args))
     try:
         probe.reset(seed=args.seed)
@@ -326,7 +325,8 @@ def warm_start(args: Args, model: PPO, env: VecEnv, log: TrainingLog) -> dict[st
                     on_episode=lambda r, i, steps, ep: log.write_episode(steps, i, ep,
                                                                          f"dagger{r}"),
                     log=print if args.verbose else (lambda _: None))
-    method = "dagger from the grid rule driver" + (f" (tuned: {TUNED_PARAMS})" if tuned else "")
+    if "info" in train_config(args):  # PPO needs no advice: its envs stop asking
+        env.env_method("reset", options={"config": {"info": {"autopilot": False}}})
     return {"method": method, "timesteps": result.timesteps,
             "wall_s": round(result.wall_s, 1), "rounds": result.rounds}
 

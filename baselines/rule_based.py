@@ -14,6 +14,10 @@
   no surprise to it: a *privileged* upper reference, not a perception baseline.
 * ``constant``: one fixed action every step (default ``2`` = FASTER), a grid-blind
   driver: what ignoring the perception grid costs.
+* ``cautious``: :class:`CautiousDriver`, the slower of ``grid-tuned``'s action and the
+  action closest to what the autopilot would do now (``info["autopilot_action"]``:
+  the world's autopilot asked about the state the meta-actions drive, with the env's
+  ``info.autopilot``): privileged, a teacher for imitation, not a baseline to beat.
 
 Run::
 
@@ -31,7 +35,7 @@ import numpy as np
 from rl_common import EnvArgs, EpisodeResult, evaluate_policy, make_env, opt, parse_args
 from rl_common import cli, report_run
 
-DRIVERS = ("grid", "grid-tuned", "autopilot", "constant")
+DRIVERS = ("grid", "grid-tuned", "autopilot", "constant", "cautious")
 #: :class:`GridRuleDriver` parameters chosen on validation seeds in PPO's config (collision
 #: -30, off-road -10, ``action.repeat = 3``, 200 decisions) by ``tune_rule.py`` in two
 #: stages: 16 settings on seeds 20000-20049 (``benchmarks/search/rule-driver.json``), then
@@ -43,13 +47,15 @@ TUNED_PARAMS: dict[str, float] = {"corridor_static": 0.9, "give_way_line": 2.0,
                                    "give_way_moving": 0.5, "margin": 6.0}
 #: ``--env-config`` the autopilot driver adds: the world's own driver.
 AUTOPILOT_CONFIG: dict[str, Any] = {"action": {"type": "autopilot"}}
+#: ``--env-config`` the cautious driver adds: the autopilot's advice in ``info``.
+ADVICE_CONFIG: dict[str, Any] = {"info": {"autopilot": True}}
 
 
 @dataclass
 class Args(EnvArgs):
     """Run a rule-based driver on a DSTGrid env."""
 
-    driver: str = opt("grid", "grid | grid-tuned | autopilot | constant")
+    driver: str = opt("grid", "grid | grid-tuned | autopilot | constant | cautious")
     constant_action: int = opt(2, "the action of the constant driver (2 = FASTER)")
     episodes: int = opt(10, "episodes, one per seed")
     seed: int = opt(10_000, "first seed (episode k uses seed + k)")
@@ -225,6 +231,35 @@ class AutopilotPolicy:
         return 0
 
 
+class CautiousDriver:
+    """The slower of ``grid-tuned``'s action and the autopilot's advice.
+
+    Each step it takes the lower of the two ``Discrete(3)`` speed actions (SLOWER <
+    IDLE < FASTER): the tuned grid driver's and ``info["autopilot_action"]``, the action
+    closest to what the world's autopilot would do now (privileged: it reads the
+    traffic's ground truth and its junction queue). Neither alone avoids collisions:
+    the traffic does not give way to an ego it does not queue, so the autopilot's
+    advice, followed, collides where its own driving does not; where either sees
+    danger, this driver slows. Needs an env with :data:`ADVICE_CONFIG`.
+    """
+
+    name = "cautious: min(grid-tuned, autopilot advice) (privileged)"
+
+    def __init__(self) -> None:
+        self.grid = grid_driver(True)
+
+    def reset(self, env: gym.Env, seed: int) -> None:
+        if env.unwrapped.get_action_meanings() != ["SLOWER", "IDLE", "FASTER"]:
+            raise ValueError("CautiousDriver: needs the speed actions (SLOWER, IDLE, FASTER)")
+        if not env.unwrapped.config["info"]["autopilot"]:
+            raise ValueError("CautiousDriver: build the env with ADVICE_CONFIG "
+                             "(info.autopilot = true)")
+        self.grid.reset(env, seed)
+
+    def act(self, obs: Any, info: dict[str, Any]) -> int:
+        return min(self.grid.act(obs, info), int(info["autopilot_action"]))
+
+
 class ConstantPolicy:
     """The same action every step (a grid-blind driver)."""
 
@@ -251,6 +286,20 @@ def grid_driver(tuned: bool = False) -> GridRuleDriver:
     return driver
 
 
+#: DAgger teachers (``ppo_grid.py --warm-start``) -> the ``--env-config`` they need
+TEACHERS: dict[str, dict[str, Any]] = {"grid": {}, "grid-tuned": {}, "cautious": ADVICE_CONFIG}
+
+
+def teacher(name: str) -> tuple[Any, str]:
+    """A DAgger teacher of :data:`TEACHERS` and how ``model.json`` describes it."""
+    if name == "cautious":
+        driver = CautiousDriver()
+        return driver, f"dagger from {driver.name}"
+    tuned = name == "grid-tuned"
+    return grid_driver(tuned), "dagger from the grid rule driver" + (
+        f" (tuned: {TUNED_PARAMS})" if tuned else "")
+
+
 def reference_driver(name: str, args: EnvArgs, constant_action: int = 2) -> tuple[Any, gym.Env]:
     """A reference driver by name and the env it drives."""
     if name in ("grid", "grid-tuned"):
@@ -259,6 +308,8 @@ def reference_driver(name: str, args: EnvArgs, constant_action: int = 2) -> tupl
         return AutopilotPolicy(), make_env(args, AUTOPILOT_CONFIG)
     if name == "constant":
         return ConstantPolicy(constant_action), make_env(args)
+    if name == "cautious":
+        return CautiousDriver(), make_env(args, ADVICE_CONFIG)
     raise ValueError(f"unknown driver {name!r}; known: {', '.join(DRIVERS)}")
 
 

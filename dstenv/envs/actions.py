@@ -72,6 +72,15 @@ def default_action_config() -> dict[str, Any]:
 class Controller(Protocol):
     def world_action(self, action: Any) -> Any: ...
 
+    def imitate(self, accel: float, steer: float) -> Any:
+        """The action of this mode closest to the world command ``(accel [m/s^2],
+        steer [rad])`` (a teacher's label: ``info.autopilot``)."""
+
+
+#: [m/s^2] accelerations within this of 0 count as "hold the speed" in
+#: :meth:`_CityMeta.imitate`
+HOLD_BAND = 0.25
+
 
 class _HighwayMeta:
     """Discrete meta-actions passed to highway-env by name."""
@@ -81,6 +90,10 @@ class _HighwayMeta:
 
     def world_action(self, action: Any) -> str:
         return _HIGHWAY_NAMES[self.names[int(action)]]
+
+    def imitate(self, accel: float, steer: float) -> int:
+        raise ConfigError("config.info.autopilot: highway-env's world has no autopilot "
+                          "command to imitate; use source 'city'")
 
 
 class _Continuous:
@@ -93,6 +106,9 @@ class _Continuous:
         a = np.clip(np.asarray(action, np.float64).reshape(2), -1.0, 1.0) * self.scale
         return float(a[0]), float(a[1])
 
+    def imitate(self, accel: float, steer: float) -> np.ndarray:
+        return np.clip(np.array([accel, steer]) / self.scale, -1.0, 1.0).astype(np.float32)
+
 
 class _Autopilot:
     """The world's autopilot: every world source takes ``None`` as "drive yourself"."""
@@ -102,6 +118,9 @@ class _Autopilot:
 
     def world_action(self, action: Any) -> None:
         return None
+
+    def imitate(self, accel: float, steer: float) -> int:
+        return 0
 
 
 class _CityMeta:
@@ -136,10 +155,27 @@ class _CityMeta:
             self.index = max(self.index - 1, 0)
         elif name == "FASTER":
             self.index = min(self.index + 1, len(self.speeds) - 1)
-        v = self.world.ego_speed
-        accel = float(np.clip(self.gain * (self.speeds[self.index] - v), -self.brake,
-                              self.max_accel))
-        return accel, self.world.route_steer()
+        return self._accel(self.index), self.world.route_steer()
+
+    def _accel(self, index: int) -> float:
+        """[m/s^2] the P-controller's acceleration towards ``speeds[index]`` now."""
+        return float(np.clip(self.gain * (self.speeds[index] - self.world.ego_speed),
+                             -self.brake, self.max_accel))
+
+    def imitate(self, accel: float, steer: float) -> int:
+        """SLOWER, IDLE or FASTER, whichever target speed it sets drives most like
+        ``accel``: among the actions that accelerate, hold or brake as ``accel`` does
+        (within :data:`HOLD_BAND` of 0 counts as holding) the one whose acceleration now
+        is closest, IDLE first on ties; the closest of all if none does (the route
+        steers: ``steer`` is not needed)."""
+        top = len(self.speeds) - 1
+        index = {"IDLE": self.index, "SLOWER": max(self.index - 1, 0),
+                 "FASTER": min(self.index + 1, top)}
+        sign = int(np.sign(accel) * (abs(accel) > HOLD_BAND))
+        acc = {n: self._accel(i) for n, i in index.items()}
+        same = [n for n in acc if int(np.sign(acc[n]) * (abs(acc[n]) > HOLD_BAND)) == sign]
+        best = min(same or list(acc), key=lambda n: abs(acc[n] - accel))
+        return self.names.index(best)
 
 
 @dataclass(frozen=True)

@@ -118,14 +118,14 @@ class DSTGridEnv(gym.Env):
     (``MapClass``), ``ego_pose`` (3,) float64, ``ego_speed`` [m/s], ``time`` [s],
     ``seed``, ``collision``, ``off_road``, ``arrived``, ``rewards`` (dict); these are
     the step's own arrays, not copies. ``route_progress`` [m] along the route since
-    reset, ``is_success`` (no collision, on the road, and arrived or
-    ``info.success_distance`` m of progress) and ``termination_reason``
-    (``"collision"``, ``"off_road"``, ``"arrived"``; ``"timeout"`` on a step that does
-    not terminate: read it at the episode's last step). With ``config["info"]["labels"]``:
+    reset, ``is_success`` (no collision, on the road, and arrived or ``info.success_distance``
+    m of progress) and ``termination_reason`` (``"collision"``, ``"off_road"``, ``"arrived"``;
+    ``"timeout"`` on a step that does not terminate). With ``config["info"]["labels"]``:
     ``labels`` (H, W) uint8 ground truth (``dstenv.dst.CLASSES`` order, occluded cells
-    too) and ``visible`` (H, W) bool (computed only then: ~15 % of a 256 x 256 step).
-    With ``config["info"]["lidar_points"]``, ``lidar_points`` (B, 2) float32 ego-frame
-    returns [m] (NaN rows: no return).
+    too), ``visible`` (H, W) bool (computed only then: ~15 % of a 256 x 256 step).
+    ``info.lidar_points``: ``lidar_points`` (B, 2) float32 ego-frame returns [m] (NaN:
+    none). ``info.autopilot`` (city; privileged): ``autopilot_command`` (accel, steer) the
+    autopilot would apply now, ``autopilot_action`` the action closest to it.
 
     ## Arguments
 
@@ -367,7 +367,7 @@ class DSTGridEnv(gym.Env):
     def _info(self, terms: dict[str, float], terminated: bool) -> dict[str, Any]:
         assert self._frame is not None and self._world is not None
         self._last_info = step_info(self._frame, self._world, terms, self._progress,
-                                    terminated, self.config["info"])
+                                    terminated, self.config["info"], self._controller)
         return self._last_info
 
     def render(self) -> np.ndarray | None:

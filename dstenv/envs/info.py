@@ -6,7 +6,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from dstenv.config import Section, between
+from dstenv.config import ConfigError, Section, between
 from dstenv.frame import Frame
 
 __all__ = ["INFO_SECTION", "step_info"]
@@ -17,6 +17,10 @@ INFO_SECTION = Section(lambda: {
     # computed every step (label_grid), ~15 % of a 256 x 256 step
     "labels": False,
     "lidar_points": False,  # add info["lidar_points"] (B, 2) float32 [m]
+    # add info["autopilot_command"] (accel [m/s^2], steer [rad]) and
+    # info["autopilot_action"]: what the world's autopilot would do now (privileged:
+    # it reads ground truth; a teacher for imitation), city world only
+    "autopilot": False,
     # [m] route progress that makes an episode without collision, off-road or arrival a
     # success (info["is_success"])
     "success_distance": 100.0,
@@ -24,7 +28,8 @@ INFO_SECTION = Section(lambda: {
 
 
 def step_info(frame: Frame, world: Any, terms: dict[str, float], progress: float,
-              terminated: bool, cfg: Mapping[str, Any]) -> dict[str, Any]:
+              terminated: bool, cfg: Mapping[str, Any], controller: Any = None
+              ) -> dict[str, Any]:
     """The step's ``info`` (keys documented on :class:`dstenv.envs.dstgrid.DSTGridEnv`).
 
     Args:
@@ -35,6 +40,8 @@ def step_info(frame: Frame, world: Any, terms: dict[str, float], progress: float
         progress: [m] along the route since reset.
         terminated: whether the step ends the episode (else the reason is "timeout").
         cfg: the validated ``info`` section.
+        controller: the episode's action controller (``imitate``: the action closest to
+            the autopilot's command), for ``info.autopilot``.
     """
     info: dict[str, Any] = {
         "sensor": frame.sensor,
@@ -57,4 +64,20 @@ def step_info(frame: Frame, world: Any, terms: dict[str, float], progress: float
                                   if terminated else "timeout")
     if cfg["lidar_points"]:
         info["lidar_points"] = frame.extras["lidar_points"]
+    if cfg["autopilot"]:
+        info["autopilot_command"] = command = _shadow(world).command
+        info["autopilot_action"] = controller.imitate(*command)
     return info
+
+
+def _shadow(world: Any) -> Any:
+    """The world's :class:`~dstenv.sim.shadow.ShadowAutopilot`, attached at first use."""
+    from dstenv.sim.shadow import ShadowAutopilot
+
+    if not hasattr(world, "shadow"):
+        raise ConfigError(f"config.info.autopilot: the {type(world).__name__} world has no "
+                          "autopilot to ask; use source 'city' or set info.autopilot = false")
+    if world.shadow is None:
+        world.shadow = ShadowAutopilot()
+        world.shadow.update(world)
+    return world.shadow

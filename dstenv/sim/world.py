@@ -17,6 +17,7 @@ from dstenv.sim.ego import bicycle_step, hits, pure_pursuit, pursuit_lookahead
 from dstenv.sim.lanes import Control, LaneKind, LaneNetwork, Turn, lane_pose, project_on_lane
 from dstenv.sim.lanechange import lane_neighbours
 from dstenv.sim.routing import choose_successor, route_point, signal_green
+from dstenv.sim.shadow import ShadowAutopilot, autopilot_limit
 from dstenv.sim.traffic import n_randoms, traffic_step
 from dstenv.sim.types import AgentKind, Agents, WorldMap
 
@@ -63,6 +64,9 @@ class World:
         self._pool_nbr: dict[int, Any] = {}  # map pool: index -> its lane neighbours
         self.map_index = -1  # index of the episode's map in the pool (-1: no pool)
         self._map: WorldMap | None = None
+        #: what the autopilot would do while something else drives (set it to a
+        #: :class:`~dstenv.sim.shadow.ShadowAutopilot`; updated after reset and each step)
+        self.shadow: ShadowAutopilot | None = None
         if world_map is None and self.config["map"]["kind"] == "osm":
             self._fixed_map = self._load_osm()
         self.reset(seed)
@@ -114,7 +118,7 @@ class World:
         self._state = spawn.populate(self._map, self.config, self.rng, ROUTE_LEN)
         self._steer = 0.0
         self._lane_offset = 0.0
-        self._update_flags()
+        self._update_flags(reset_shadow=True)
 
     def step(self, ego_action: tuple[float, float] | np.ndarray | None = None) -> None:
         """Advance the world by ``dt``.
@@ -135,15 +139,8 @@ class World:
             u, auto)
         e = len(st["v"]) - 1
         x, y, yaw, v = st["xy"][e, 0], st["xy"][e, 1], st["yaw"][e], st["v"][e]
-        if auto:
-            # IDM, and never further than the free gap ahead (like the traffic agents)
-            room = max(gap - 0.05, 0.0)
-            if room >= v * dt / 2:  # reaches ``room`` at the end of the step at the latest
-                limit = 2.0 * (room - v * dt) / dt ** 2
-            else:  # has to stop within the step
-                limit = -v * v / (2.0 * room) if room > 0 else -1e9
-            accel = float(min(acc, limit))
-            steer = self.route_steer()
+        if auto:  # IDM, and never further than the free gap ahead (like the traffic agents)
+            accel, steer = autopilot_limit(acc, gap, v, dt), self.route_steer()
         else:
             a = np.asarray(ego_action, np.float64).reshape(-1)
             if a.shape != (2,) or not np.isfinite(a).all():
@@ -214,7 +211,7 @@ class World:
         st["xy"][-1], st["yaw"][-1], st["v"][-1], st["s"][-1] = (x, y), h, speed, s
         st["route"][-1] = spawn.plan_route(net, lane, self.rng, ROUTE_LEN)
         st["grant"][-1] = -1
-        self._update_flags()
+        self._update_flags(reset_shadow=True)
 
     def set_turn(self, turn: Turn) -> bool:
         """Choose the ego's manoeuvre at its next junction (the rest of the route re-planned).
@@ -375,11 +372,15 @@ class World:
         self._lane_offset = float(lat)
         self.route_progress += float(gain)
 
-    def _update_flags(self) -> None:
+    def _update_flags(self, reset_shadow: bool = False) -> None:
         st = self._state
         box = (*self.ego_pose, *self.ego_size)
         self.collision, self.off_road = hits(self._map, st["xy"][:-1], st["yaw"][:-1],
                                              st["hl"][:-1], st["hw"][:-1], box)
+        if self.shadow is not None:
+            if reset_shadow:
+                self.shadow.reset()
+            self.shadow.update(self)
 
     def _load_osm(self) -> WorldMap:
         from dstenv.sim.osm import load_osm

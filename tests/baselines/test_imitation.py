@@ -120,16 +120,27 @@ def test_a_blind_fit_is_undone_and_redone_at_a_tenth_of_the_rate(
         assert first["logit_spread"] < DEAD_SPREAD
 
 
-@pytest.mark.parametrize("expert", ["grid", "grid-tuned"])
-def test_warm_started_run_counts_its_steps(env_flags: list[str], tmp_path, expert: str) -> None:
+@pytest.mark.parametrize("expert", ["grid", "grid-tuned", "cautious"])
+def test_warm_started_run_counts_its_steps(env_flags: list[str], tmp_path, expert: str,
+                                           monkeypatch) -> None:
     out = tmp_path / "ws"
+    asked = []  # whether PPO's envs still ask the autopilot (only DAgger's teacher needs it)
+    learn = ppo_grid.PPO.learn
+
+    def spy(self, *a, **k):
+        asked.append(self.env.env_method("get_wrapper_attr", "config")[0]["info"]["autopilot"])
+        return learn(self, *a, **k)
+
+    monkeypatch.setattr(ppo_grid.PPO, "learn", spy)
     meta = ppo_grid.main([*env_flags, "--n-envs", "2", "--vec-env", "dummy", "--n-steps", "32",
                           "--batch-size", "32", "--n-epochs", "1", "--total-timesteps", "184",
                           "--map-pool", "2", "--verbose", "0", "--warm-start", expert,
                           "--warm-start-steps", "120", "--warm-start-rounds", "2",
                           "--checkpoint-every", "0", "--keep-checkpoints", "--out", str(out)])
     warm = meta["warm_start"]
-    assert ("tuned" in warm["method"]) == (expert == "grid-tuned")
+    assert ("(tuned:" in warm["method"]) == (expert == "grid-tuned")
+    assert ("autopilot advice" in warm["method"]) == (expert == "cautious")
+    assert asked == [False]
     assert warm["timesteps"] == 120 and [r["expert_share"] for r in warm["rounds"]] == [
         1.0, 0.5]
     assert warm["rounds"][1]["samples"] == 120

@@ -44,6 +44,33 @@ def test_autopilot_driver_drives_like_the_world_autopilot(small_config: dict) ->
     env.close()
 
 
+def test_cautious_driver_takes_the_slower_of_grid_tuned_and_the_advice(
+        small_config: dict) -> None:
+    small_config["action"] = {"type": "speed", "repeat": 3}
+    args = EnvArgs(env_config=json.dumps(small_config))
+    policy, env = rule_based.reference_driver("cautious", args)
+    obs, info = env.reset(seed=3)
+    policy.reset(env, 3)
+    tuned = rule_based.grid_driver(True)
+    tuned.reset(env, 3)
+    picked = []
+    for _ in range(40):
+        action = policy.act(obs, info)
+        mine, advice = tuned.act(obs, info), info["autopilot_action"]
+        assert action == min(mine, advice)
+        picked.append((action, mine, advice))
+        obs, _, terminated, truncated, info = env.step(action)
+        if terminated or truncated:
+            break
+    assert any(a < m for a, m, _ in picked) or any(a < v for a, _, v in picked)
+    env.close()
+    plain = rule_based.make_env(args)
+    plain.reset(seed=3)
+    with pytest.raises(ValueError, match="ADVICE_CONFIG"):
+        policy.reset(plain, 3)
+    plain.close()
+
+
 def _obs(junction: float = 1.0, speed: float = 9.0, target: float = 9.0,
          route_y: float = 0.0, control: str = "none") -> dict:
     from dstenv.envs.navigation import EGO_FEATURES, SPEED_SCALE

@@ -206,3 +206,42 @@ def test_human_render_does_not_start_the_audio_mixer(monkeypatch):
     env.reset(seed=0)
     assert pygame.display.get_init() and not pygame.mixer.get_init()
     env.close()
+
+
+def test_info_autopilot_advises_without_changing_the_episode():
+    cfg = {**SMALL_CITY, "action": {"repeat": 3}}
+    plain = gym.make("DSTGrid-Occluded-v0", config=cfg)
+    advised = gym.make("DSTGrid-Occluded-v0", config={**cfg, "info": {"autopilot": True}})
+    o1, i1 = plain.reset(seed=4)
+    o2, i2 = advised.reset(seed=4)
+    assert "autopilot_action" not in i1
+    actions = set()
+    for _ in range(40):
+        a = i2["autopilot_action"]
+        assert advised.action_space.contains(a) and len(i2["autopilot_command"]) == 2
+        actions.add(a)
+        o1, *_, i1 = plain.step(a)
+        o2, *_, i2 = advised.step(a)
+        np.testing.assert_array_equal(o1["grid"], o2["grid"])
+        np.testing.assert_array_equal(i1["ego_pose"], i2["ego_pose"])
+    assert len(actions) >= 2
+    with pytest.raises(ConfigError, match="info.autopilot"):
+        gym.make("DSTGrid-v0", config={**SMALL_HIGHWAY, "info": {"autopilot": True}}).reset(seed=0)
+
+
+@pytest.mark.parametrize("speed, index, accel, expected", [
+    (4.5, 1, 1.44, "FASTER"),  # the autopilot speeds up gently: the next target, not IDLE
+    (9.0, 2, 0.5, "IDLE"),  # at the top speed FASTER would change nothing: IDLE
+    (9.0, 2, -1.0, "SLOWER"),  # it brakes: a lower target
+    (0.0, 0, 0.0, "IDLE"),  # it waits at a line
+    (7.0, 1, -0.3, "IDLE"),  # IDLE already brakes towards 4.5 m/s
+    (0.0, 0, 1.5, "FASTER"),  # it was granted the junction
+])
+def test_meta_actions_imitate_the_autopilot_command(speed, index, accel, expected):
+    env = gym.make("DSTGrid-Occluded-v0", config=SMALL_CITY)
+    env.reset(seed=0)
+    ctrl = env.unwrapped._controller
+    ctrl.index = index
+    env.unwrapped.pipeline.world._state["v"][-1] = speed
+    assert env.unwrapped.get_action_meanings()[ctrl.imitate(accel, 0.0)] == expected
+    env.close()

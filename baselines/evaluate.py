@@ -5,7 +5,8 @@ the same registered env with its default observation (same worlds, same traffic,
 a fresh map per seed, none of them a training map): ``random``
 (:mod:`random_policy`), ``grid`` (the grid-aware rule driver), ``grid-tuned`` (the
 same with its parameters tuned on validation seeds), ``autopilot``
-(privileged) and ``constant`` (:mod:`rule_based`), and each trained PPO checkpoint
+(privileged), ``constant``, ``advice`` and ``cautious`` (privileged teachers; all in
+:mod:`rule_based`), and each trained PPO checkpoint
 given with ``--checkpoints`` (``model.pt`` state_dicts from :mod:`ppo_grid`, with
 their ``model.json`` sidecars; only tensors are loaded). Reported per policy:
 success rate, collision rate, off-road rate, mean return and mean route progress
@@ -55,7 +56,7 @@ class Args(EnvArgs):
 
     policies: list[str] = opt(["random", "grid", "autopilot", "constant"],
                               "reference drivers: random | grid | grid-tuned | autopilot | "
-                              "constant")
+                              "constant | advice | cautious")
     checkpoints: list[str] = opt([], "PPO model.pt files from ppo_grid.py")
     constant_action: int = opt(2, "action of the constant driver (city: 2 = FASTER)")
     episodes: int = opt(50, "episodes per policy, one per seed")

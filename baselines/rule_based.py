@@ -14,10 +14,12 @@
   no surprise to it: a *privileged* upper reference, not a perception baseline.
 * ``constant``: one fixed action every step (default ``2`` = FASTER), a grid-blind
   driver: what ignoring the perception grid costs.
-* ``cautious``: :class:`CautiousDriver`, the slower of ``grid-tuned``'s action and the
-  action closest to what the autopilot would do now (``info["autopilot_action"]``:
-  the world's autopilot asked about the state the meta-actions drive, with the env's
-  ``info.autopilot``): privileged, a teacher for imitation, not a baseline to beat.
+* ``advice``: :class:`AdvicePolicy`, the action closest to what the autopilot would do
+  now (``info["autopilot_action"]``: the world's autopilot asked about the state the
+  meta-actions drive, with the env's ``info.autopilot``); privileged. The traffic does
+  not queue an ego it does not drive, so this collides where the autopilot does not.
+* ``cautious``: :class:`CautiousDriver`, the slower of ``grid-tuned``'s action and
+  ``advice``'s: privileged, a teacher for imitation, not a baseline to beat.
 
 Run::
 
@@ -35,7 +37,7 @@ import numpy as np
 from rl_common import EnvArgs, EpisodeResult, evaluate_policy, make_env, opt, parse_args
 from rl_common import cli, report_run
 
-DRIVERS = ("grid", "grid-tuned", "autopilot", "constant", "cautious")
+DRIVERS = ("grid", "grid-tuned", "autopilot", "constant", "advice", "cautious")
 #: :class:`GridRuleDriver` parameters chosen on validation seeds in PPO's config (collision
 #: -30, off-road -10, ``action.repeat = 3``, 200 decisions) by ``tune_rule.py`` in two
 #: stages: 16 settings on seeds 20000-20049 (``benchmarks/search/rule-driver.json``), then
@@ -55,7 +57,7 @@ ADVICE_CONFIG: dict[str, Any] = {"info": {"autopilot": True}}
 class Args(EnvArgs):
     """Run a rule-based driver on a DSTGrid env."""
 
-    driver: str = opt("grid", "grid | grid-tuned | autopilot | constant | cautious")
+    driver: str = opt("grid", "grid | grid-tuned | autopilot | constant | advice | cautious")
     constant_action: int = opt(2, "the action of the constant driver (2 = FASTER)")
     episodes: int = opt(10, "episodes, one per seed")
     seed: int = opt(10_000, "first seed (episode k uses seed + k)")
@@ -231,6 +233,20 @@ class AutopilotPolicy:
         return 0
 
 
+class AdvicePolicy:
+    """The action closest to the autopilot's command; needs :data:`ADVICE_CONFIG`."""
+
+    name = "autopilot advice (privileged)"
+
+    def reset(self, env: gym.Env, seed: int) -> None:
+        if not env.unwrapped.config["info"]["autopilot"]:
+            raise ValueError("AdvicePolicy: build the env with ADVICE_CONFIG "
+                             "(info.autopilot = true)")
+
+    def act(self, obs: Any, info: dict[str, Any]) -> int:
+        return int(info["autopilot_action"])
+
+
 class CautiousDriver:
     """The slower of ``grid-tuned``'s action and the autopilot's advice.
 
@@ -308,8 +324,9 @@ def reference_driver(name: str, args: EnvArgs, constant_action: int = 2) -> tupl
         return AutopilotPolicy(), make_env(args, AUTOPILOT_CONFIG)
     if name == "constant":
         return ConstantPolicy(constant_action), make_env(args)
-    if name == "cautious":
-        return CautiousDriver(), make_env(args, ADVICE_CONFIG)
+    if name in ("advice", "cautious"):
+        return (AdvicePolicy() if name == "advice" else CautiousDriver()), make_env(
+            args, ADVICE_CONFIG)
     raise ValueError(f"unknown driver {name!r}; known: {', '.join(DRIVERS)}")
 
 

@@ -64,10 +64,16 @@ def test_cautious_driver_takes_the_slower_of_grid_tuned_and_the_advice(
             break
     assert any(a < m for a, m, _ in picked) or any(a < v for a, _, v in picked)
     env.close()
+    advice, env = rule_based.reference_driver("advice", args)
+    _, info = env.reset(seed=3)
+    advice.reset(env, 3)
+    assert advice.act(None, info) == info["autopilot_action"]
+    env.close()
     plain = rule_based.make_env(args)
     plain.reset(seed=3)
-    with pytest.raises(ValueError, match="ADVICE_CONFIG"):
-        policy.reset(plain, 3)
+    for driver in (policy, advice):
+        with pytest.raises(ValueError, match="ADVICE_CONFIG"):
+            driver.reset(plain, 3)
     plain.close()
 
 

@@ -171,7 +171,7 @@ def _fit(model: PPO, data: dict[str, np.ndarray], returns: np.ndarray, epochs: i
 
 
 def dagger(model: PPO, venv: VecEnv, expert: Any, rounds: int, steps_per_round: int,
-           epochs: int = 3, lr: float = 1e-3, batch: int = 256, seed: int = 0,
+           epochs: int = 3, lr: float = 3e-4, batch: int = 256, seed: int = 0,
            retries: int = 2,
            on_episode: Callable[[int, int, int, dict[str, Any]], None] | None = None,
            log: Callable[[str], None] = print) -> DaggerLog:
@@ -186,7 +186,8 @@ def dagger(model: PPO, venv: VecEnv, expert: Any, rounds: int, steps_per_round: 
             config).
         rounds: DAgger rounds (round 0 is the expert's own driving).
         steps_per_round: vector steps per round (``venv.num_envs`` env steps each).
-        epochs, lr, batch: the supervised fit after each round (Adam).
+        epochs, lr, batch: the supervised fit after each round (Adam; the rate is
+            ``ppo_grid.py --warm-start-lr``'s default, 3e-4).
         retries: refits of a round whose fitted policy ignores its input, each from the
             weights before that fit at a tenth of the rate (kept for later rounds).
         seed: seed of the minibatch order.

@@ -25,6 +25,7 @@ from dstenv.sim.traffic import n_randoms, traffic_step
 
 __all__ = ["ShadowAutopilot", "autopilot_limit"]
 
+
 def autopilot_limit(acc: float, gap: float, v: float, dt: float) -> float:
     """The autopilot's acceleration [m/s^2]: the IDM's ``acc``, never further than the
     free ``gap`` [m] ahead at the end of the step (like the traffic agents), at speed

@@ -89,7 +89,9 @@ def cluster(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("ray")
     port = _free_port()
     address = f"{HEAD_IP}:{port}"
-    env = {**os.environ, "RAY_USAGE_STATS_ENABLED": "0"}
+    # a ~/.ray/auth_token (written by any earlier ray.init of Ray >= 2.5x) turns token
+    # authentication on for `ray start` but not for the clients: the nodes never join
+    env = {**os.environ, "RAY_USAGE_STATS_ENABLED": "0", "RAY_AUTH_MODE": "disabled"}
     env.pop("RAY_ADDRESS", None)
     common = ["--num-cpus=1", "--object-store-memory=80000000", "--disable-usage-stats",
               "--include-dashboard=false"]

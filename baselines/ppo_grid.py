@@ -325,7 +325,7 @@ def warm_start(args: Args, model: PPO, env: VecEnv, log: TrainingLog) -> dict[st
                     on_episode=lambda r, i, steps, ep: log.write_episode(steps, i, ep,
                                                                          f"dagger{r}"),
                     log=print if args.verbose else (lambda _: None))
-    if "info" in train_config(args):  # PPO needs no advice: its envs stop asking
+    if TEACHERS[args.warm_start]:  # the teacher's env settings (info.autopilot) are not PPO's
         env.env_method("reset", options={"config": {"info": {"autopilot": False}}})
     return {"method": method, "timesteps": result.timesteps,
             "wall_s": round(result.wall_s, 1), "rounds": result.rounds}

@@ -240,14 +240,14 @@ class AdvicePolicy:
 
     def reset(self, env: gym.Env, seed: int) -> None:
         if not env.unwrapped.config["info"]["autopilot"]:
-            raise ValueError("AdvicePolicy: build the env with ADVICE_CONFIG "
+            raise ValueError(f"{type(self).__name__}: build the env with ADVICE_CONFIG "
                              "(info.autopilot = true)")
 
     def act(self, obs: Any, info: dict[str, Any]) -> int:
         return int(info["autopilot_action"])
 
 
-class CautiousDriver:
+class CautiousDriver(AdvicePolicy):
     """The slower of ``grid-tuned``'s action and the autopilot's advice.
 
     Each step it takes the lower of the two ``Discrete(3)`` speed actions (SLOWER <
@@ -267,13 +267,11 @@ class CautiousDriver:
     def reset(self, env: gym.Env, seed: int) -> None:
         if env.unwrapped.get_action_meanings() != ["SLOWER", "IDLE", "FASTER"]:
             raise ValueError("CautiousDriver: needs the speed actions (SLOWER, IDLE, FASTER)")
-        if not env.unwrapped.config["info"]["autopilot"]:
-            raise ValueError("CautiousDriver: build the env with ADVICE_CONFIG "
-                             "(info.autopilot = true)")
+        super().reset(env, seed)
         self.grid.reset(env, seed)
 
     def act(self, obs: Any, info: dict[str, Any]) -> int:
-        return min(self.grid.act(obs, info), int(info["autopilot_action"]))
+        return min(self.grid.act(obs, info), super().act(obs, info))
 
 
 class ConstantPolicy:

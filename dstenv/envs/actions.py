@@ -171,9 +171,11 @@ class _CityMeta:
         top = len(self.speeds) - 1
         index = {"IDLE": self.index, "SLOWER": max(self.index - 1, 0),
                  "FASTER": min(self.index + 1, top)}
-        sign = int(np.sign(accel) * (abs(accel) > HOLD_BAND))
+        def sense(a: float) -> int:  # -1 brake, 0 hold, +1 accelerate
+            return int(np.sign(a)) if abs(a) > HOLD_BAND else 0
+
         acc = {n: self._accel(i) for n, i in index.items()}
-        same = [n for n in acc if int(np.sign(acc[n]) * (abs(acc[n]) > HOLD_BAND)) == sign]
+        same = [n for n in acc if sense(acc[n]) == sense(accel)]
         best = min(same or list(acc), key=lambda n: abs(acc[n] - accel))
         return self.names.index(best)
 

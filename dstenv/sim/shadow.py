@@ -57,12 +57,13 @@ class ShadowAutopilot:
         """Forget the right-of-way state (a new episode)."""
         self.grant, self.req_t, self.stop_clock = -1, float(np.inf), 0.0
 
-    def update(self, world: Any) -> tuple[float, float]:
+    def update(self, world: Any, reset: bool = False) -> tuple[float, float]:
         """Compute :attr:`command` from ``world``'s current state (once per world step:
-        the stop-sign clock advances by ``dt`` per call)."""
+        the stop-sign clock advances by ``dt`` per call), first forgetting the
+        right-of-way state with ``reset`` (a new episode, the ego moved by hand)."""
         st = world._state
         route = st["route"][-1]
-        if self.grant >= 0 and self.grant not in route:  # re-planned: the grant is stale
+        if reset or (self.grant >= 0 and self.grant not in route):  # stale: re-planned
             self.reset()
         table = {k: a.copy() for k, a in st.items()}  # the kernel writes in place
         table["grant"][-1], table["req_t"][-1] = self.grant, self.req_t

@@ -53,6 +53,7 @@ class World:
         route: ``(8,)`` lanes the ego follows (current first); route_progress: [m]
             driven along it since reset; lane_offset: [m] from its centre-line
             (left +); route_polyline(ahead, spacing): points ahead on the route.
+        shadow: ``None`` or a :class:`~dstenv.sim.shadow.ShadowAutopilot`, asked each step.
     """
 
     def __init__(self, config: Mapping[str, Any] | None = None, seed: int | None = 0, *,
@@ -64,8 +65,6 @@ class World:
         self._pool_nbr: dict[int, Any] = {}  # map pool: index -> its lane neighbours
         self.map_index = -1  # index of the episode's map in the pool (-1: no pool)
         self._map: WorldMap | None = None
-        #: what the autopilot would do while something else drives (set it to a
-        #: :class:`~dstenv.sim.shadow.ShadowAutopilot`; updated after reset and each step)
         self.shadow: ShadowAutopilot | None = None
         if world_map is None and self.config["map"]["kind"] == "osm":
             self._fixed_map = self._load_osm()
@@ -118,7 +117,8 @@ class World:
         self._state = spawn.populate(self._map, self.config, self.rng, ROUTE_LEN)
         self._steer = 0.0
         self._lane_offset = 0.0
-        self._update_flags(reset_shadow=True)
+        self._update_flags()
+        self._ask_shadow(reset=True)
 
     def step(self, ego_action: tuple[float, float] | np.ndarray | None = None) -> None:
         """Advance the world by ``dt``.
@@ -129,8 +129,7 @@ class World:
                 ego by autopilot (route following with the traffic's IDM rule).
         """
         cfg, ego_cfg, st = self.config, self.config["ego"], self._state
-        dt = cfg["dt"]
-        net = self._map.lanes
+        dt, net = cfg["dt"], self._map.lanes
         auto = ego_action is None
         u = self.rng.random((len(st["v"]), n_randoms(ROUTE_LEN)))
         acc, gap, pulling = traffic_step(
@@ -149,13 +148,11 @@ class World:
             steer = float(np.clip(a[1], -ego_cfg["max_steer"], ego_cfg["max_steer"]))
         nx, ny, nyaw, nv = bicycle_step(x, y, yaw, v, accel, steer, ego_cfg["wheelbase"], dt,
                                         ego_cfg["max_speed"])
-        st["xy"][e] = nx, ny
-        st["yaw"][e], st["v"][e] = nyaw, nv
+        st["xy"][e], st["yaw"][e], st["v"][e] = (nx, ny), nyaw, nv
         self._steer = steer
         self._localise(u[e, 0])
-        if st["stuck"][:-1].any():
-            for i in np.flatnonzero(st["stuck"][:-1]):
-                spawn.respawn(self._map, st, int(i), self.rng)
+        for i in np.flatnonzero(st["stuck"][:-1]):
+            spawn.respawn(self._map, st, int(i), self.rng)
         rate = cfg["traffic"]["pull_out_rate"]
         if rate > 0:
             n = int(np.count_nonzero(st["parked"][:-1]))
@@ -169,6 +166,7 @@ class World:
         self.time = round(self.time + dt, 9)
         self.steps += 1
         self._update_flags()
+        self._ask_shadow()
 
     def add_agent(self, kind: AgentKind, lane: int, s: float, speed: float = 0.0,
                   route: tuple[int, ...] = ()) -> int:
@@ -211,7 +209,8 @@ class World:
         st["xy"][-1], st["yaw"][-1], st["v"][-1], st["s"][-1] = (x, y), h, speed, s
         st["route"][-1] = spawn.plan_route(net, lane, self.rng, ROUTE_LEN)
         st["grant"][-1] = -1
-        self._update_flags(reset_shadow=True)
+        self._update_flags()
+        self._ask_shadow(reset=True)
 
     def set_turn(self, turn: Turn) -> bool:
         """Choose the ego's manoeuvre at its next junction (the rest of the route re-planned).
@@ -372,15 +371,16 @@ class World:
         self._lane_offset = float(lat)
         self.route_progress += float(gain)
 
-    def _update_flags(self, reset_shadow: bool = False) -> None:
+    def _update_flags(self) -> None:
         st = self._state
         box = (*self.ego_pose, *self.ego_size)
         self.collision, self.off_road = hits(self._map, st["xy"][:-1], st["yaw"][:-1],
                                              st["hl"][:-1], st["hw"][:-1], box)
+
+    def _ask_shadow(self, reset: bool = False) -> None:
+        """Once per step (its stop clock advances), and afresh after a reset or a move."""
         if self.shadow is not None:
-            if reset_shadow:
-                self.shadow.reset()
-            self.shadow.update(self)
+            self.shadow.update(self, reset)
 
     def _load_osm(self) -> WorldMap:
         from dstenv.sim.osm import load_osm

@@ -68,3 +68,13 @@ def test_a_new_episode_forgets_the_grant():
     w.shadow.grant, w.shadow.stop_clock = 7, 3.0  # as if left over from an episode
     w.reset(1)
     assert w.shadow.stop_clock in (0.0, 0.1) and w.shadow.command is not None
+
+
+def test_adding_an_agent_does_not_step_the_shadow():
+    w = World(CITY, seed=0)
+    w.shadow = ShadowAutopilot()
+    w.reset(0)
+    w.shadow.stop_clock = 1.0  # as if standing at a stop line
+    lane = int(w.route[0])
+    w.add_agent(world_module.AgentKind.CAR, lane, 0.0)
+    assert w.shadow.stop_clock == 1.0  # the shadow is asked once per world step only

@@ -103,10 +103,10 @@ class PPOPolicy:
 
     def make_env(self, args: EnvArgs) -> gym.Env:
         """The evaluation env; the policy is rebuilt on its spaces."""
-        from ppo_grid import load
-        from residual import wrap
+        from ppo_grid import env_wrap, load
 
-        env = make_env(args, wrap=lambda e: wrap(e, self.meta["args"].get("residual", "")))
+        run = self.meta["args"]
+        env = make_env(args, wrap=env_wrap(run.get("residual", ""), run.get("critic", "")))
         try:
             self.model, self.meta = load(self.path, env)
         except Exception:

@@ -12,6 +12,8 @@ from gymnasium import spaces
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from torch import nn
 
+from privileged import PRIVILEGED_KEY
+
 __all__ = ["GridCNN"]
 
 
@@ -27,7 +29,7 @@ class GridCNN(BaseFeaturesExtractor):
     Args:
         observation_space: a ``Box`` ``(C, H, W)``, or a ``Dict`` with key ``"grid"``
             (that ``Box``) and flat ``Box`` vectors (e.g. ``"ego"``) concatenated
-            after the convolutions.
+            after the convolutions (all but :data:`privileged.PRIVILEGED_KEY`).
         features_dim: output size.
     """
 
@@ -35,7 +37,9 @@ class GridCNN(BaseFeaturesExtractor):
         super().__init__(observation_space, features_dim)
         if isinstance(observation_space, spaces.Dict):
             grid = observation_space["grid"]
-            self.vector_keys = sorted(k for k in observation_space.spaces if k != "grid")
+            # the critic's ground truth (privileged.py) never reaches the actor
+            self.vector_keys = sorted(k for k in observation_space.spaces
+                                      if k not in ("grid", PRIVILEGED_KEY))
             n_vec = sum(int(np.prod(observation_space[k].shape)) for k in self.vector_keys)
         else:
             grid, self.vector_keys, n_vec = observation_space, [], 0

@@ -15,7 +15,8 @@ action. DAgger (Ross, Gordon & Bagnell, AISTATS 2011) uses that:
    (cross-entropy, each class weighted by its inverse frequency, at most 10x: the rule
    driver holds its target speed in ~93 % of steps, and the rare SLOWER before an
    obstacle is what matters), then its value head to the discounted returns of the episodes
-   (features frozen), so that PPO starts with a value baseline of the same policy;
+   (features frozen; a critic with its own extractor, ``--critic privileged``, fits
+   that too), so that PPO starts with a value baseline of the same policy;
 4. a fit after which the policy answers every observation alike (its logits' spread
    below :data:`DEAD_SPREAD`: at too high a rate the features grow until the policy
    MLP's tanh layer saturates) is undone and redone at a tenth of the rate, which the
@@ -39,7 +40,8 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.vec_env import VecEnv
 from torch import nn
 
-__all__ = ["DEAD_SPREAD", "DaggerLog", "dagger", "discounted_returns"]
+__all__ = ["DEAD_SPREAD", "DaggerLog", "dagger", "discounted_returns", "warm_start",
+           "warm_start_steps_per_round"]
 
 #: a fit whose held-out logits vary less than this across observations has a policy
 #: that ignores its input (logged as such; a fresh policy's spread is ~1e-3, a trained one's ~1)
@@ -132,6 +134,8 @@ def _fit(model: PPO, data: dict[str, np.ndarray], returns: np.ndarray, epochs: i
     value_params = [*policy.mlp_extractor.value_net.parameters(),
                     *policy.value_net.parameters()]
     ids = {id(p) for p in value_params}
+    if not policy.share_features_extractor:  # the critic's extractor: not the actor's to fit
+        ids |= {id(p) for p in policy.vf_features_extractor.parameters()}
     actor_params = [p for p in policy.parameters() if id(p) not in ids]
     counts = np.bincount(data["label"][train_idx], minlength=int(model.action_space.n))
     weight = np.minimum(counts.max() / np.maximum(counts, 1), 10.0)
@@ -146,12 +150,16 @@ def _fit(model: PPO, data: dict[str, np.ndarray], returns: np.ndarray, epochs: i
             opt.zero_grad()
             loss.backward()
             opt.step()
+    own = not policy.share_features_extractor  # a critic with its own extractor learns too
+    if own:
+        value_params += list(policy.vf_features_extractor.parameters())
     opt = torch.optim.Adam(value_params, lr=lr)
     target = torch.as_tensor(returns, dtype=torch.float32)
     for _ in range(epochs):
         for idx in _batches(len(train_idx), batch, rng):
-            with torch.no_grad():
+            with torch.set_grad_enabled(own):
                 latent = policy.extract_features(obs(train_idx[idx]))
+                latent = latent[1] if own else latent  # SB3: (actor's, critic's) when not shared
             v = policy.value_net(policy.mlp_extractor.forward_critic(latent)).flatten()
             loss = mse(v, target[train_idx[idx]])
             opt.zero_grad()
@@ -245,3 +253,59 @@ def dagger(model: PPO, venv: VecEnv, expert: Any, rounds: int, steps_per_round: 
                if stats["logit_spread"] < DEAD_SPREAD else ""))
     result.wall_s = time.monotonic() - start
     return result
+
+
+def warm_start_steps_per_round(args: Any) -> int:
+    """Vector steps per DAgger round of ``ppo_grid.py``'s warm start (``args``: its
+    ``Args``).
+
+    Raises:
+        ValueError: an unknown ``--warm-start``, ``--warm-start-steps`` below one step
+            per round and env or not below ``--total-timesteps``, or a
+            ``--warm-start-lr`` that is not positive.
+    """
+    from rule_based import TEACHERS
+
+    if args.warm_start not in TEACHERS:
+        raise ValueError(f"--warm-start: expected '' or one of {', '.join(TEACHERS)}, got "
+                         f"{args.warm_start!r}")
+    if not args.warm_start_lr > 0:
+        raise ValueError(f"--warm-start-lr {args.warm_start_lr}: must be positive")
+    rounds = args.warm_start_rounds
+    per_round = args.warm_start_steps // (rounds * args.n_envs) if rounds > 0 else 0
+    if per_round < 1 or args.warm_start_steps >= args.total_timesteps:
+        raise ValueError(f"--warm-start-steps {args.warm_start_steps}: needs >= one step per "
+                         f"round and env ({rounds} x {args.n_envs}) and less than "
+                         f"--total-timesteps {args.total_timesteps}")
+    return per_round
+
+
+def warm_start(args: Any, model: PPO, venv: VecEnv, on_episode: Callable[..., None],
+               probe: Callable[[], Any]) -> dict[str, Any]:
+    """DAgger from the teacher ``args.warm_start`` of :data:`rule_based.TEACHERS` on
+    ``ppo_grid.py``'s training env ``venv``; returns its record for ``model.json`` (env
+    steps, wall time, rounds).
+
+    Args:
+        on_episode: ``(round, env index, env steps so far, info["episode"])`` of each
+            episode that ends.
+        probe: builds one env of the training config, on which the teacher is reset.
+    """
+    from rule_based import TEACHERS, teacher
+
+    per_round = warm_start_steps_per_round(args)
+    expert, method = teacher(args.warm_start)
+    env = probe()
+    try:
+        env.reset(seed=args.seed)
+        expert.reset(env, args.seed)
+    finally:
+        env.close()
+    result = dagger(model, venv, expert, args.warm_start_rounds, per_round,
+                    epochs=args.warm_start_epochs, lr=args.warm_start_lr, seed=args.seed,
+                    retries=args.warm_start_retries, on_episode=on_episode,
+                    log=print if args.verbose else (lambda _: None))
+    if TEACHERS[args.warm_start]:  # the teacher's env settings (info.autopilot) are not PPO's
+        venv.env_method("reset", options={"config": {"info": {"autopilot": False}}})
+    return {"method": method, "timesteps": result.timesteps,
+            "wall_s": round(result.wall_s, 1), "rounds": result.rounds}

@@ -17,7 +17,9 @@ steering, target speed, next junction, "route": the route ahead}``
 
 With ``--residual grid`` the policy drives on top of the grid rule driver
 (:mod:`residual`): one more action, ``0`` = the rule driver's, and the fresh policy
-starts as the rule driver.
+starts as the rule driver. With ``--critic privileged`` the critic also reads the
+nearest road users' ground truth, the actor still the observation only
+(:mod:`privileged`, an asymmetric actor-critic).
 
 Training uses several envs in parallel (``--n-envs``, ``SubprocVecEnv``) drawing
 their episodes from a pool of maps (``--map-pool``, the env's ``world.map.pool``);
@@ -43,7 +45,7 @@ import shutil
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import gymnasium as gym
 import torch
@@ -54,9 +56,10 @@ from stable_baselines3.common.logger import configure
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv, VecNormalize
 
 from extractors import GridCNN
+from imitation import warm_start, warm_start_steps_per_round
 from rl_common import EnvArgs, atomic_write_bytes, atomic_write_text, machine_info, make_env, opt
 from rl_common import check_env_args, cli, parse_args, to_argv
-from rule_based import TEACHERS, teacher
+from rule_based import TEACHERS
 
 EXTRACTORS = ("grid-cnn", "route-cnn", "combined")
 
@@ -99,6 +102,8 @@ class Args(EnvArgs):
     warm_start_lr: float = opt(3e-4, "Adam rate of the supervised fits (1e-3 before "
                                      "2026-12-06 saturated a six-epoch fit)")
     warm_start_retries: int = opt(2, "refits at a tenth of the rate of a blind DAgger fit")
+    critic: str = opt("", "'' (the actor's input) | privileged: an asymmetric critic that "
+                          "also reads the nearest road users' ground truth (privileged.py)")
     anchor: bool = opt(False, "with --warm-start: PPO's entropy bonus becomes a KL penalty "
                               "to the warm-started policy (anchor.py), --ent-coef its weight")
     checkpoint_every: int = opt(10_000, "save the model every this many steps; 0: at the end")
@@ -171,16 +176,23 @@ def train_config(args: Args) -> dict[str, Any]:
     return {"world": {"map": {"pool": args.map_pool}}, **TEACHERS.get(args.warm_start, {})}
 
 
+def env_wrap(residual: str, critic: str) -> Callable[[gym.Env], gym.Env]:
+    """The wrappers of a run's env, in training and evaluation alike: ``--residual``
+    (:func:`residual.wrap`), then ``--critic`` (:func:`privileged.wrap`)."""
+    from privileged import wrap as privileged
+    from residual import wrap as residual_wrap
+
+    return lambda env: privileged(residual_wrap(env, residual), critic)
+
+
 def make_vec_env(args: Args) -> VecEnv:
     """``args.n_envs`` monitored envs in a Dummy/Subproc vector env (seeded at reset)."""
     if args.vec_env not in ("subproc", "dummy"):
         raise ValueError(f"--vec-env: expected subproc or dummy, got {args.vec_env!r}")
 
-    from residual import wrap
-
     def thunk() -> gym.Env:
         return make_env(args, train_config(args), monitor=True,
-                        wrap=lambda e: wrap(e, args.residual))
+                        wrap=env_wrap(args.residual, args.critic))
 
     cls = SubprocVecEnv if args.vec_env == "subproc" and args.n_envs > 1 else DummyVecEnv
     if cls is SubprocVecEnv:  # a config error in a worker would only say "connection reset"
@@ -215,6 +227,13 @@ def build_model(args: Args, env: VecEnv | gym.Env) -> PPO:
         policy_kwargs = ({"features_extractor_kwargs": {"cnn_output_dim": args.features_dim}}
                          if dict_obs else {"features_extractor_kwargs":
                                            {"features_dim": args.features_dim}})
+    if args.critic:
+        from privileged import AsymmetricPolicy
+
+        if args.extractor == "combined" or not dict_obs:
+            raise ValueError("--critic privileged: needs --extractor grid-cnn or route-cnn on a "
+                             "dict observation (SB3's own extractor would read the ground truth)")
+        policy = AsymmetricPolicy  # type: ignore[assignment]
     tb = str(Path(args.out) / "tb") if args.tensorboard else None
     model = PPO(policy, env, learning_rate=args.learning_rate, n_steps=args.n_steps,
                batch_size=args.batch_size, n_epochs=args.n_epochs, gamma=args.gamma,
@@ -284,53 +303,6 @@ def load(path: str | Path, env: gym.Env) -> tuple[PPO, dict[str, Any]]:
     return model, meta
 
 
-def warm_start_steps_per_round(args: Args) -> int:
-    """Vector steps per DAgger round of ``args``' warm start.
-
-    Raises:
-        ValueError: an unknown ``--warm-start``, ``--warm-start-steps`` below one step
-            per round and env or not below ``--total-timesteps``, or a
-            ``--warm-start-lr`` that is not positive.
-    """
-    if args.warm_start not in TEACHERS:
-        raise ValueError(f"--warm-start: expected '' or one of {', '.join(TEACHERS)}, got "
-                         f"{args.warm_start!r}")
-    if not args.warm_start_lr > 0:
-        raise ValueError(f"--warm-start-lr {args.warm_start_lr}: must be positive")
-    rounds = args.warm_start_rounds
-    per_round = args.warm_start_steps // (rounds * args.n_envs) if rounds > 0 else 0
-    if per_round < 1 or args.warm_start_steps >= args.total_timesteps:
-        raise ValueError(f"--warm-start-steps {args.warm_start_steps}: needs >= one step per "
-                         f"round and env ({rounds} x {args.n_envs}) and less than "
-                         f"--total-timesteps {args.total_timesteps}")
-    return per_round
-
-
-def warm_start(args: Args, model: PPO, env: VecEnv, log: TrainingLog) -> dict[str, Any]:
-    """DAgger from a teacher of :data:`rule_based.TEACHERS` (:mod:`imitation`), on the
-    training env; returns its record for ``model.json`` (env steps, wall time, rounds)."""
-    from imitation import dagger
-
-    rounds = args.warm_start_rounds
-    per_round = warm_start_steps_per_round(args)
-    expert, method = teacher(args.warm_start)
-    probe = make_env(args, train_config(args))
-    try:
-        probe.reset(seed=args.seed)
-        expert.reset(probe, args.seed)
-    finally:
-        probe.close()
-    result = dagger(model, env, expert, rounds, per_round, epochs=args.warm_start_epochs,
-                    lr=args.warm_start_lr, seed=args.seed, retries=args.warm_start_retries,
-                    on_episode=lambda r, i, steps, ep: log.write_episode(steps, i, ep,
-                                                                         f"dagger{r}"),
-                    log=print if args.verbose else (lambda _: None))
-    if TEACHERS[args.warm_start]:  # the teacher's env settings (info.autopilot) are not PPO's
-        env.env_method("reset", options={"config": {"info": {"autopilot": False}}})
-    return {"method": method, "timesteps": result.timesteps,
-            "wall_s": round(result.wall_s, 1), "rounds": result.rounds}
-
-
 #: the files a run writes into ``--out`` (their presence: a run is there)
 RUN_FILES = ("model.pt", "model.json", "episodes.csv", "progress.csv")
 
@@ -373,7 +345,11 @@ def train(args: Args) -> tuple[PPO, dict[str, Any]]:
         log = TrainingLog(args, out)
         ppo_steps = args.total_timesteps
         if args.warm_start:
-            log.warm = warm_start(args, model, env, log)
+            log.warm = warm_start(
+                args, model, env, lambda r, i, steps, ep: log.write_episode(steps, i, ep,
+                                                                            f"dagger{r}"),
+                lambda: make_env(args, train_config(args), wrap=env_wrap(args.residual,
+                                                                         args.critic)))
             log.offset = log.warm["timesteps"]
             ppo_steps -= log.offset
             log.checkpoint(model)  # the imitation policy alone, before PPO

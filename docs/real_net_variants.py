@@ -81,6 +81,11 @@ VARIANTS: dict[str, dict[str, Any]] = {
                                                         "inputs": "fcn10+sensor+past",
                                                         "epochs": 10,
                                                         "seeds": [0, 1, 2, 3, 4, 5]}},
+    # the same with each training sample mirrored left-right at random (train.flip)
+    "no map past kitti moving flip": {"real_net": {"map": "match", "moving": "match",
+                                                   "inputs": "fcn10+sensor+past",
+                                                   "seeds": [0, 1, 2, 3, 4, 5]},
+                                      "train": {"flip": 0.5}},
     # the same on twice the simulated drives (1200 frames)
     "no map past kitti moving 1200 frames": {"real_net": {"map": "match", "moving": "match",
                                                           "inputs": "fcn10+sensor+past",

@@ -46,6 +46,9 @@ def default_train_config() -> dict[str, Any]:
         "lr": 1e-3,  # Adam learning rate (betas 0.9/0.999, eps 1e-8 as in the paper)
         "weight_decay": 0.0,
         "crop": 0,  # [cells] side of random square training crops; 0: whole grids
+        # probability that a training sample is mirrored left-right (its columns, across
+        # the ego's heading: the grid's axes, dstenv.grid); 0: off (no random draw)
+        "flip": 0.0,
         "max_batches": 0,  # training batches per epoch; 0: the whole dataset (required for streams)
         # training batches per epoch drawn with replacement, whatever the data size (the
         # same optimiser steps for 140 or 14000 frames: the training-set-size curve); 0: off
@@ -94,9 +97,9 @@ def _check(cfg: dict[str, Any]) -> None:
     # written as "not >=" so that NaN fails too
     if not (cfg["crop"] >= 0 and cfg["max_batches"] >= 0 and cfg["fixed_batches"] >= 0
             and cfg["lr"] > 0 and math.isfinite(cfg["lr"]) and cfg["weight_power"] >= 0
-            and math.isfinite(cfg["weight_power"])):
-        raise ConfigError("train.crop, max_batches, fixed_batches and weight_power must be >= 0 "
-                          "and train.lr > 0 (finite numbers)")
+            and math.isfinite(cfg["weight_power"]) and 0 <= cfg["flip"] <= 1):
+        raise ConfigError("train.crop, max_batches, fixed_batches and weight_power must be >= 0, "
+                          "train.lr > 0 (finite numbers) and train.flip in [0, 1]")
     w = cfg["class_weights"]
     if w is not None and (not all(isinstance(v, (int, float)) and math.isfinite(v) and v >= 0
                                   for v in w) or not any(v > 0 for v in w)):
@@ -136,6 +139,18 @@ def _crop(
     i = int(torch.randint(0, h - ch + 1, (1,), generator=gen))
     j = int(torch.randint(0, w - cw + 1, (1,), generator=gen))
     return {k: (v[..., i : i + ch, j : j + cw] if v.dim() >= 3 else v) for k, v in batch.items()}
+
+
+def _flip(
+    batch: dict[str, torch.Tensor], p: float, gen: torch.Generator
+) -> dict[str, torch.Tensor]:
+    """Mirror each sample left-right with probability ``p`` (``x (B, C, H, W)``,
+    ``labels (B, H, W)``: the last axis); ``p == 0`` draws nothing from ``gen``."""
+    if p <= 0:
+        return batch
+    pick = torch.rand(batch["labels"].shape[0], generator=gen) < p
+    return {k: (torch.where(pick.view(-1, *([1] * (v.dim() - 1))), v.flip(-1), v)
+                if v.dim() >= 3 else v) for k, v in batch.items()}
 
 
 def train(
@@ -268,7 +283,7 @@ def train(
         for b, batch in enumerate(bar):
             if b >= n_batches:
                 break
-            batch = _crop(batch, cfg["crop"], gen)
+            batch = _flip(_crop(batch, cfg["crop"], gen), cfg["flip"], gen)
             x = batch["x"].to(device).float()
             y = batch["labels"].to(device).long()
             loss = loss_fn(model(x), y)

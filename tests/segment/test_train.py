@@ -5,7 +5,7 @@ from dstenv.config import ConfigError
 from dstenv.segment.checkpoint import load_checkpoint, load_segmenter
 from dstenv.segment.evaluate import batches, evaluate
 from dstenv.segment.registry import create_segmenter
-from dstenv.segment.train import train
+from dstenv.segment.train import _flip, train
 
 SMALL = {
     "model": "unet-light",
@@ -60,6 +60,8 @@ def test_resume_with_other_settings_is_refused(tmp_path, make_frames):
     ({"class_weights": [1, 1, float("nan"), 1, 1]}, "need finite values >= 0"),
     ({"class_weights": [-1, 1, 1, 1, 1]}, "need finite values >= 0"),
     ({"class_weights": [0, 0, 0, 0, 0]}, "not all 0"),
+    ({"flip": 1.5}, "train.flip in"),
+    ({"flip": float("nan")}, "train.flip in"),
 ])
 def test_nan_negative_or_zero_weights_are_refused(make_frames, tmp_path, over, message):
     # a NaN weight trained to NaN weights and still exited 0
@@ -224,3 +226,35 @@ def test_inputs_are_recorded_checked_and_loaded(tmp_path, make_frames):
     assert load_segmenter(tmp_path / "old" / "last.pt").inputs == "fcn10"
     train({**SMALL, "epochs": 1, "init": str(tmp_path / "old" / "last.pt")}, data, None, None,
           **quiet)
+
+
+def test_flip_mirrors_inputs_and_labels_together():
+    x = torch.arange(2 * 3 * 4 * 5, dtype=torch.float32).reshape(2, 3, 4, 5)
+    y = torch.arange(2 * 4 * 5).reshape(2, 4, 5)
+    batch = {"x": x, "labels": y, "seed": torch.tensor([7, 8])}
+    gen = torch.Generator().manual_seed(0)
+    assert _flip(batch, 0.0, gen) is batch
+    assert torch.equal(gen.get_state(), torch.Generator().manual_seed(0).get_state())
+    out = _flip(batch, 1.0, gen)
+    assert torch.equal(out["x"][:, :, :, 0], x[:, :, :, -1])
+    assert torch.equal(out["labels"][:, 2, 0], y[:, 2, -1])
+    assert torch.equal(out["seed"], batch["seed"])
+    # half the samples: each one flipped whole or not at all, inputs with its labels
+    many = {"x": x.repeat(20, 1, 1, 1), "labels": y.repeat(20, 1, 1)}
+    out = _flip(many, 0.5, torch.Generator().manual_seed(1))
+    flipped = [bool(torch.equal(out["x"][i], many["x"][i].flip(-1))) for i in range(40)]
+    assert 5 < sum(flipped) < 35
+    for i in range(40):
+        assert torch.equal(out["labels"][i], many["labels"][i].flip(-1) if flipped[i]
+                           else many["labels"][i])
+
+
+def test_flip_changes_training_and_stays_seeded(tmp_path, make_frames):
+    data = make_frames(8, seed=1)
+    quiet = {"progress": False, "log": lambda m: None}
+    a, _ = train({**SMALL, "epochs": 1}, data, None, None, **quiet)
+    b, _ = train({**SMALL, "epochs": 1, "flip": 0.5}, data, None, None, **quiet)
+    c, _ = train({**SMALL, "epochs": 1, "flip": 0.5}, data, None, None, **quiet)
+    wa, wb, wc = _weights(a), _weights(b), _weights(c)
+    assert not all(torch.equal(wa[k], wb[k]) for k in wa)
+    assert all(torch.equal(wb[k], wc[k]) for k in wb)

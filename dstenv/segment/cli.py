@@ -57,7 +57,8 @@ def _train(args: argparse.Namespace) -> int:
         "inputs": args.inputs or defaults["inputs"],
         "labels": args.labels,
     }
-    for key in ("epochs", "batch_size", "lr", "loss", "crop", "num_workers", "weight_power"):
+    for key in ("epochs", "batch_size", "lr", "loss", "crop", "flip", "num_workers",
+                "weight_power"):
         if getattr(args, key) is not None:
             cfg[key] = getattr(args, key)
     if args.init:
@@ -295,6 +296,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--batch-size", type=int)
     p.add_argument("--lr", type=float, help="Adam learning rate (default 1e-3)")
     p.add_argument("--crop", type=int, help="random square training crops [cells] (0: whole grids)")
+    p.add_argument("--flip", type=float, help="probability of mirroring a training sample "
+                                              "left-right (default 0: off)")
     p.add_argument("--num-workers", type=int, help="DataLoader workers")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--device", default="auto", help="cpu, cuda or auto (default)")

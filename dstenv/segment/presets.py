@@ -197,6 +197,7 @@ PRESETS: dict[str, dict[str, Any]] = {
             "batch_size": 8,
             "lr": 2e-3,
             "crop": 96,
+            "flip": 0.0,  # no mirroring (docs/benchmark.md: tried for real_net)
             "loss": "wce+lovasz",
             "weight_power": 0.5,  # chosen on validation: benchmarks/search/cpu-weight-power.json
         },

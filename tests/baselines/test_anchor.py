@@ -10,6 +10,7 @@ import torch
 from stable_baselines3.common.utils import obs_as_tensor
 
 import ppo_grid
+from conftest import TINY_WARM
 from anchor import anchor_to, kl_to_anchor
 from ppo_grid import Args, build_model, make_vec_env
 from rl_common import parse_args
@@ -59,10 +60,7 @@ def test_kl_is_zero_at_the_anchor_and_pulls_back(model_and_obs) -> None:
 
 def test_anchored_run_logs_the_kl(env_flags: list[str], tmp_path) -> None:
     out = tmp_path / "anchored"
-    meta = ppo_grid.main([*env_flags, "--n-envs", "2", "--vec-env", "dummy", "--n-steps", "32",
-                          "--batch-size", "32", "--n-epochs", "2", "--total-timesteps", "312",
-                          "--map-pool", "2", "--verbose", "0", "--warm-start", "grid",
-                          "--warm-start-steps", "120", "--warm-start-rounds", "2",
+    meta = ppo_grid.main([*env_flags, *TINY_WARM, "--n-epochs", "2", "--total-timesteps", "312",
                           "--anchor", "--ent-coef", "0.5", "--learning-rate", "1e-3",
                           "--out", str(out)])
     assert meta["args"]["anchor"] is True and meta["env_steps"] == 312

@@ -15,6 +15,7 @@ import imitation
 import ppo_grid
 from imitation import DEAD_SPREAD, _fit, discounted_returns
 from ppo_grid import Args, build_model, make_vec_env
+from conftest import TINY_WARM
 from rl_common import parse_args
 
 
@@ -103,10 +104,7 @@ def test_a_blind_fit_is_undone_and_redone_at_a_tenth_of_the_rate(
         return _fit(model, data, returns, epochs, lr, batch, rng)
 
     monkeypatch.setattr(imitation, "_fit", blinding_fit)
-    meta = ppo_grid.main([*env_flags, "--n-envs", "2", "--vec-env", "dummy", "--n-steps", "32",
-                          "--batch-size", "32", "--n-epochs", "1", "--total-timesteps", "184",
-                          "--map-pool", "2", "--verbose", "0", "--warm-start", "grid",
-                          "--warm-start-steps", "120", "--warm-start-rounds", "2",
+    meta = ppo_grid.main([*env_flags, *TINY_WARM, "--n-epochs", "1", "--total-timesteps", "184",
                           "--warm-start-lr", "1e-3", "--warm-start-retries", str(retries),
                           "--checkpoint-every", "0", "--out", str(tmp_path / "ws")])
     first, second = meta["warm_start"]["rounds"]
@@ -132,11 +130,9 @@ def test_warm_started_run_counts_its_steps(env_flags: list[str], tmp_path, exper
         return learn(self, *a, **k)
 
     monkeypatch.setattr(ppo_grid.PPO, "learn", spy)
-    meta = ppo_grid.main([*env_flags, "--n-envs", "2", "--vec-env", "dummy", "--n-steps", "32",
-                          "--batch-size", "32", "--n-epochs", "1", "--total-timesteps", "184",
-                          "--map-pool", "2", "--verbose", "0", "--warm-start", expert,
-                          "--warm-start-steps", "120", "--warm-start-rounds", "2",
-                          "--checkpoint-every", "0", "--keep-checkpoints", "--out", str(out)])
+    meta = ppo_grid.main([*env_flags, *TINY_WARM, "--n-epochs", "1", "--total-timesteps", "184",
+                          "--warm-start", expert, "--checkpoint-every", "0",
+                          "--keep-checkpoints", "--out", str(out)])
     warm = meta["warm_start"]
     assert ("(tuned:" in warm["method"]) == (expert == "grid-tuned")
     assert ("autopilot advice" in warm["method"]) == (expert == "cautious")

@@ -9,6 +9,7 @@ import pytest
 import torch
 
 import ppo_grid
+from conftest import TINY_WARM
 from imitation import _fit
 from ppo_grid import Args, build_model, make_vec_env
 from privileged import (NEAREST, PRIVILEGED_KEY, RADIUS, SPEED_SCALE, AsymmetricPolicy,
@@ -94,10 +95,7 @@ def test_run_saves_a_policy_that_evaluate_scores(env_flags: list[str], tmp_path)
     from rl_common import EnvArgs
 
     out = tmp_path / "asym"
-    meta = ppo_grid.main([*env_flags, "--n-envs", "2", "--vec-env", "dummy", "--n-steps", "32",
-                          "--batch-size", "32", "--n-epochs", "1", "--total-timesteps", "184",
-                          "--map-pool", "2", "--verbose", "0", "--warm-start", "grid",
-                          "--warm-start-steps", "120", "--warm-start-rounds", "2",
+    meta = ppo_grid.main([*env_flags, *TINY_WARM, "--n-epochs", "1", "--total-timesteps", "184",
                           "--extractor", "route-cnn", "--critic", "privileged",
                           "--anchor", "--ent-coef", "0.1", "--checkpoint-every", "0",
                           "--out", str(out)])

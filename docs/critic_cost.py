@@ -1,0 +1,51 @@
+"""PPO's steps per second with and without the privileged critic (``ppo_grid.py --critic
+privileged``), in one process, alternating, PPO alone (no warm start), the anchored
+recipe's env config and extractor::
+
+    python docs/critic_cost.py --steps 4096 --rounds 2 --out benchmarks/results/rl/critic-cost.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "baselines"))
+
+
+def main() -> None:
+    import ppo_grid
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--steps", type=int, default=4096)
+    ap.add_argument("--rounds", type=int, default=2)
+    ap.add_argument("--out", type=Path, required=True)
+    args = ap.parse_args()
+    cfg = json.dumps({"reward": {"collision": -100, "off_road": -10}, "action": {"repeat": 3}})
+    rates: dict[str, list[float]] = {"plain": [], "privileged": []}
+    with tempfile.TemporaryDirectory() as tmp:
+        for r in range(args.rounds):
+            for critic in ("plain", "privileged"):
+                argv = ["--env-config", cfg, "--max-episode-steps", "200", "--extractor",
+                        "route-cnn", "--total-timesteps", str(args.steps), "--map-pool", "10",
+                        "--learning-rate", "3e-05", "--gamma", "0.98", "--checkpoint-every",
+                        "0", "--verbose", "0", "--out", f"{tmp}/{critic}{r}"]
+                if critic != "plain":
+                    argv += ["--critic", critic]
+                meta = ppo_grid.main(argv)
+                rates[critic].append(round(meta["timesteps"] / meta["wall_time_s"], 1))
+    ratio = sorted(rates["privileged"])[len(rates["privileged"]) // 2] / sorted(
+        rates["plain"])[len(rates["plain"]) // 2]
+    record = {"command": "python " + " ".join(sys.argv),
+              "date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+              "steps_per_s": rates, "ratio_privileged_to_plain": round(ratio, 3)}
+    args.out.write_text(json.dumps(record, indent=2) + "\n")
+    print(record)
+
+
+if __name__ == "__main__":
+    main()

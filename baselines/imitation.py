@@ -131,11 +131,12 @@ def _fit(model: PPO, data: dict[str, np.ndarray], returns: np.ndarray, epochs: i
     def obs(idx: np.ndarray) -> Any:
         return policy.obs_to_tensor({k: data[k][idx] for k in keys})[0]
 
+    # a critic with its own extractor (--critic privileged) fits it with the value head
+    own = not policy.share_features_extractor
     value_params = [*policy.mlp_extractor.value_net.parameters(),
-                    *policy.value_net.parameters()]
+                    *policy.value_net.parameters(),
+                    *(policy.vf_features_extractor.parameters() if own else ())]
     ids = {id(p) for p in value_params}
-    if not policy.share_features_extractor:  # the critic's extractor: not the actor's to fit
-        ids |= {id(p) for p in policy.vf_features_extractor.parameters()}
     actor_params = [p for p in policy.parameters() if id(p) not in ids]
     counts = np.bincount(data["label"][train_idx], minlength=int(model.action_space.n))
     weight = np.minimum(counts.max() / np.maximum(counts, 1), 10.0)
@@ -150,17 +151,17 @@ def _fit(model: PPO, data: dict[str, np.ndarray], returns: np.ndarray, epochs: i
             opt.zero_grad()
             loss.backward()
             opt.step()
-    own = not policy.share_features_extractor  # a critic with its own extractor learns too
-    if own:
-        value_params += list(policy.vf_features_extractor.parameters())
     opt = torch.optim.Adam(value_params, lr=lr)
     target = torch.as_tensor(returns, dtype=torch.float32)
     for _ in range(epochs):
         for idx in _batches(len(train_idx), batch, rng):
-            with torch.set_grad_enabled(own):
-                latent = policy.extract_features(obs(train_idx[idx]))
-                latent = latent[1] if own else latent  # SB3: (actor's, critic's) when not shared
-            v = policy.value_net(policy.mlp_extractor.forward_critic(latent)).flatten()
+            o = obs(train_idx[idx])
+            if own:  # the critic's extractor alone, with gradients
+                v = policy.predict_values(o).flatten()
+            else:
+                with torch.no_grad():
+                    latent = policy.extract_features(o)
+                v = policy.value_net(policy.mlp_extractor.forward_critic(latent)).flatten()
             loss = mse(v, target[train_idx[idx]])
             opt.zero_grad()
             loss.backward()

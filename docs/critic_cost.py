@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import statistics
 import sys
 import tempfile
 import time
@@ -38,8 +39,7 @@ def main() -> None:
                     argv += ["--critic", critic]
                 meta = ppo_grid.main(argv)
                 rates[critic].append(round(meta["timesteps"] / meta["wall_time_s"], 1))
-    ratio = sorted(rates["privileged"])[len(rates["privileged"]) // 2] / sorted(
-        rates["plain"])[len(rates["plain"]) // 2]
+    ratio = statistics.median(rates["privileged"]) / statistics.median(rates["plain"])
     record = {"command": "python " + " ".join(sys.argv),
               "date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
               "steps_per_s": rates, "ratio_privileged_to_plain": round(ratio, 3)}

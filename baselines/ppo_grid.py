@@ -103,7 +103,8 @@ class Args(EnvArgs):
                                      "2026-12-06 saturated a six-epoch fit)")
     warm_start_retries: int = opt(2, "refits at a tenth of the rate of a blind DAgger fit")
     critic: str = opt("", "'' (the actor's input) | privileged: an asymmetric critic that "
-                          "also reads the nearest road users' ground truth (privileged.py)")
+                          "also reads the nearest road users' ground truth (privileged.py) | "
+                          "privileged-vectors: that truth, ego and route, no grid")
     anchor: bool = opt(False, "with --warm-start: PPO's entropy bonus becomes a KL penalty "
                               "to the warm-started policy (anchor.py), --ent-coef its weight")
     checkpoint_every: int = opt(10_000, "save the model every this many steps; 0: at the end")
@@ -228,12 +229,13 @@ def build_model(args: Args, env: VecEnv | gym.Env) -> PPO:
                          if dict_obs else {"features_extractor_kwargs":
                                            {"features_dim": args.features_dim}})
     if args.critic:
-        from privileged import AsymmetricPolicy
+        from privileged import policy_class
 
         if args.extractor == "combined" or not dict_obs:
-            raise ValueError("--critic privileged: needs --extractor grid-cnn or route-cnn on a "
-                             "dict observation (SB3's own extractor would read the ground truth)")
-        policy = AsymmetricPolicy  # type: ignore[assignment]
+            raise ValueError(f"--critic {args.critic}: needs --extractor grid-cnn or route-cnn "
+                             "on a dict observation (SB3's own extractor would read the ground "
+                             "truth)")
+        policy = policy_class(args.critic)  # type: ignore[assignment]
     tb = str(Path(args.out) / "tb") if args.tensorboard else None
     model = PPO(policy, env, learning_rate=args.learning_rate, n_steps=args.n_steps,
                batch_size=args.batch_size, n_epochs=args.n_epochs, gamma=args.gamma,

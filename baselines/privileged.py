@@ -29,8 +29,9 @@ from stable_baselines3.common.policies import MultiInputActorCriticPolicy
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from torch import nn
 
-__all__ = ["AsymmetricPolicy", "CRITICS", "NEAREST", "PRIVILEGED_KEY", "PrivilegedCritic",
-           "PrivilegedObservation", "privileged_features", "wrap"]
+__all__ = ["AsymmetricPolicy", "AsymmetricVectorPolicy", "CRITICS", "NEAREST", "PRIVILEGED_KEY",
+           "PrivilegedCritic", "PrivilegedObservation", "PrivilegedVectorCritic",
+           "policy_class", "privileged_features", "wrap"]
 
 #: the observation key only the critic reads (:class:`~extractors.GridCNN` skips it)
 PRIVILEGED_KEY = "privileged"
@@ -40,8 +41,8 @@ NEAREST = 8
 RADIUS = 40.0
 #: [m/s] velocities are divided by it
 SPEED_SCALE = 15.0
-#: ``--critic`` values
-CRITICS = ("", "privileged")
+#: ``--critic`` values: none, the actor's extractor plus the vector, the vectors alone
+CRITICS = ("", "privileged", "privileged-vectors")
 
 
 def privileged_features(ego_pose: np.ndarray, ego_speed: float, xy: np.ndarray,
@@ -103,7 +104,8 @@ class PrivilegedObservation(gym.ObservationWrapper, gym.utils.RecordConstructorA
 def wrap(env: gym.Env, critic: str) -> gym.Env:
     """``env`` itself (``critic == ""``) or with the privileged vector added."""
     if critic not in CRITICS:
-        raise ValueError(f"--critic: expected '' or privileged, got {critic!r}")
+        raise ValueError(f"--critic: expected '', privileged or privileged-vectors, "
+                         f"got {critic!r}")
     return PrivilegedObservation(env) if critic else env
 
 
@@ -146,6 +148,51 @@ class AsymmetricPolicy(MultiInputActorCriticPolicy):
         # SB3 calls this twice: first the actor's extractor, then the critic's
         if not isinstance(self._modules.get("features_extractor"), nn.Module):
             return super().make_features_extractor()
-        return PrivilegedCritic(self.observation_space, self.features_extractor.features_dim,
+        return self.make_critic_extractor(self.features_extractor.features_dim)
+
+    def make_critic_extractor(self, features_dim: int) -> BaseFeaturesExtractor:
+        """The critic's extractor, ``features_dim`` wide (the actor's)."""
+        return PrivilegedCritic(self.observation_space, features_dim,
                                 self.features_extractor_class,
                                 self.features_extractor_kwargs)
+
+
+class PrivilegedVectorCritic(BaseFeaturesExtractor):
+    """A critic's extractor without the grid: an MLP of every flat vector of the
+    observation (``ego``, ``route``, :data:`PRIVILEGED_KEY`, ..., in key order).
+
+    With the ground truth of the nearest road users (parked cars included), the ego's
+    state and the route ahead, the grid adds little the value needs, and a critic
+    without a CNN costs PPO almost nothing (:class:`PrivilegedCritic` runs a second
+    copy of the actor's CNN).
+
+    Args:
+        observation_space: a ``Dict`` with :data:`PRIVILEGED_KEY` and a ``grid`` key
+            (not read); every other entry a ``Box``.
+        features_dim: output size (the actor's, so that SB3's heads fit both).
+    """
+
+    def __init__(self, observation_space: spaces.Dict, features_dim: int) -> None:
+        super().__init__(observation_space, features_dim)
+        self.keys = sorted(k for k in observation_space.spaces if k != "grid")
+        n = sum(int(np.prod(observation_space[k].shape)) for k in self.keys)
+        self.mlp = nn.Sequential(nn.Linear(n, 256), nn.ReLU(), nn.Linear(256, 256), nn.ReLU(),
+                                 nn.Linear(256, features_dim), nn.ReLU())
+
+    def forward(self, observations: Any) -> torch.Tensor:
+        x = torch.cat([observations[k].float().flatten(1) for k in self.keys], dim=1)
+        return self.mlp(x)
+
+
+class AsymmetricVectorPolicy(AsymmetricPolicy):
+    """:class:`AsymmetricPolicy` with a :class:`PrivilegedVectorCritic` (no grid)."""
+
+    def make_critic_extractor(self, features_dim: int) -> BaseFeaturesExtractor:
+        return PrivilegedVectorCritic(self.observation_space, features_dim)
+
+
+def policy_class(critic: str) -> type[AsymmetricPolicy]:
+    """The SB3 policy class of a ``--critic`` value other than ``''``."""
+    if critic not in CRITICS[1:]:
+        raise ValueError(f"--critic: expected privileged or privileged-vectors, got {critic!r}")
+    return AsymmetricPolicy if critic == "privileged" else AsymmetricVectorPolicy

@@ -13,7 +13,8 @@ from conftest import TINY_WARM
 from imitation import _fit
 from ppo_grid import Args, build_model, make_vec_env
 from privileged import (NEAREST, PRIVILEGED_KEY, RADIUS, SPEED_SCALE, AsymmetricPolicy,
-                        PrivilegedCritic, privileged_features)
+                        AsymmetricVectorPolicy, PrivilegedCritic, PrivilegedVectorCritic,
+                        privileged_features)
 from rl_common import parse_args
 
 
@@ -38,10 +39,14 @@ def test_features_in_the_ego_frame_nearest_first() -> None:
                                np.zeros(0, bool)).shape == (NEAREST * 5,)
 
 
-@pytest.fixture
-def asym(env_flags: list[str]):
+#: each ``--critic`` and the extractor class of its critic
+CRITIC_CLASSES = {"privileged": PrivilegedCritic, "privileged-vectors": PrivilegedVectorCritic}
+
+
+@pytest.fixture(params=sorted(CRITIC_CLASSES))
+def asym(env_flags: list[str], request):
     args = parse_args(Args, [*env_flags, "--n-envs", "1", "--vec-env", "dummy", "--extractor",
-                             "route-cnn", "--critic", "privileged"])
+                             "route-cnn", "--critic", request.param])
     env = make_vec_env(args)
     try:
         yield build_model(args, env), env
@@ -53,8 +58,10 @@ def test_the_actor_never_reads_the_ground_truth(asym) -> None:
     model, env = asym
     policy = model.policy
     assert isinstance(policy, AsymmetricPolicy)
-    assert isinstance(policy.vf_features_extractor, PrivilegedCritic)
-    assert not isinstance(policy.pi_features_extractor, PrivilegedCritic)
+    critic = type(policy.vf_features_extractor)
+    assert critic in CRITIC_CLASSES.values()
+    assert isinstance(policy, AsymmetricVectorPolicy) == (critic is PrivilegedVectorCritic)
+    assert not isinstance(policy.pi_features_extractor, tuple(CRITIC_CLASSES.values()))
     obs = env.reset()
     assert obs[PRIVILEGED_KEY].shape == (1, NEAREST * 5) and obs[PRIVILEGED_KEY].any()
     other = {**obs, PRIVILEGED_KEY: np.random.default_rng(0).uniform(
@@ -66,6 +73,24 @@ def test_the_actor_never_reads_the_ground_truth(asym) -> None:
         values = [policy.predict_values(o) for o in (t, u)]
     assert torch.equal(logits[0], logits[1])
     assert not torch.equal(values[0], values[1])  # the critic does read it
+
+
+def test_the_vector_critic_never_reads_the_grid(env_flags: list[str]) -> None:
+    args = parse_args(Args, [*env_flags, "--n-envs", "1", "--vec-env", "dummy", "--extractor",
+                             "route-cnn", "--critic", "privileged-vectors"])
+    env = make_vec_env(args)
+    try:
+        policy = build_model(args, env).policy
+        obs = env.reset()
+    finally:
+        env.close()
+    assert isinstance(policy.vf_features_extractor, PrivilegedVectorCritic)
+    assert PRIVILEGED_KEY in policy.vf_features_extractor.keys
+    other = {**obs, "grid": 255 - obs["grid"]}
+    moved = {**obs, "ego": obs["ego"] + 0.5}
+    with torch.no_grad():
+        v = [policy.predict_values(policy.obs_to_tensor(o)[0]) for o in (obs, other, moved)]
+    assert torch.equal(v[0], v[1]) and not torch.equal(v[0], v[2])
 
 
 def test_dagger_value_fit_trains_the_critics_own_extractor(asym) -> None:
@@ -90,13 +115,15 @@ def test_dagger_value_fit_trains_the_critics_own_extractor(asym) -> None:
     assert stats["value_rmse"] < 0.5 * float(np.std(returns))
 
 
-def test_run_saves_a_policy_that_evaluate_scores(env_flags: list[str], tmp_path) -> None:
+@pytest.mark.parametrize("critic", sorted(CRITIC_CLASSES))
+def test_run_saves_a_policy_that_evaluate_scores(env_flags: list[str], tmp_path,
+                                                  critic: str) -> None:
     from evaluate import PPOPolicy
     from rl_common import EnvArgs
 
     out = tmp_path / "asym"
     meta = ppo_grid.main([*env_flags, *TINY_WARM, "--n-epochs", "1", "--total-timesteps", "184",
-                          "--extractor", "route-cnn", "--critic", "privileged",
+                          "--extractor", "route-cnn", "--critic", critic,
                           "--anchor", "--ent-coef", "0.1", "--checkpoint-every", "0",
                           "--out", str(out)])
     assert meta["timesteps"] == 64 and PRIVILEGED_KEY in meta["observation_space"]
@@ -122,3 +149,6 @@ def test_privileged_critic_needs_a_grid_extractor(env_flags: list[str]) -> None:
         env.close()
     with pytest.raises(ValueError, match="--critic: expected"):
         ppo_grid.main([*env_flags, "--critic", "oracle", "--out", "unused"])
+    from privileged import policy_class
+    with pytest.raises(ValueError, match="--critic: expected privileged or"):
+        policy_class("")

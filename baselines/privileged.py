@@ -30,7 +30,7 @@ from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
 from torch import nn
 
 __all__ = ["AsymmetricPolicy", "AsymmetricVectorPolicy", "CRITICS", "NEAREST", "PRIVILEGED_KEY",
-           "PrivilegedCritic", "PrivilegedObservation", "PrivilegedVectorCritic",
+           "POLICIES", "PrivilegedCritic", "PrivilegedObservation", "PrivilegedVectorCritic",
            "policy_class", "privileged_features", "wrap"]
 
 #: the observation key only the critic reads (:class:`~extractors.GridCNN` skips it)
@@ -41,8 +41,6 @@ NEAREST = 8
 RADIUS = 40.0
 #: [m/s] velocities are divided by it
 SPEED_SCALE = 15.0
-#: ``--critic`` values: none, the actor's extractor plus the vector, the vectors alone
-CRITICS = ("", "privileged", "privileged-vectors")
 
 
 def privileged_features(ego_pose: np.ndarray, ego_speed: float, xy: np.ndarray,
@@ -104,8 +102,7 @@ class PrivilegedObservation(gym.ObservationWrapper, gym.utils.RecordConstructorA
 def wrap(env: gym.Env, critic: str) -> gym.Env:
     """``env`` itself (``critic == ""``) or with the privileged vector added."""
     if critic not in CRITICS:
-        raise ValueError(f"--critic: expected '', privileged or privileged-vectors, "
-                         f"got {critic!r}")
+        raise ValueError(f"--critic: expected one of {CRITICS}, got {critic!r}")
     return PrivilegedObservation(env) if critic else env
 
 
@@ -191,8 +188,16 @@ class AsymmetricVectorPolicy(AsymmetricPolicy):
         return PrivilegedVectorCritic(self.observation_space, features_dim)
 
 
+#: the SB3 policy class of each ``--critic`` but ``''``: the actor's extractor plus the
+#: vector, the vectors alone
+POLICIES: dict[str, type[AsymmetricPolicy]] = {"privileged": AsymmetricPolicy,
+                                               "privileged-vectors": AsymmetricVectorPolicy}
+#: ``--critic`` values ('': the critic reads the actor's input)
+CRITICS = ("", *POLICIES)
+
+
 def policy_class(critic: str) -> type[AsymmetricPolicy]:
     """The SB3 policy class of a ``--critic`` value other than ``''``."""
-    if critic not in CRITICS[1:]:
-        raise ValueError(f"--critic: expected privileged or privileged-vectors, got {critic!r}")
-    return AsymmetricPolicy if critic == "privileged" else AsymmetricVectorPolicy
+    if critic not in POLICIES:
+        raise ValueError(f"--critic: expected one of {tuple(POLICIES)}, got {critic!r}")
+    return POLICIES[critic]

@@ -17,13 +17,13 @@ BASELINES = Path(__file__).resolve().parents[2] / "baselines"
 if str(BASELINES) not in sys.path:  # the scripts import their sibling rl_common
     sys.path.insert(0, str(BASELINES))
 
-#: A small city and grid (40 x 40 is above NatureCNN's 36 x 36 minimum).
 #: a tiny warm-started PPO run: two dummy envs, DAgger from the grid rule driver for 120
 #: env steps in two rounds (a later ``--warm-start`` flag overrides the teacher)
 TINY_WARM = ["--n-envs", "2", "--vec-env", "dummy", "--n-steps", "32", "--batch-size", "32",
              "--map-pool", "2", "--verbose", "0", "--warm-start", "grid",
              "--warm-start-steps", "120", "--warm-start-rounds", "2"]
 
+#: A small city and grid (40 x 40 is above NatureCNN's 36 x 36 minimum).
 SMALL_CONFIG = {
     "grid": {"height": 40, "width": 40, "cell_size": 1.0},
     "lidar": {"beams": 360},

@@ -91,6 +91,20 @@ VARIANTS: dict[str, dict[str, Any]] = {
                                                           "inputs": "fcn10+sensor+past",
                                                           "frames": 1200,
                                                           "seeds": [0, 1, 2, 3]}},
+    # the same with KITTI's OXTS-like ego-motion errors in the drives' filter (moving
+    # evidence on the rims of parked cars, as 0003's have)
+    "no map past kitti moving odometry": {"real_net": {"map": "match", "moving": "match",
+                                                       "inputs": "fcn10+sensor+past",
+                                                       "seeds": [0, 1, 2, 3, 4, 5]},
+                                          "data_overrides": {"protocol": {
+                                              "odometry_along": 0.04, "odometry_drift": 0.01,
+                                              "odometry_yaw": 0.015}}},
+    # the same with logits on top of DST's log BetP (betp_skip): the network corrects
+    # DST's decision rather than replacing it
+    "no map past kitti moving betp_skip": {"real_net": {"map": "match", "moving": "match",
+                                                        "inputs": "fcn10+sensor+past",
+                                                        "seeds": [0, 1, 2, 3, 4, 5]},
+                                           "model_kwargs": {"unet-light": {"betp_skip": 1.0}}},
 }
 
 

@@ -247,7 +247,30 @@ class AdvicePolicy:
         return int(info["autopilot_action"])
 
 
-class CautiousDriver(AdvicePolicy):
+class SlowerOf:
+    """Each step the slower of two drivers' ``Discrete(3)`` speed actions (SLOWER <
+    IDLE < FASTER): whichever sees danger slows the car.
+
+    A learned policy held back by a rule driver this way is *shielded* by it
+    (``evaluate.py --shield``; Alshiekh et al., AAAI 2018); :class:`CautiousDriver`
+    is ``grid-tuned`` with the autopilot's advice. Both read the same observation and
+    ``info``, so the pair is privileged only where one of the two is.
+    """
+
+    def __init__(self, first: Any, second: Any, name: str) -> None:
+        self.first, self.second, self.name = first, second, name
+
+    def reset(self, env: gym.Env, seed: int) -> None:
+        if env.unwrapped.get_action_meanings() != ["SLOWER", "IDLE", "FASTER"]:
+            raise ValueError(f"{self.name}: needs the speed actions (SLOWER, IDLE, FASTER)")
+        self.first.reset(env, seed)
+        self.second.reset(env, seed)
+
+    def act(self, obs: Any, info: dict[str, Any]) -> int:
+        return min(int(self.first.act(obs, info)), int(self.second.act(obs, info)))
+
+
+class CautiousDriver(SlowerOf):
     """The slower of ``grid-tuned``'s action and the autopilot's advice.
 
     Each step it takes the lower of the two ``Discrete(3)`` speed actions (SLOWER <
@@ -259,19 +282,9 @@ class CautiousDriver(AdvicePolicy):
     danger, this driver slows. Needs an env with :data:`ADVICE_CONFIG`.
     """
 
-    name = "cautious: min(grid-tuned, autopilot advice) (privileged)"
-
     def __init__(self) -> None:
-        self.grid = grid_driver(True)
-
-    def reset(self, env: gym.Env, seed: int) -> None:
-        if env.unwrapped.get_action_meanings() != ["SLOWER", "IDLE", "FASTER"]:
-            raise ValueError("CautiousDriver: needs the speed actions (SLOWER, IDLE, FASTER)")
-        super().reset(env, seed)
-        self.grid.reset(env, seed)
-
-    def act(self, obs: Any, info: dict[str, Any]) -> int:
-        return min(self.grid.act(obs, info), super().act(obs, info))
+        super().__init__(grid_driver(True), AdvicePolicy(),
+                         "cautious: min(grid-tuned, autopilot advice) (privileged)")
 
 
 class ConstantPolicy:
@@ -312,6 +325,24 @@ def teacher(name: str) -> tuple[Any, str]:
     tuned = name == "grid-tuned"
     return grid_driver(tuned), "dagger from the grid rule driver" + (
         f" (tuned: {TUNED_PARAMS})" if tuned else "")
+
+
+#: rule drivers that can shield a learned policy (``evaluate.py --shield``)
+SHIELDS = ("grid", "grid-tuned")
+
+
+def check_shield(shield: str) -> None:
+    """Raise ``ValueError`` unless ``shield`` is one of :data:`SHIELDS`."""
+    if shield not in SHIELDS:
+        raise ValueError(f"--shield: expected one of {SHIELDS}, got {shield!r}")
+
+
+def shielded(policy: Any, shield: str) -> SlowerOf:
+    """``policy`` held back by the rule driver ``shield`` of :data:`SHIELDS`: each step
+    the slower of the two actions, named ``"<policy> + shield <shield>"``."""
+    check_shield(shield)
+    return SlowerOf(policy, grid_driver(shield == "grid-tuned"),
+                    f"{policy.name} + shield {shield}")
 
 
 def reference_driver(name: str, args: EnvArgs, constant_action: int = 2) -> tuple[Any, gym.Env]:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import evaluate
+import numpy as np
 import ppo_grid
 from evaluate import BEGIN, END, write_readme
 
@@ -79,6 +80,44 @@ def test_temperature_sampling_is_seeded_and_sharpens(tmp_path, env_flags: list[s
     assert hot.name.endswith("T=1")
     with pytest.raises(ValueError, match="--temperature"):
         evaluate.PPOPolicy(out / "model.pt", temperature=-1.0)
+
+
+def test_shield_takes_the_slower_action_and_adds_a_row(tmp_path, env_flags: list[str]) -> None:
+    import pytest
+    from rl_common import parse_args
+    from rule_based import grid_driver, shielded
+
+    out = tmp_path / "ppo"
+    ppo_grid.main([*env_flags, "--n-envs", "1", "--vec-env", "dummy", "--n-steps", "32",
+                   "--batch-size", "32", "--n-epochs", "1", "--total-timesteps", "32",
+                   "--map-pool", "2", "--verbose", "0", "--out", str(out)])
+    ppo = evaluate.PPOPolicy(out / "model.pt", temperature=1.0)  # sampled: actions vary
+    env = ppo.make_env(parse_args(evaluate.Args, env_flags))
+    policy, tuned = shielded(ppo, "grid-tuned"), grid_driver(True)
+    obs, info = env.reset(seed=5)
+    policy.reset(env, 5)
+    tuned.reset(env, 5)
+    picked = []
+    for _ in range(30):
+        ppo.rng = np.random.default_rng(len(picked))  # the same draw for both calls
+        mine = ppo.act(obs, info)
+        ppo.rng = np.random.default_rng(len(picked))
+        action, rule = policy.act(obs, info), tuned.act(obs, info)
+        assert action == min(mine, rule)
+        picked.append((action, mine, rule))
+        obs, _, terminated, truncated, info = env.step(action)
+        if terminated or truncated:
+            break
+    assert len({m for _, m, _ in picked}) > 1  # the check saw more than one PPO action
+    env.close()
+    assert policy.name == ppo.name + " + shield grid-tuned"
+    block = evaluate.main([*env_flags, "--policies", "--episodes", "1", "--checkpoints",
+                           str(out / "model.pt"), "--shield", "grid"])
+    rows = [ln.split(" | ")[0] for ln in block.splitlines() if ln.startswith("| ")][1:]
+    assert rows == ["| PPO grid-cnn (model)", "| PPO grid-cnn (model) + shield grid"]
+    with pytest.raises(ValueError, match="--shield: expected one of"):
+        evaluate.main([*env_flags, "--policies", "--episodes", "1", "--checkpoints",
+                       str(out / "model.pt"), "--shield", "nope"])
 
 
 def test_budget_counts_a_warm_starts_steps():

@@ -8,8 +8,8 @@ same with its parameters tuned on validation seeds), ``autopilot``
 (privileged), ``constant``, ``advice`` and ``cautious`` (privileged teachers; all in
 :mod:`rule_based`), and each trained PPO checkpoint
 given with ``--checkpoints`` (``model.pt`` state_dicts from :mod:`ppo_grid`, with
-their ``model.json`` sidecars; only tensors are loaded), with ``--shield NAME`` each
-also held back by a rule driver (the slower of the two actions each step). Reported
+their ``model.json`` sidecars; only tensors are loaded); with ``--shield NAME`` each
+of them also held back by a rule driver (the slower of the two actions each step). Reported
 per policy:
 success rate, collision rate, off-road rate, mean return and mean route progress
 [m] with standard errors (definitions in :mod:`rl_common`).
@@ -72,9 +72,9 @@ class Args(EnvArgs):
     write_readme: bool = opt(False, "replace the results block of --readme (else print only)")
     csv: str = opt("", "write every episode of every policy to this CSV file")
     torch_threads: int = opt(1, "torch CPU threads for the PPO policies")
-    shield: str = opt("", "'' (none) | grid | grid-tuned: each checkpoint also drives "
-                          "held back by that rule driver, each step the slower of the two "
-                          "speed actions (rows '<policy> + shield <name>')")
+    shield: str = opt("", "'' (none) | grid | grid-tuned: every policy also drives held "
+                          "back by that rule driver, each step the slower of the two speed "
+                          "actions (rows '<policy> + shield <name>')")
 
 
 class PPOPolicy:
@@ -237,21 +237,24 @@ def run(args: Args, command: str) -> str:
     # every checkpoint (file, sidecar, temperature) is read before the first episode
     ppo = {path: PPOPolicy(path, args.deterministic, args.temperature)
            for path in args.checkpoints}
-    jobs: list[tuple[Any, Any]] = [(name, None) for name in args.policies]
-    jobs += [(None, path) for path in args.checkpoints]
+    jobs: list[tuple[Any, Any, bool]] = [(name, None, False) for name in args.policies]
+    jobs += [(None, path, False) for path in args.checkpoints]
     if args.shield:
         check_shield(args.shield)  # before any episode
-        jobs += [("shield", path) for path in args.checkpoints]
-    for name, path in jobs:
+        # the autopilot drives the world's own controls, not the speed actions
+        jobs += [(name, path, True) for name, path, _ in jobs if name != "autopilot"]
+    for name, path, shield in jobs:
         if path is None:
             policy, env = _reference(name, args)
             meta = None
         else:
-            env, meta = ppo[path].make_env(args), ppo[path].meta
-            policy = shielded(ppo[path], args.shield) if name == "shield" else ppo[path]
+            policy = ppo[path]
+            env, meta = policy.make_env(args), policy.meta
             if meta["args"]["env_id"] != args.env_id:
                 print(f"warning: {path} was trained on {meta['args']['env_id']}, "
                       f"evaluated on {args.env_id}")
+        if shield:
+            policy = shielded(policy, args.shield)
         start = time.monotonic()
         try:
             results = evaluate_policy(env, policy, seeds,

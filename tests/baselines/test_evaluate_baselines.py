@@ -111,10 +111,12 @@ def test_shield_takes_the_slower_action_and_adds_a_row(tmp_path, env_flags: list
     assert len({m for _, m, _ in picked}) > 1  # the check saw more than one PPO action
     env.close()
     assert policy.name == ppo.name + " + shield grid-tuned"
-    block = evaluate.main([*env_flags, "--policies", "--episodes", "1", "--checkpoints",
-                           str(out / "model.pt"), "--shield", "grid"])
+    block = evaluate.main([*env_flags, "--policies", "grid-tuned", "--episodes", "1",
+                           "--checkpoints", str(out / "model.pt"), "--shield", "grid"])
     rows = [ln.split(" | ")[0] for ln in block.splitlines() if ln.startswith("| ")][1:]
-    assert rows == ["| PPO grid-cnn (model)", "| PPO grid-cnn (model) + shield grid"]
+    assert rows == ["| rule-based (grid, tuned)", "| PPO grid-cnn (model)",
+                    "| rule-based (grid, tuned) + shield grid",
+                    "| PPO grid-cnn (model) + shield grid"]
     with pytest.raises(ValueError, match="--shield: expected one of"):
         evaluate.main([*env_flags, "--policies", "--episodes", "1", "--checkpoints",
                        str(out / "model.pt"), "--shield", "nope"])

@@ -33,6 +33,21 @@ from typing import Any
 #: (a variant that does not set ``real_net.moving`` or ``inputs`` has "run" and
 #: "fcn10+sensor", the main job's until 2026-12-06, as the variants before were run;
 #: the main job's have been "match" and "fcn10+sensor+past" since)
+#: the filter's ego motion with KITTI's OXTS step errors (dstenv.sensing.odometry;
+#: docs/kitti-pose-check.json: <= 9 cm along, a growing across-track error, <= 0.05 deg)
+_ODOMETRY = {"protocol": {"odometry_along": 0.04, "odometry_drift": 0.01,
+                          "odometry_yaw": 0.015}}
+#: the main job's ``real_net`` since 2026-12-06 (map-free drives, KITTI's moving rule, the
+#: past grid), six seeds: the base of the variants of 2026-12-06 and later
+_MAIN = {"map": "match", "moving": "match", "inputs": "fcn10+sensor+past",
+         "seeds": [0, 1, 2, 3, 4, 5]}
+
+#: variant -> overrides of the ``cpu`` preset (``real_net``, ``model_kwargs``) and of its
+#: drives' pipeline (``data_overrides``, merged into ``data.overrides``); the drives are
+#: treated as converted without a map (``real_map=False``), as 0003 is
+#: (a variant that does not set ``real_net.moving`` or ``inputs`` has "run" and
+#: "fcn10+sensor", the main job's until 2026-12-06, as the variants before were run;
+#: the main job's have been "match" and "fcn10+sensor+past" since)
 VARIANTS: dict[str, dict[str, Any]] = {
     # the main job's networks before real_net.map: the run's map settings
     "none": {"real_net": {"map": "run"}},
@@ -44,12 +59,7 @@ VARIANTS: dict[str, dict[str, Any]] = {
     # off-street parking lots (dstenv.sim.lots): cars parked 10-30 m from the road
     "no map lots 0.2": {"real_net": {"map": "match"},
                          "data_overrides": {"world": {"map": {"lot_prob": 0.2}}}},
-    # the filter's ego motion with KITTI's OXTS step errors (dstenv.sensing.odometry;
-    # docs/kitti-pose-check.json: <= 9 cm along, a growing across-track error, <= 0.05 deg)
-    "no map odometry": {"real_net": {"map": "match"},
-                        "data_overrides": {"protocol": {"odometry_along": 0.04,
-                                                        "odometry_drift": 0.01,
-                                                        "odometry_yaw": 0.015}}},
+    "no map odometry": {"real_net": {"map": "match"}, "data_overrides": _ODOMETRY},
     # the sensor grid of one second earlier as two more input channels
     # (dstenv.data.datasets, inputs "fcn10+sensor+past")
     "no map past": {"real_net": {"map": "match", "inputs": "fcn10+sensor+past"}},
@@ -61,9 +71,7 @@ VARIANTS: dict[str, dict[str, Any]] = {
     # as KITTI's parked cars have) and the past grid that tells them apart
     "no map past odometry": {"real_net": {"map": "match", "inputs": "fcn10+sensor+past",
                                           "seeds": [0, 1, 2, 3, 4, 5]},
-                             "data_overrides": {"protocol": {"odometry_along": 0.04,
-                                                             "odometry_drift": 0.01,
-                                                             "odometry_yaw": 0.015}}},
+                             "data_overrides": _ODOMETRY},
     # the full median-frequency class weights (the paper's eq. 2) instead of their root
     "no map wp 1.0": {"real_net": {"map": "match"}, "train": {"weight_power": 1.0}},
     # cars as a body on wheels for the 3-D LIDAR (dstenv.sensing.carshape)
@@ -73,43 +81,23 @@ VARIANTS: dict[str, dict[str, Any]] = {
     # simulator's 0.1 m/s (real_net.moving "match", the main job's since 2026-12-06)
     "no map kitti moving": {"real_net": {"map": "match", "moving": "match",
                                          "seeds": [0, 1, 2, 3, 4, 5]}},
-    "no map past kitti moving": {"real_net": {"map": "match", "moving": "match",
-                                              "inputs": "fcn10+sensor+past",
-                                              "seeds": [0, 1, 2, 3, 4, 5]}},
+    "no map past kitti moving": {"real_net": _MAIN},
     # the same trained twice as long (10 epochs)
-    "no map past kitti moving 10 epochs": {"real_net": {"map": "match", "moving": "match",
-                                                        "inputs": "fcn10+sensor+past",
-                                                        "epochs": 10,
-                                                        "seeds": [0, 1, 2, 3, 4, 5]}},
+    "no map past kitti moving 10 epochs": {"real_net": {**_MAIN, "epochs": 10}},
     # the same with each training sample mirrored left-right at random (train.flip)
-    "no map past kitti moving flip": {"real_net": {"map": "match", "moving": "match",
-                                                   "inputs": "fcn10+sensor+past",
-                                                   "seeds": [0, 1, 2, 3, 4, 5]},
-                                      "train": {"flip": 0.5}},
+    "no map past kitti moving flip": {"real_net": _MAIN, "train": {"flip": 0.5}},
     # the same on twice the simulated drives (1200 frames; four seeds, for time)
-    "no map past kitti moving 1200 frames": {"real_net": {"map": "match", "moving": "match",
-                                                          "inputs": "fcn10+sensor+past",
-                                                          "frames": 1200,
+    "no map past kitti moving 1200 frames": {"real_net": {**_MAIN, "frames": 1200,
                                                           "seeds": [0, 1, 2, 3]}},
     # the same with KITTI's OXTS-like ego-motion errors in the drives' filter (moving
     # evidence on the rims of parked cars, as 0003's have)
-    "no map past kitti moving odometry": {"real_net": {"map": "match", "moving": "match",
-                                                       "inputs": "fcn10+sensor+past",
-                                                       "seeds": [0, 1, 2, 3, 4, 5]},
-                                          "data_overrides": {"protocol": {
-                                              "odometry_along": 0.04, "odometry_drift": 0.01,
-                                              "odometry_yaw": 0.015}}},
+    "no map past kitti moving odometry": {"real_net": _MAIN, "data_overrides": _ODOMETRY},
     # the same with flatter class weights (the root of the root of the median-frequency
     # weights): less pull towards the rare moving class, whose cars the networks draw wide
-    "no map past kitti moving wp 0.25": {"real_net": {"map": "match", "moving": "match",
-                                                      "inputs": "fcn10+sensor+past",
-                                                      "seeds": [0, 1, 2, 3, 4, 5]},
-                                         "train": {"weight_power": 0.25}},
+    "no map past kitti moving wp 0.25": {"real_net": _MAIN, "train": {"weight_power": 0.25}},
     # the same with logits on top of DST's log BetP (betp_skip): the network corrects
     # DST's decision rather than replacing it
-    "no map past kitti moving betp_skip": {"real_net": {"map": "match", "moving": "match",
-                                                        "inputs": "fcn10+sensor+past",
-                                                        "seeds": [0, 1, 2, 3, 4, 5]},
+    "no map past kitti moving betp_skip": {"real_net": _MAIN,
                                            "model_kwargs": {"unet-light": {"betp_skip": 1.0}}},
 }
 

@@ -9,7 +9,8 @@ Stages (each resumable: rerunning the same command reuses finished work):
    and checked against the stored BetP; frames are keyed by ``(seed, episode,
    step)`` so several episodes per map work.
 3. **non-learned baselines, tuned on train only** -- ``dst`` for each preset of
-   ``dst_presets``; ``dst-tuned`` (:mod:`dstenv.segment.tune`, the objective is
+   ``dst_presets``; ``dst-free`` (``dst_free``: the generation parameters, no obstacle
+   on cells the current sweep saw free); ``dst-tuned`` (:mod:`dstenv.segment.tune`, the objective is
    the headline scope); ``dst-complete`` (:mod:`dstenv.segment.complete`, DST
    with the ``dst-tuned`` parameters plus a vehicle-box completion searched on
    training drives).
@@ -247,7 +248,7 @@ def run_benchmark(
         "timings_s": timings,
     }
     if drives.evaluation_only:
-        ref = next((k for k in segs if segs[k]["kind"] == "dst"
+        ref = next((k for k in segs if segs[k]["describe"]["name"] == "dst"
                     and segs[k]["describe"]["params"] == drives.generation_params.to_dict()),
                    None)
         results["goal"] = None

@@ -37,7 +37,7 @@ from dstenv.segment.shardindex import (
     stored_episodes,
     stored_inputs,
 )
-from dstenv.segment.segmenters import DSTSegmenter, Segmenter
+from dstenv.segment.segmenters import DSTFreeSegmenter, DSTSegmenter, Segmenter
 
 __all__ = ["Drives", "Plan", "split_drives", "plan_segmenters", "fixed_params"]
 
@@ -230,6 +230,8 @@ def _dst_rows(cfg: Mapping[str, Any], drives: Drives, train: Callable[[], list[E
         presets.insert(0, DSTSegmenter(gen, "dst", "dst (stored)"))
     for seg in presets:
         _add_dst(plan, seg, drives)
+    if cfg["dst_free"]:  # the generation parameters, as the goal's reference
+        _add_dst(plan, DSTFreeSegmenter(gen), drives)
     tuned = None
     if cfg["tune"]["params"]:
         tuned = DSTSegmenter(DSTParams.from_dict(fixed_params(cfg["tune"]["params"],

@@ -50,6 +50,7 @@ def default_benchmark_config() -> dict[str, Any]:
         },
         "protocol": "sim",  # "sim" or "paper" (PAPER_PROTOCOL)
         "dst_presets": ["default", "paper"],  # DSTParams presets scored as `dst`
+        "dst_free": True,  # add `dst-free`: DST, no obstacle on cells the sweep saw free
         "tune": {
             "enabled": True,  # add `dst-tuned`
             "episodes": 8,  # training episodes replayed for the search

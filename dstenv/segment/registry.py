@@ -13,6 +13,7 @@ name               kind     what
 ``dst``            dst      argmax BetP; ``preset="default"|"paper"`` or ``params=``
 ``dst-tuned``      dst      DST parameters searched on training episodes for mIoU
 ``dst-complete``   dst      DST + kerb-aligned vehicle boxes (:mod:`.complete`)
+``dst-free``       dst      DST, no obstacle where the current sweep saw free space
 ``unet-light``     learned  small U-Net (~0.48 M parameters), CPU-trainable
 ``unet-temporal``  learned  U-Net with separate t and t-1 streams (paper's future work)
 ``fcn8s-vgg16``    learned  the paper's FCN-8s (VGG-16 body, 10 -> 3 input conv)
@@ -28,7 +29,8 @@ from typing import Any
 from dstenv.dst.params import DSTParams
 from dstenv.registry import Registry
 from dstenv.segment.models import MODELS
-from dstenv.segment.segmenters import DSTSegmenter, Segmenter, TorchSegmenter
+from dstenv.segment.segmenters import (DSTFreeSegmenter, DSTSegmenter, Segmenter,
+                                       TorchSegmenter)
 
 __all__ = [
     "SegmenterEntry",
@@ -82,6 +84,12 @@ def _make_dst_complete(
     return DSTCompleteSegmenter(p, cell_size, completion)
 
 
+def _make_dst_free(params: DSTParams | dict | None = None) -> DSTFreeSegmenter:
+    p = DSTParams.default() if params is None else (
+        params if isinstance(params, DSTParams) else DSTParams.from_dict(params))
+    return DSTFreeSegmenter(p)
+
+
 def _learned(model_name: str) -> Callable[..., TorchSegmenter]:
     def factory(
         in_channels: int = 10, num_classes: int = 5, device: str = "cpu", **model_kwargs: Any
@@ -104,6 +112,9 @@ SEGMENTERS: Registry[SegmenterEntry] = Registry("segmenter", "", {
     ),
     "dst-complete": SegmenterEntry(
         _make_dst_complete, "dst", "DST plus kerb-aligned car-sized boxes (geometric completion)"
+    ),
+    "dst-free": SegmenterEntry(
+        _make_dst_free, "dst", "DST with no obstacle where the current sweep saw free space"
     ),
     **{name: SegmenterEntry(_learned(name), "learned", _describe(builder))
        for name, builder in MODELS.items()},

@@ -156,6 +156,16 @@ def _goal_lines(goal: dict[str, Any] | None, real: dict[str, Any] | None) -> lis
                 f"(goal >= {row.get('margin', real['margin_goal']):.2f}: "
                 + ("met" if row["moving"]["met"] and row["static"]["met"] else "NOT met") + ")"
             )
+        strongest = real.get("strongest") or {}
+        if strongest:
+            lines += ["", "Against the strongest non-learned row of each class (not the goal): "
+                      + "; ".join(f"{name} **{b['baseline']}** {score_text(b['iou'])}"
+                                  for name, b in strongest.items()), ""]
+            for label, row in real["networks"].items():
+                vs = {name: row[name]["vs_strongest"] for name in strongest
+                      if "vs_strongest" in row[name]}
+                diffs = [f"{name} {_ci(d['diff'], d['ci'])}" for name, d in vs.items()]
+                lines.append(f"- **{label}**: " + ", ".join(diffs))
         lines.append("")
     return lines
 

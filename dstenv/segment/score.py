@@ -245,7 +245,8 @@ def score(
     A DST segmenter (:class:`DSTSegmenter` and subclasses) gets the BetP of a
     filter run with its own parameters over the drive's inputs (argmax of the
     stored BetP when they are the generation parameters and the drive has no
-    history; unscorable otherwise). Any other segmenter (a network) reads the
+    history; unscorable otherwise), with the drive's sensor grids when its ``inputs``
+    say so (``dst-free``). Any other segmenter (a network) reads the
     drive's ``stored_x`` if set, else the filter run with ``generation_params``,
     and, when its ``inputs`` are ``fcn10+sensor`` (``+past``), the drive's sensor grids
     (and :func:`past_grids`; :func:`dstenv.data.datasets.network_input`).
@@ -307,6 +308,8 @@ def score(
                         "frame, e.g. kitti convert --stride 1 --warmup 0)"
                     )
                     continue
+                inputs = getattr(seg, "inputs", "fcn10")  # dst-free: + the sensor grid
+                x = network_input(x, ep.sensor[ep.steps], inputs) if inputs != "fcn10" else x
                 pred = seg.predict(torch.from_numpy(x)).numpy()
             else:
                 inputs = getattr(seg, "inputs", "fcn10")

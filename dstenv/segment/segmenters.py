@@ -8,6 +8,8 @@ Two kinds:
   the *generation* parameters, so for any other parameters the benchmark replays
   the episode's sensor and GIS grids through a fresh filter
   (:mod:`dstenv.segment.replay`) before calling :meth:`predict`.
+  :class:`DSTFreeSegmenter` (``dst-free``) also reads the current sensor grid: no
+  object where the sweep saw free space (:func:`free_space_veto`).
 * :class:`TorchSegmenter` -- a network from :mod:`dstenv.segment.models` reading
   the stored input as is (the paper's 10 channels: BetP at t and t-1).
 """
@@ -18,10 +20,16 @@ from typing import Any
 
 import torch
 
+from dstenv.dst.frame import CLASSES
 from dstenv.dst.params import DSTParams
 from dstenv.segment.models import SegmentationModel, build_model
 
-__all__ = ["Segmenter", "DSTSegmenter", "TorchSegmenter"]
+__all__ = ["Segmenter", "DSTSegmenter", "DSTFreeSegmenter", "TorchSegmenter",
+           "free_space_veto"]
+
+_NAV, _NONNAV = CLASSES.index("navigable"), CLASSES.index("non_navigable")
+#: the first class index that is an obstacle (building, static, moving)
+_FIRST_OBSTACLE = CLASSES.index("building")
 
 
 class Segmenter:
@@ -72,6 +80,47 @@ class DSTSegmenter(Segmenter):
 
     def describe(self) -> dict[str, Any]:
         return {**super().describe(), "params": self.params.to_dict(), **self.info}
+
+
+def free_space_veto(pred: torch.Tensor, betp: torch.Tensor, free: torch.Tensor) -> torch.Tensor:
+    """No obstacle where the current sweep saw free space.
+
+    A cell the sweep saw free had a beam pass through it (or hit the ground in it)
+    without an echo, so no building, parked or moving object stands there now,
+    whatever evidence the filter still carries from earlier sweeps (the trail a moving
+    car leaves). Such cells predicted ``building``, ``static`` or ``moving`` become
+    ``navigable`` or ``non_navigable``, whichever has the larger BetP.
+
+    Args:
+        pred: ``(B, H, W) int64`` predicted classes.
+        betp: ``(B, >=2, H, W)`` BetP (channels in :data:`CLASSES` order).
+        free: ``(B, H, W) bool`` cells seen free in the current sweep.
+
+    Returns:
+        ``(B, H, W) int64``, a new tensor.
+    """
+    ground = torch.where(betp[:, _NAV] >= betp[:, _NONNAV], _NAV, _NONNAV)
+    return torch.where(free & (pred >= _FIRST_OBSTACLE), ground, pred)
+
+
+class DSTFreeSegmenter(DSTSegmenter):
+    """``dst-free``: argmax of BetP, then :func:`free_space_veto` with the current sweep.
+
+    Reads ``fcn10+sensor`` (:func:`dstenv.data.inputs.network_input`): BetP at t and
+    t-1, then the sensor grid as seen-free and seen-occupied channels (10 and 11).
+    """
+
+    inputs = "fcn10+sensor"
+
+    def __init__(self, params: DSTParams, label: str = "dst-free",
+                 info: dict | None = None) -> None:
+        super().__init__(params, "dst-free", label, info)
+
+    def predict(self, x: torch.Tensor) -> torch.Tensor:
+        if x.dim() != 4 or x.shape[1] < 12:
+            raise ValueError("dst-free needs (B, >=12, H, W) fcn10+sensor input (BetP at t "
+                             f"and t-1, then the sensor grid), got {tuple(x.shape)}")
+        return free_space_veto(x[:, :5].argmax(1), x[:, :5], x[:, 10] > 0.5)
 
 
 class TorchSegmenter(Segmenter):

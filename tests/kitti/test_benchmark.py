@@ -61,9 +61,23 @@ def test_every_frame_stored_scores_every_dst_variant(kitti_root, sim_checkpoint,
                   "--set", "tune.params={alpha=0.5}") == 0
     res = json.loads((out / "results.json").read_text())
     segs = res["segmenters"]
-    assert list(segs) == ["dst (default)", "dst (paper)", "dst-tuned", "unet-light"]
-    assert [segs[k]["kind"] for k in segs] == ["dst", "dst", "dst", "learned"]
+    assert list(segs) == ["dst (default)", "dst (paper)", "dst-free", "dst-tuned",
+                          "unet-light"]
+    assert [segs[k]["kind"] for k in segs] == ["dst", "dst", "dst", "dst", "learned"]
     assert segs["dst-tuned"]["describe"]["params"]["alpha"] == 0.5
+    # each network also against the strongest non-learned row of each class
+    strongest = res["real_goal"]["strongest"]
+    assert "moving" in strongest
+    for name in strongest:
+        best = strongest[name]["baseline"]
+        assert segs[best]["kind"] == "dst"
+        assert strongest[name]["iou"] == max(
+            v["visible"]["iou"][name] for v in segs.values()
+            if v["kind"] == "dst" and v["visible"]["iou"][name] is not None)
+        row = res["real_goal"]["networks"]["unet-light"][name]
+        net, ref = segs["unet-light"]["visible"]["iou"][name], strongest[name]["iou"]
+        assert abs(row["vs_strongest"]["diff"] - (net - ref)) < 1e-9
+    assert "strongest non-learned row" in (out / "results.md").read_text()
     assert segs["unet-light"]["describe"]["checkpoint"] == str(sim_checkpoint)
     assert set(res["unscored"]) == {"dst-complete"}  # no train split, no complete.params
     assert res["data"]["source"] == "kitti" and res["data"]["test_frames"] == 6
@@ -107,7 +121,7 @@ def test_sparse_frames_say_which_variants_are_not_scored(kitti_root, sim_checkpo
     out = tmp_path / "b"
     assert _bench(ds, out, "--checkpoint", str(sim_checkpoint)) == 0
     res = json.loads((out / "results.json").read_text())
-    assert list(res["segmenters"]) == ["dst (default)", "unet-light"]
+    assert list(res["segmenters"]) == ["dst (default)", "dst-free", "unet-light"]
     assert set(res["unscored"]) == {"dst (paper)", "dst-tuned", "dst-complete"}
     assert "filter state between stored frames is lost" in res["unscored"]["dst (paper)"]
     assert "no train split to tune on" in res["unscored"]["dst-tuned"]

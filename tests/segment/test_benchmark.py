@@ -22,7 +22,7 @@ def tiny(tmp_path_factory):
 def test_tiny_benchmark_scores_every_segmenter_on_the_same_cells(tiny):
     out, res = tiny
     assert set(res["segmenters"]) == {
-        "dst (default)", "dst (paper)", "dst-tuned", "dst-complete", "unet-light"
+        "dst (default)", "dst (paper)", "dst-free", "dst-tuned", "dst-complete", "unet-light"
     }
     cells = {k: tuple(v[sc]["cells"] for sc in ("visible", "observed", "all"))
              for k, v in res["segmenters"].items()}

@@ -42,7 +42,8 @@ def test_every_step_stored_rebuilds_episodes_and_scores_presets(tmp_path):
     assert np.array_equal(ep.steps, np.arange(6))
     res = _run(data, tmp_path / "out")
     segs = res["segmenters"]
-    assert list(segs) == ["dst (default)", "dst (paper)", "dst-tuned", "dst-complete"]
+    assert list(segs) == ["dst (default)", "dst (paper)", "dst-free", "dst-tuned",
+                          "dst-complete"]
     assert res["unscored"] == {} and res["data"]["source"] == "sim"
     assert res["data"]["evaluation_only"] and res["histories"] == {}
     assert res["data"]["observed_definition"] == "history" and res["preset"] is None
@@ -57,7 +58,7 @@ def test_strided_frames_score_only_the_stored_betp(tmp_path):
     data = _generate(tmp_path / "data", stride=2, warmup=1)
     res = _run(data, tmp_path / "out")
     # dst-complete runs on the stored BetP (the generation parameters)
-    assert list(res["segmenters"]) == ["dst (default)", "dst-complete"]
+    assert list(res["segmenters"]) == ["dst (default)", "dst-free", "dst-complete"]
     assert set(res["unscored"]) == {"dst (paper)", "dst-tuned"}
     assert res["data"]["observed_definition"] == "visible"
     d = res["segmenters"]["dst (default)"]

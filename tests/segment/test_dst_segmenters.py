@@ -117,3 +117,34 @@ def test_tuning_is_deterministic_and_never_worse():
     assert trace["best_miou"] == pytest.approx(score_params(eps, best))
     seg = create_segmenter("dst-tuned", episodes=eps, budget=4)
     assert seg.name == "dst-tuned" and "tuning" in seg.describe()
+
+
+def test_dst_free_clears_the_trail_of_a_car_that_left():
+    # occupied at sweeps 0-2, seen free at sweep 3: DST still says static there (BetP
+    # 0.32 against navigable 0.25); dst-free reads the sweep and says navigable
+    ep = parked_car_episode(steps=(0, 1, 2, 3), T=4)
+    ep.sensor[3, 2, 2] = 1
+    x = filter_episode(ep, DSTParams.default())
+    assert create_segmenter("dst").predict(torch.from_numpy(x))[3, 2, 2] == STATIC
+    from dstenv.data.inputs import network_input
+
+    free = create_segmenter("dst-free")
+    assert free.inputs == "fcn10+sensor" and free.label == "dst-free"
+    pred = free.predict(torch.from_numpy(network_input(x, ep.sensor, "fcn10+sensor")))
+    assert pred[3, 2, 2] == NAV
+    assert (pred[:3, 2, 2] == STATIC).all()  # seen occupied: DST's call stands
+    with pytest.raises(ValueError, match="fcn10\\+sensor"):
+        free.predict(torch.from_numpy(x))  # BetP alone: no sensor channels
+
+
+def test_free_space_veto_by_hand():
+    from dstenv.segment.segmenters import free_space_veto
+
+    pred = torch.tensor([[[0, 1, 2, 3, 4, 4]]])
+    betp = torch.zeros(1, 5, 1, 6)
+    betp[0, 0] = torch.tensor([0.1, 0.1, 0.1, 0.3, 0.2, 0.1])  # navigable
+    betp[0, 1] = torch.tensor([0.2, 0.2, 0.2, 0.1, 0.2, 0.3])  # non-navigable
+    free = torch.tensor([[[True, True, True, True, True, False]]])
+    # free ground keeps its class; obstacles on free cells take the larger of
+    # navigable / non-navigable (ties: navigable); a cell not seen free keeps its call
+    assert free_space_veto(pred, betp, free).tolist() == [[[0, 1, 1, 0, 0, 4]]]

@@ -14,7 +14,7 @@ from dstenv.segment.score import (
     score,
     tie_cells,
 )
-from dstenv.segment.segmenters import DSTSegmenter, Segmenter
+from dstenv.segment.segmenters import DSTFreeSegmenter, DSTSegmenter, Segmenter
 
 NAV, BUILD, STATIC, MOVING = (CLASSES.index(c) for c in ("navigable", "building", "static",
                                                           "moving"))
@@ -146,3 +146,17 @@ def test_past_grids_read_the_step_one_second_earlier():
     past = past_grids(ep)
     assert not past[0].any()
     np.testing.assert_array_equal(past[2][1:], sensor[10][:-1])
+
+
+def test_score_gives_dst_free_the_sensor_grids():
+    # a drive of free road with one cell occupied at steps 0-2 and seen free at step 3
+    sensor = np.ones((4, 5, 5), np.uint8)
+    sensor[:3, 2, 2] = 2
+    ep = _episode(np.zeros((4, 3)), sensor, [2, 3])
+    gen = DSTParams.default()
+    res = score([DSTSegmenter(gen), DSTFreeSegmenter(gen)], [ep], gen,
+                examples=[(0, 0, 3)])
+    assert res.examples["dst"][0, 0, 3][2, 2] != NAV  # the trail DST still holds
+    assert res.examples["dst-free"][0, 0, 3][2, 2] == NAV
+    assert (res.examples["dst-free"][0, 0, 3] == NAV).all()
+

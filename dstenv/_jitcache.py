@@ -29,7 +29,8 @@ import re
 import sys
 from pathlib import Path
 
-__all__ = ["install", "install_when_imported", "dependency_files", "register_package"]
+__all__ = ["install", "install_when_imported", "dependency_files", "register_package",
+           "kernels_cached"]
 
 _ROOTS: dict[str, Path] = {}  # package name -> package directory
 
@@ -244,3 +245,21 @@ def install_when_imported() -> None:
         install()
     elif not any(isinstance(f, _AfterNumba) for f in sys.meta_path):
         sys.meta_path.insert(0, _AfterNumba())
+
+
+def kernels_cached(package_dir: str | Path) -> bool:
+    """Whether numba's on-disk cache holds any kernel of the package in ``package_dir``:
+    in ``__pycache__`` next to its sources, or in the user-wide cache (``NUMBA_CACHE_DIR``
+    or ``~/.cache/numba``) under a folder named after it. False on a fresh install, whose
+    first run compiles every kernel it uses (about a minute for data generation)."""
+    root = Path(package_dir).resolve()
+    if next(root.glob("**/__pycache__/*.nbi"), None) is not None:
+        return True
+    try:
+        from numba.core.config import CACHE_DIR
+    except ImportError:  # pragma: no cover - numba is a dependency
+        return False
+    user = Path(CACHE_DIR) if CACHE_DIR else Path.home() / ".cache" / "numba"
+    return user.is_dir() and any(root.name in str(p.relative_to(user))
+                                 for p in user.glob("**/*.nbi"))
+

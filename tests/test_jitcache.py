@@ -95,3 +95,24 @@ def test_installed_once_in_front_of_numbas_locators() -> None:
     names = [c.__name__ for c in impl._locator_classes]
     assert names[0].startswith("Package") and sum(n.startswith("Package") for n in names) == len(
         [n for n in names if not n.startswith("Package") and f"Package{n}" in names])
+
+
+def test_kernels_cached_looks_in_tree_and_user_wide(tmp_path: Path, monkeypatch) -> None:
+    import numba.core.config as nb_config
+
+    from dstenv._jitcache import kernels_cached
+
+    pkg = tmp_path / "pkgx"
+    (pkg / "sub" / "__pycache__").mkdir(parents=True)
+    user = tmp_path / "user"
+    monkeypatch.setattr(nb_config, "CACHE_DIR", str(user))
+    assert not kernels_cached(pkg)  # fresh install: nothing compiled yet
+    (user / "other" / "x.nbi").parent.mkdir(parents=True)
+    (user / "other" / "x.nbi").write_bytes(b"")
+    assert not kernels_cached(pkg)  # another package's kernels do not count
+    (user / "pkgx_sub_1234" / "k.nbi").parent.mkdir(parents=True)
+    (user / "pkgx_sub_1234" / "k.nbi").write_bytes(b"")
+    assert kernels_cached(pkg)
+    monkeypatch.setattr(nb_config, "CACHE_DIR", str(tmp_path / "none"))
+    (pkg / "sub" / "__pycache__" / "k.nbi").write_bytes(b"")
+    assert kernels_cached(pkg)

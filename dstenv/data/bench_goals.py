@@ -20,6 +20,7 @@ this process (generation rows use ``workers`` worker processes):
 
 from __future__ import annotations
 
+import math
 import statistics
 import tempfile
 import time
@@ -217,6 +218,24 @@ def _dst_ms() -> float:
     return median_ms(lambda: f.update(sensor, gis, (0.33, 0.02, 0.004), copy=False), 50, 3)
 
 
+def _generation_row(runs: list[dict[str, Any]], frames: int, workers: int, goal: str
+                    ) -> dict[str, Any]:
+    """A generation goal row from :func:`_generate_rates` runs: the median steady rate
+    over the runs that have one (``None`` and a note saying why when none has)."""
+    steady = [r["steady"] for r in runs if math.isfinite(r["steady"])]
+    runs = [{**r, "steady": r["steady"] if math.isfinite(r["steady"]) else None}
+            for r in runs]  # JSON has no NaN
+    note = ("steady rate of a long run" if len(steady) == len(runs) else
+            f"steady rate of a long run (median of the {len(steady)} of {len(runs)} runs "
+            "whose long run was slower than the short one)" if steady else
+            "no steady rate: in no run was the long run slower than the short one "
+            "(too few frames for this machine's noise; run without --quick)")
+    return {"value": statistics.median(steady) if steady else None, "runs": runs,
+            "unit": f"frames/h, {workers} workers", "goal": goal,
+            "note": f"{note}; a run of {frames} frames with start-up: "
+                    f"{statistics.median(r['short_run'] for r in runs):,.0f}"}
+
+
 def goal_rows(config: dict[str, Any], repeat: int, quick: bool, workers: int = 2
               ) -> dict[str, Any]:
     """Measure every goal row; ``{row: {"value", "runs", "unit", "goal"}}``."""
@@ -233,11 +252,7 @@ def goal_rows(config: dict[str, Any], repeat: int, quick: bool, workers: int = 2
                                "note": "not in this build (protocol.update_every / lidar.model)"}
                 continue
             runs = [_generate_rates(cfg, frames * workers, workers, tmp) for _ in range(repeat)]
-            rows[label] = {"value": statistics.median(r["steady"] for r in runs), "runs": runs,
-                           "unit": f"frames/h, {workers} workers", "goal": goal,
-                           "note": f"steady rate of a long run; a run of {frames * workers} "
-                                   "frames with start-up: "
-                                   f"{statistics.median(r['short_run'] for r in runs):,.0f}"}
+            rows[label] = _generation_row(runs, frames * workers, workers, goal)
         value, runs = _median(_reset_ms, repeat)
         rows["reset of DSTGrid-v0 with a fresh map"] = {"value": value, "runs": runs,
                                                          "unit": "ms", "goal": "<= 150"}

@@ -244,7 +244,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     c.add_argument("--masses", action="store_true", help="also store the raw 32 DST masses")
     c.add_argument("--out", required=True, metavar="DIR", help="output dataset directory")
     c.set_defaults(func=_convert)
-    r = ksub.add_parser("render", help="PNG of one converted frame")
+    r = ksub.add_parser("render", help="PNG of one raw KITTI frame (--root): scan, grids, labels")
     _common(r)
     r.add_argument("--sequence", required=True, help="sequence number, e.g. 0003")
     r.add_argument("--frame", type=int, required=True, help="frame index to render")

@@ -46,6 +46,21 @@ def test_steady_rate_cancels_start_up(monkeypatch, tmp_path):
     assert math.isnan(bench_goals._generate_rates({}, 40, 2, tmp_path)["steady"])
 
 
+def test_generation_row_skips_runs_without_a_steady_rate(capsys):
+    from dstenv.data.bench_goals import _generation_row
+
+    runs = [{"steady": 4e5, "short_run": 3e5}, {"steady": float("nan"), "short_run": 2e5},
+            {"steady": 6e5, "short_run": 1e5}]
+    row = _generation_row(runs, 16, 2, ">= 500,000")
+    assert row["value"] == 5e5 and row["runs"][1]["steady"] is None
+    assert "median of the 2 of 3 runs" in row["note"] and "200,000" in row["note"]
+    none = _generation_row([{"steady": float("nan"), "short_run": 1e5}], 16, 2, ">= 1")
+    assert none["value"] is None and "without --quick" in none["note"]
+    print_goals({"stride 10, 10 Hz fusion, 2-D LIDAR": none}, 1)
+    out = capsys.readouterr().out
+    assert "n/a" in out and "nan" not in out
+
+
 def test_timed_generate_runs_the_documented_spec(tmp_path):
     """The one generate run every data benchmark times: seed 1, split train, a frame
     every ``stride`` steps from step ``stride``, two shards per worker."""

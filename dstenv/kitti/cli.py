@@ -209,8 +209,11 @@ def _export(args: argparse.Namespace) -> int:
 
     if args.frames < 1:
         raise CLIError(f"--frames must be >= 1, got {args.frames}")
-    split = export_drive(scenario_config(args.scenario), args.seed, args.frames, args.out,
-                         args.sequence)
+    try:
+        split = export_drive(scenario_config(args.scenario), args.seed, args.frames, args.out,
+                             args.sequence)
+    except (ValueError, FileExistsError) as exc:
+        raise CLIError(str(exc).removeprefix("export-kitti: ")) from None
     print(f"wrote {args.frames} frames of sequence {args.sequence:04d} under {split}; "
           f"read it back with: dstenv kitti convert --root {args.out} "
           f"--sequences {args.sequence:04d} --out DIR")

@@ -35,6 +35,8 @@ knows every agent in view, occluded ones included, marked ``occluded = 2``).
 
 from __future__ import annotations
 
+import os
+import shutil
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -213,13 +215,28 @@ def export_drive(config: Mapping[str, Any], seed: int, frames: int, out: str | P
 
     if frames < 1:
         raise ValueError(f"export-kitti: --frames must be >= 1, got {frames}")
-    cfg = merge_config(config, {"lidar": {"model": "hdl64"}}, "config")
-    pipe = Pipeline(cfg)
+    if not 0 <= int(sequence) <= 9999:
+        raise ValueError(f"export-kitti: --sequence must be in 0..9999 (KITTI's SSSS), got "
+                         f"{sequence}")
     split = Path(out) / "training"
     name = f"{int(sequence):04d}"
-    for d in ("label_02", "calib", "oxts"):
-        (split / d).mkdir(parents=True, exist_ok=True)
-    (split / "velodyne" / name).mkdir(parents=True, exist_ok=True)
+    targets = {"velodyne": split / "velodyne" / name, "oxts": split / "oxts" / f"{name}.txt",
+               "calib": split / "calib" / f"{name}.txt",
+               "label_02": split / "label_02" / f"{name}.txt"}
+    held = [str(t.relative_to(split)) for t in targets.values() if t.exists()]
+    if held:  # never over (or beside) a sequence already there, real or exported
+        raise FileExistsError(f"export-kitti: {split} already holds sequence {name} "
+                              f"({', '.join(held)}); pick another --sequence or --out "
+                              "(nothing was written)")
+    cfg = merge_config(config, {"lidar": {"model": "hdl64"}}, "config")
+    pipe = Pipeline(cfg)
+    # written into a staging folder, moved into place when complete: a killed export
+    # leaves no half sequence (the next run clears its staging folder)
+    stage = split / f".export-{name}.partial"
+    if stage.exists():
+        shutil.rmtree(stage)
+    (stage / "velodyne").mkdir(parents=True)
+    final, split = split, stage
     calib = sim_calibration()
     mount = np.array([cfg["lidar"]["mount_x"], cfg["lidar"]["mount_y"]])
     poses, speeds, labels = [], [], []
@@ -230,7 +247,7 @@ def export_drive(config: Mapping[str, Any], seed: int, frames: int, out: str | P
         c, s = np.cos(ego[2]), np.sin(ego[2])
         velo = np.array([ego[0] + c * mount[0] - s * mount[1],
                          ego[1] + s * mount[0] + c * mount[1], ego[2]])
-        cloud.points.astype("<f4").tofile(split / "velodyne" / name / f"{f:06d}.bin")
+        cloud.points.astype("<f4").tofile(split / "velodyne" / f"{f:06d}.bin")
         on_agent = cloud.surface == SURFACES.index("agent")
         returns = np.bincount(cloud.index[on_agent], minlength=len(world.agents))
         labels += label_rows(f, world.agents, velo, calib, returns,
@@ -250,8 +267,12 @@ def export_drive(config: Mapping[str, Any], seed: int, frames: int, out: str | P
                                       meta["mercator_scale"])
         latlon0 = (float(lat), float(lon))
     oxts = oxts_rows(poses_a, np.array(speeds), dyaw / dt, calib, latlon0)
-    (split / "oxts" / f"{name}.txt").write_text(
+    (stage / "oxts").write_text(
         "\n".join(" ".join(f"{v:.12g}" for v in row) for row in oxts) + "\n")
-    (split / "calib" / f"{name}.txt").write_text(calib_text(calib))
-    (split / "label_02" / f"{name}.txt").write_text("\n".join(labels) + ("\n" if labels else ""))
-    return split
+    (stage / "calib").write_text(calib_text(calib))
+    (stage / "label_02").write_text("\n".join(labels) + ("\n" if labels else ""))
+    for key, target in targets.items():
+        target.parent.mkdir(parents=True, exist_ok=True)
+        os.replace(stage / key, target)
+    stage.rmdir()
+    return final

@@ -104,3 +104,29 @@ def test_convert_gives_the_simulators_labels(drive):
             compared += int(mine.sum())
             assert np.array_equal(mine & theirs, mine), (f, cls, int((mine & ~theirs).sum()))
     assert compared > 30  # seed 2: two parked cars and a moving one in view
+
+
+def test_export_never_writes_over_or_beside_a_sequence(drive, tmp_path):
+    root, _, _ = drive
+    split = root / "training"
+    before = {p: p.stat().st_mtime_ns for p in split.rglob("*") if p.is_file()}
+    with pytest.raises(FileExistsError, match="already holds sequence 0007"):
+        export_drive(scenario_config("clean", FAST), seed=3, frames=2, out=root, sequence=7)
+    assert {p: p.stat().st_mtime_ns for p in split.rglob("*") if p.is_file()} == before
+    # a sequence whose scans alone exist (a real one without labels, say) is refused too
+    (split / "velodyne" / "0009").mkdir()
+    with pytest.raises(FileExistsError, match="velodyne/0009"):
+        export_drive(scenario_config("clean", FAST), seed=3, frames=2, out=root, sequence=9)
+    with pytest.raises(ValueError, match="0..9999"):
+        export_drive(scenario_config("clean", FAST), seed=3, frames=2, out=tmp_path,
+                     sequence=10000)
+    # a killed export's staging folder is cleared; the sequence appears whole
+    stage = tmp_path / "training" / ".export-0001.partial" / "velodyne"
+    stage.mkdir(parents=True)
+    (stage / "000005.bin").write_bytes(b"stale")
+    export_drive(scenario_config("clean", FAST), seed=3, frames=2, out=tmp_path, sequence=1)
+    scans = sorted(p.name for p in (tmp_path / "training" / "velodyne" / "0001").iterdir())
+    assert scans == ["000000.bin", "000001.bin"]
+    assert not (tmp_path / "training" / ".export-0001.partial").exists()
+    for d in ("oxts", "calib", "label_02"):
+        assert (tmp_path / "training" / d / "0001.txt").is_file()

@@ -213,8 +213,12 @@ def _existing(out: Path, task: ShardTask) -> dict[str, Any] | None:
     if old_task != new_task:
         diff = sorted(k for k in set(new_task) | set(old_task or {})
                       if (old_task or {}).get(k) != new_task.get(k))
-        if diff == ["frames"]:
-            return None  # same episode stream, other length: regenerate this shard
+        if diff == ["frames"] and new_task["frames"] > (old_task or {}).get("frames", 0):
+            return None  # same episode stream, longer: regenerate this shard (a superset)
+        if diff == ["frames"]:  # shorter: that would drop frames already made
+            raise GenerateError(f"{path} holds {old_task['frames']} frames, this run makes "
+                                f"{new_task['frames']} there: it would drop frames; give "
+                                "--frames at least the dataset's, or use another --out")
         k = diff[0]
         raise GenerateError(f"{path} was made with other settings ({k}: "
                             f"{(old_task or {}).get(k)!r}, now {new_task.get(k)!r}); use another "

@@ -109,6 +109,13 @@ def test_resume_refuses_other_settings(tmp_path, fake_pipeline):
     fake.resets.clear()
     m = gen.generate(_spec(frames=10, split="train"), tmp_path, progress=False)
     assert m["frames"] == 10 and len(fake.resets) == 1
+    # shrinking it within its last shard would drop frames: refused, nothing touched
+    last = tmp_path / "train" / "shard-00002.h5"
+    before = last.read_bytes()
+    with pytest.raises(gen.GenerateError, match=r"shard-00002\.h5 holds 2 frames, this run "
+                                                r"makes 1 there: it would drop frames"):
+        gen.generate(_spec(frames=9, split="train"), tmp_path, progress=False)
+    assert last.read_bytes() == before
 
 
 def test_a_foreign_manifest_is_never_replaced(tmp_path, fake_pipeline):

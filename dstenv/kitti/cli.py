@@ -17,6 +17,7 @@ of ``dstenv generate``) and ``DIR/manifest.json``. ``evaluate`` is an alias of
 from __future__ import annotations
 
 import argparse
+import json
 import re
 import logging
 from pathlib import Path
@@ -79,6 +80,27 @@ def _split_name(text: str) -> str:
     return text
 
 
+def _same_conversion(path: Path, attrs: dict[str, Any], masses: bool) -> None:
+    """Refuse to replace a converted shard made with other settings (the same command
+    again rewrites the same bytes)."""
+    from dstenv.config import CLIError
+    from dstenv.data.shards import ShardError, ShardReader
+
+    if not path.exists():
+        return
+    try:
+        with ShardReader(path) as r:
+            old = {k: r.attrs.get(k) for k in attrs} | {"masses": bool(r.attrs.get("has_masses"))}
+    except ShardError:
+        return  # a damaged shard of ours: converted again
+    new = json.loads(json.dumps({**attrs, "masses": bool(masses)}))  # as stored
+    diff = sorted(k for k in new if old.get(k) != new[k])
+    if diff:
+        k = diff[0]
+        raise CLIError(f"{path} was converted with other settings ({k}: {old.get(k)!r}, now "
+                       f"{new[k]!r}); use another --out or remove it")
+
+
 def _convert(args: argparse.Namespace) -> int:
     from dstenv.config import CLIError
     from dstenv.data.manifest import MANIFEST_NAME, scan_shards, shard_entry, write_manifest
@@ -110,6 +132,7 @@ def _convert(args: argparse.Namespace) -> int:
             "sequence": seq.name, "root": str(Path(args.root).resolve()),
             "map": str(Path(args.osm).resolve()) if args.osm else "none",
         }
+        _same_conversion(path, attrs, args.masses)
         with ShardWriter(path, attrs, masses=args.masses) as writer:
             for frame in convert_sequence(seq, cfg, gis_fn, skipped):
                 writer.add(frame)

@@ -39,6 +39,14 @@ def test_convert_writes_shards_and_manifest(tiny_root, tmp_path, capsys):
     before = (out / "test" / "kitti-0001.h5").read_bytes()
     assert _convert(tiny_root, out) == 0
     assert (out / "test" / "kitti-0001.h5").read_bytes() == before
+    # other settings into the same directory: refused, the shard kept
+    capsys.readouterr()
+    for extra in (("--masses",), ("--label-rule", "paper")):
+        assert _convert(tiny_root, out, *extra) == 2
+        err = capsys.readouterr().err
+        assert "kitti-0001.h5 was converted with other settings" in err, err
+        assert len(err.strip().splitlines()) == 1
+        assert (out / "test" / "kitti-0001.h5").read_bytes() == before
 
 
 def test_convert_paper_rule_and_ignore_free(tiny_root, tmp_path):

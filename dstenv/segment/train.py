@@ -12,6 +12,9 @@ generator seeded by ``(seed, epoch)``, dropout from the restored torch RNG.
 
 from __future__ import annotations
 
+import hashlib
+import json
+
 import math
 from collections.abc import Callable, Mapping
 from pathlib import Path
@@ -161,6 +164,7 @@ def train(
     resume: bool = True,
     progress: bool = True,
     log: Callable[[str], None] = print,
+    data_id: Mapping[str, Any] | None = None,
 ) -> tuple[TorchSegmenter, dict[str, Any]]:
     """Train a network.
 
@@ -173,6 +177,8 @@ def train(
         resume: continue from ``out_dir/last.pt`` if it exists.
         progress: tqdm bars.
         log: receives one-line messages.
+        data_id: JSON-compatible identity of the training data (:func:`data_identity`),
+            kept in the checkpoints: resuming on other data is refused.
 
     Returns:
         ``(segmenter, history)``: the trained network (weights of the last epoch) and
@@ -210,6 +216,14 @@ def train(
                 f"{last}: checkpoint was trained with other settings ({', '.join(diff)}); "
                 "use another output directory or --no-resume"
             )
+        theirs = ckpt.get("data")  # checkpoints before 2026-12-07 carry none
+        if data_id is not None and theirs is not None and theirs != json_ready(data_id):
+            diff = sorted(k for k in set(theirs) | set(data_id)
+                          if theirs.get(k) != json_ready(data_id).get(k))
+            raise ConfigError(
+                f"{last}: checkpoint was trained on other data ({', '.join(diff)} differ: "
+                f"{theirs.get('source', '?')}); give the same --data, another output "
+                "directory or --no-resume")
         cfg["class_weights"] = ckpt["config"]["class_weights"]
     else:
         cfg["class_weights"] = _class_weights(cfg, train_data, log)
@@ -317,6 +331,7 @@ def train(
                 "rng": {"torch": torch.get_rng_state()},
                 "config": cfg,
                 "history": history,
+                **({"data": json_ready(data_id)} if data_id is not None else {}),
             }
             save_checkpoint(last, payload)
             score = val_miou if val_miou is not None else -(total / max(count, 1))
@@ -362,3 +377,26 @@ def _validate(
     iou = [None if np.isnan(v) else float(v) for v in iou_per_class(meter.all)]
     miou = mean_iou(meter.all)
     return total / max(count, 1), (None if np.isnan(miou) else miou), iou
+
+
+def json_ready(value: Any) -> Any:
+    """``value`` as JSON stores it (tuples become lists), for comparisons with saved data."""
+    return json.loads(json.dumps(value))
+
+
+def data_identity(dataset: Any) -> dict[str, Any]:
+    """What training data a checkpoint was made on, cheaply: for shards
+    (:class:`dstenv.data.ShardDataset`) the folder's name, each shard file's name and
+    size, and the frames; for a stream (:class:`dstenv.data.StreamingDataset`) a hash of
+    its configuration, its seed, split and frame sampling."""
+    files = getattr(dataset, "files", None)
+    if files is not None:
+        return {"source": f"shards in {Path(files[0]).parent.parent.name}" if files else
+                "no shards", "frames": len(dataset),
+                "shards": [[f"{Path(f).parent.name}/{Path(f).name}", Path(f).stat().st_size]
+                           for f in files]}
+    config = json.dumps(getattr(dataset, "config", None), sort_keys=True, default=str)
+    return {"source": "stream", "config": hashlib.sha256(config.encode()).hexdigest()[:16],
+            **{k: getattr(dataset, k, None)
+               for k in ("seed", "split", "episode_length", "stride", "warmup")}}
+

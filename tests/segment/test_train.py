@@ -54,6 +54,28 @@ def test_resume_with_other_settings_is_refused(tmp_path, make_frames):
         )
 
 
+def test_resume_on_other_data_is_refused(tmp_path, make_frames):
+    from dstenv.segment.train import data_identity
+
+    data, other = make_frames(4, seed=1), make_frames(4, seed=2)
+    quiet = {"progress": False, "log": lambda m: None}
+    ident = {"source": "shards in a", "frames": 4, "shards": [["train/shard-00000.h5", 100]]}
+    train({**SMALL, "epochs": 1}, data, None, tmp_path, data_id=ident, **quiet)
+    assert load_checkpoint(tmp_path / "last.pt")["data"] == ident
+    moved = {**ident, "shards": [["train/shard-00000.h5", 101]]}
+    with pytest.raises(ConfigError, match=r"trained on other data \(shards differ"):
+        train({**SMALL, "epochs": 2}, other, None, tmp_path, data_id=moved, **quiet)
+    _, h = train({**SMALL, "epochs": 2}, data, None, tmp_path, data_id=ident, **quiet)
+    assert h["epoch"] == [1, 2]  # the same data resumes
+    # the identity of a stream: its configuration, seed, split and sampling
+    from dstenv.data import StreamingDataset
+
+    a, b = StreamingDataset("dense", seed=0), StreamingDataset("dense", seed=1)
+    assert data_identity(a) == data_identity(StreamingDataset("dense", seed=0))
+    assert data_identity(a) != data_identity(b)
+    assert data_identity(a)["config"] != data_identity(StreamingDataset("default"))["config"]
+
+
 @pytest.mark.parametrize("over, message", [
     ({"weight_power": float("nan")}, "weight_power must be >= 0"),
     ({"lr": float("inf")}, "train.lr > 0"),

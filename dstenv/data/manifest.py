@@ -174,6 +174,58 @@ def data_identity(root: str | Path) -> str:
     return h.hexdigest()
 
 
+#: manifest shard entry key -> type (``attrs_sha256``: optional)
+_ENTRY: dict[str, type | tuple[type, ...]] = {
+    "file": str, "split": str, "frames": int, "bytes": int, "sha256": str,
+    "class_counts": list, "grid_shape": list, "cell_size": (int, float)}
+
+
+_KIND = {int: "an integer", str: "a string", list: "a list"}
+
+
+def _check_entries(manifest: dict[str, Any], path: Path) -> None:
+    """Every shard entry whole and typed, no file twice, and the totals (frames, splits,
+    class counts, geometry) those of the entries: a hand-edited or damaged manifest is
+    one line naming what is wrong, never a traceback or a wrong count."""
+    fix = ("the manifest was edited or damaged; delete it and rerun the command that made "
+           "the dataset (finished shards are kept and listed again)")
+    shards = manifest.get("shards")
+    if not isinstance(shards, list) or not shards:
+        raise ManifestError(f"{path}: 'shards' must be a non-empty list of entries ({fix})")
+    seen: set[str] = set()
+    n_classes = len(class_names())
+    for i, e in enumerate(shards):
+        if not isinstance(e, dict):
+            raise ManifestError(f"{path}: shard entry {i} is not an object ({fix})")
+        for key, kind in _ENTRY.items():
+            v = e.get(key)
+            if not isinstance(v, kind) or isinstance(v, bool):
+                raise ManifestError(f"{path}: shard entry {i} ({e.get('file', '?')}): {key!r} "
+                                    f"is missing or not {_KIND.get(kind, 'a number')} "
+                                    f"({fix})")
+        ok = (e["frames"] >= 0 and e["bytes"] >= 0 and e["cell_size"] > 0
+              and len(e["grid_shape"]) == 2 and len(e["class_counts"]) == n_classes
+              and all(isinstance(x, int) and not isinstance(x, bool) and x > 0
+                      for x in e["grid_shape"])
+              and all(isinstance(x, int) and not isinstance(x, bool) and x >= 0
+                      for x in e["class_counts"]))
+        if not ok:
+            raise ManifestError(f"{path}: shard entry {i} ({e['file']}): a negative count, a "
+                                f"grid shape that is not two sizes or {n_classes} class counts "
+                                f"expected ({fix})")
+        if e["file"] in seen:
+            raise ManifestError(f"{path}: {e['file']} is listed twice ({fix})")
+        seen.add(e["file"])
+    try:
+        derived = build_manifest(shards)
+    except ManifestError as exc:
+        raise ManifestError(f"{path}: {exc} ({fix})") from None
+    for key in ("frames", "grid_shape", "cell_size", "class_counts", "splits"):
+        if manifest.get(key) != derived[key]:
+            raise ManifestError(f"{path}: {key!r} ({manifest.get(key)!r:.60}) is not what its "
+                                f"shard entries add up to ({derived[key]!r:.60}) ({fix})")
+
+
 def load_manifest(root: str | Path, verify: str = "attrs") -> dict[str, Any]:
     """Read ``root/manifest.json`` and check it against the shard files.
 
@@ -207,6 +259,7 @@ def load_manifest(root: str | Path, verify: str = "attrs") -> dict[str, Any]:
                             f"not supported (this dstenv reads {MANIFEST_VERSION})")
     if verify == "none":
         return manifest
+    _check_entries(manifest, path)
     hint = ("the files changed after the manifest was written; regenerate them (a new --out, "
             "or delete the changed shards and rerun the command that made them)")
     listed = set()

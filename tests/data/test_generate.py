@@ -155,6 +155,34 @@ def test_manifest_mismatch_is_reported(tmp_path):
         load_manifest(tmp_path)
 
 
+@pytest.mark.parametrize("edit, message", [
+    (lambda m: m["shards"][0].pop("bytes"), r"shard entry 0 \(val/shard-00000\.h5\): 'bytes' is "
+                                            "missing or not an integer"),
+    (lambda m: m["shards"][1].update(sha256=None), r"'sha256' is missing"),
+    (lambda m: m["shards"][0].update(frames="8"), r"'frames' is missing or not an integer"),
+    (lambda m: m.update(shards=5), r"'shards' must be a non-empty list"),
+    (lambda m: m.update(shards=None), r"'shards' must be a non-empty list"),
+    (lambda m: m["shards"][0].update(grid_shape="abc"), r"'grid_shape' is missing"),
+    (lambda m: m["shards"][0].update(cell_size=None), r"'cell_size' is missing or not a number"),
+    (lambda m: m.update(frames=999), r"'frames' \(999\) is not what its shard entries add up "
+                                     r"to \(8\)"),
+    (lambda m: m.pop("splits"), r"'splits' \(None\) is not what"),
+    (lambda m: m["shards"].append(dict(m["shards"][0])), r"val/shard-00000\.h5 is listed twice"),
+])
+def test_an_edited_manifest_is_one_line(tmp_path, edit, message):
+    import json
+
+    gen.generate(_spec(frames=8, split="val"), tmp_path, progress=False)
+    path = tmp_path / "manifest.json"
+    m = json.loads(path.read_text())
+    edit(m)
+    path.write_text(json.dumps(m))
+    with pytest.raises(ManifestError, match=message) as info:
+        load_manifest(tmp_path)
+    assert "delete it and rerun the command" in str(info.value)
+    assert "\n" not in str(info.value)
+
+
 def _flip_a_data_byte(path):
     """Corrupt one byte inside a compressed chunk of ``labels`` (the size stays)."""
     import h5py

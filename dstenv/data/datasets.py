@@ -101,6 +101,20 @@ def _resolve_files(root_or_files: str | Path | Sequence[str | Path], split: str 
     return [(Path(p), None) for p in root_or_files]
 
 
+def _same_dataset(first: tuple[Path, Any, Any], other: tuple[Path, Any, Any],
+                  folder: bool) -> None:
+    """Refuse shards of another geometry (they cannot be batched together) and, in a
+    dataset folder, of another configuration (a folder mixing two datasets)."""
+    (p0, g0, c0), (p1, g1, c1) = first, other
+    if g1 != g0:
+        raise ShardError(f"{p1}: grid {g1[0][0]} x {g1[0][1]} of {g1[1]:g} m, but {p0.name} "
+                         f"has {g0[0][0]} x {g0[0][1]} of {g0[1]:g} m; keep one dataset per "
+                         "folder (or pass the files of one)")
+    if folder and c1 != c0:
+        raise ShardError(f"{p1}: made with another configuration than {p0.name} (two datasets "
+                         "in one folder); keep one dataset per folder")
+
+
 class ShardDataset(Dataset):
     """Map-style dataset over shard files (random access; safe with DataLoader workers).
 
@@ -135,6 +149,8 @@ class ShardDataset(Dataset):
         lengths: list[int] = []
         #: ``(5,) int64`` labelled cells per class over the kept shards (loss weights)
         self.class_counts = np.zeros(N_CLASSES, dtype=np.int64)
+        folder = isinstance(root_or_files, (str, Path)) and Path(root_or_files).is_dir()
+        first: tuple[Path, Any, Any] | None = None  # path, geometry, config
         for path, _ in _resolve_files(root_or_files, split):
             try:
                 with ShardReader(path) as r:
@@ -145,9 +161,13 @@ class ShardDataset(Dataset):
                                          "(generate with --masses)")
                     n = len(r)
                     counts = r.class_counts()
+                    mine = (path, (tuple(r.grid_shape), float(r.cell_size)),
+                            r.attrs.get("config"))
             except ShardError as exc:
                 self._fail(exc)
                 continue
+            first = first or mine
+            _same_dataset(first, mine, folder)
             self.files.append(path)
             lengths.append(n)
             self.class_counts += counts

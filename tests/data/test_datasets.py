@@ -224,3 +224,29 @@ def test_past_input_reads_the_frame_one_second_earlier(tmp_path, make_frame, sha
 
     with pytest.raises(ValueError, match="not a StreamingDataset"):
         StreamingDataset("dense", inputs="fcn10+sensor+past")
+
+
+def test_a_folder_mixing_two_datasets_is_refused(tmp_path, make_frame, shard_attrs):
+    rng = np.random.default_rng(4)
+
+    def shard(path, attrs, h=12, w=10):
+        with ShardWriter(path, attrs) as wr:
+            wr.add(make_frame(rng, h=h, w=w))
+
+    shard(tmp_path / "train" / "shard-00000.h5", shard_attrs)
+    shard(tmp_path / "train" / "shard-00001.h5", shard_attrs)
+    assert len(ShardDataset(tmp_path, split="train")) == 2  # no manifest: scanned
+    # a shard of another configuration (same geometry) in the folder
+    other = {**shard_attrs, "config": {**shard_attrs["config"], "world": {"scenario": "x"}}}
+    shard(tmp_path / "train" / "shard-00002.h5", other)
+    with pytest.raises(ShardError, match=r"shard-00002\.h5: made with another configuration "
+                                         r"than shard-00000\.h5"):
+        ShardDataset(tmp_path, split="train")
+    # given as a list of files, datasets may be combined: but only of one geometry
+    files = sorted((tmp_path / "train").glob("*.h5"))
+    assert len(ShardDataset(files)) == 3
+    small = {**shard_attrs, "config": {"grid": {"height": 6, "width": 10, "cell_size": 0.5}}}
+    shard(tmp_path / "small.h5", small, h=6)
+    with pytest.raises(ShardError, match=r"small\.h5: grid 6 x 10 of 0\.5 m, but "
+                                         r"shard-00000\.h5 has 12 x 10 of 0\.5 m"):
+        ShardDataset([*files, tmp_path / "small.h5"], on_error="skip")

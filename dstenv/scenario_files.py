@@ -63,6 +63,19 @@ def scenario_path(name_or_path: str | Path) -> Path:
     return path
 
 
+def _resolve_osm_file(raw: dict[str, Any], path: Path) -> None:
+    """A user's scenario names its OSM map relative to its own folder (module doc)."""
+    m = raw.get("world", {}).get("map", {}) if isinstance(raw.get("world"), dict) else {}
+    osm = m.get("osm_file") if isinstance(m, dict) else None
+    if not isinstance(osm, str) or not osm or Path(osm).is_absolute():
+        return
+    if path.resolve().parent == _scenario_dir().resolve():
+        return  # shipped: stays relative, the same config on every install
+    beside = path.resolve().parent / osm
+    if beside.is_file():
+        m["osm_file"] = str(beside)
+
+
 def load_scenario(
     name_or_path: str | Path, defaults: Mapping[str, Any] | None = None
 ) -> dict[str, Any]:
@@ -74,8 +87,10 @@ def load_scenario(
             (validated-as-TOML) overrides are returned without the meta keys.
 
     Returns:
-        The merged configuration. Relative paths in the file (e.g. an OSM map)
-        stay as written; :func:`scenario_path` gives the directory to resolve them.
+        The merged configuration. A relative ``world.map.osm_file`` of a user's file
+        that exists beside it becomes that absolute path (whatever the current folder);
+        otherwise relative paths stay as written (the shipped scenarios' maps are found
+        by :class:`dstenv.sim.world.World`).
 
     Raises:
         ConfigError: unreadable file, invalid TOML (with line), or unknown keys.
@@ -90,6 +105,10 @@ def load_scenario(
         raise ConfigError(f"{path}: invalid TOML: nested too deeply") from None
     except OSError as exc:
         raise ConfigError(f"{path}: cannot read: {exc.strerror}") from None
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"{path}: not UTF-8 text at byte {exc.start} (TOML files are UTF-8); "
+                          "save it as UTF-8") from None
+    _resolve_osm_file(raw, path)
     overrides = {k: v for k, v in raw.items() if k not in _SCENARIO_META_KEYS}
     if "description" in raw and not isinstance(raw["description"], str):
         raise ConfigError(f"{path}: 'description' must be a string")

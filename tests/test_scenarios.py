@@ -48,3 +48,27 @@ def test_unknown_key_is_named_with_the_allowed_keys(tmp_path):
     with pytest.raises(ConfigError, match=r"world\.traffic\.bicycles: unknown key 'bicycles'; "
                                           r"allowed keys: .*cyclists.*pedestrians"):
         load_scenario(bad, _defaults())
+
+
+def test_a_users_osm_file_is_found_beside_the_scenario(tmp_path, monkeypatch):
+    folder = tmp_path / "sc"
+    folder.mkdir()
+    (folder / "town.osm").write_text("<osm/>")
+    (folder / "rel.toml").write_text('[world.map]\nkind = "osm"\nosm_file = "town.osm"\n')
+    (folder / "gone.toml").write_text('[world.map]\nkind = "osm"\nosm_file = "nope.osm"\n')
+    monkeypatch.chdir(tmp_path)  # not the scenario's folder
+    cfg = load_scenario(folder / "rel.toml", _defaults())
+    assert cfg["world"]["map"]["osm_file"] == str((folder / "town.osm").resolve())
+    # not beside it: left as written (the current folder, then the shipped maps)
+    assert load_scenario(folder / "gone.toml", _defaults())["world"]["map"]["osm_file"] == (
+        "nope.osm")
+    # the shipped OSM scenario keeps its relative path: the same config on every install
+    shipped = load_scenario("osm", _defaults())["world"]["map"]["osm_file"]
+    assert not shipped.startswith("/")
+
+
+def test_a_scenario_that_is_not_utf8_is_one_line(tmp_path):
+    bad = tmp_path / "latin.toml"
+    bad.write_bytes(b'description = "caf\xe9"\n')
+    with pytest.raises(ConfigError, match=r"latin\.toml: not UTF-8 text at byte 18"):
+        load_scenario(bad, _defaults())

@@ -90,9 +90,9 @@ def _run_pool_env(todo: list[ShardTask], out: Path, workers: int,
                         task = pending.pop(fut)
                         results[task.file] = fut.result()
             except BaseException:
-                for fut in pending:
-                    fut.cancel()
-                # stop the shards still running now rather than finishing them
+                # stop the shards still running now rather than finishing them; the pool's
+                # manager thread then fails the pending futures itself (cancelling them
+                # here first made it raise InvalidStateError, a traceback on Ctrl-C)
                 for proc in list(getattr(ex, "_processes", {}).values()):
                     proc.terminate()
                 raise

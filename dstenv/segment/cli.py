@@ -229,7 +229,29 @@ def _with_real(args: argparse.Namespace, results: dict[str, Any]) -> dict[str, A
     return results
 
 
+def _check_kitti_flags(args: argparse.Namespace) -> None:
+    """The ``--kitti`` options, before any stage runs (not after the whole benchmark)."""
+    from dstenv.config import CLIError
+
+    if not args.kitti:
+        given = [f for f, v in (("--sequences", args.sequences), ("--osm", args.osm),
+                                ("--finetune-frames", args.finetune_frames)) if v]
+        if given:
+            raise CLIError(f"{given[0]} goes with --kitti ROOT (the real drives to score)")
+        return
+    if not args.sequences:
+        raise CLIError("--kitti needs --sequences LIST (e.g. 0003)")
+    if not Path(args.kitti).is_dir():
+        raise CLIError(f"--kitti {args.kitti}: no such folder (KITTI tracking's root, holding "
+                       "training/velodyne/...)")
+    if args.osm and not Path(args.osm).is_file():
+        raise CLIError(f"--osm {args.osm}: no such file")
+    if args.finetune_frames is not None and args.finetune_frames < 0:
+        raise CLIError(f"--finetune-frames must be >= 0, got {args.finetune_frames}")
+
+
 def _benchmark(args: argparse.Namespace) -> int:
+    _check_kitti_flags(args)
     results = run_cli_benchmark(args)
     if args.kitti:
         results = _with_real(args, results)

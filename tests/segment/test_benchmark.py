@@ -148,3 +148,20 @@ def test_cli_train_resumes(tiny, tmp_path, capsys):
         assert name in err and "leave" in err and err.count("\n") == 1
     assert not (tmp_path / "ft").exists()
     assert main([*init, "--model", "unet-light", "--out", str(tmp_path / "ft")]) == 0
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["--kitti", "{root}"], "--kitti needs --sequences"),
+    (["--kitti", "{root}/missing", "--sequences", "0003"], "no such folder"),
+    (["--sequences", "0003"], "--sequences goes with --kitti ROOT"),
+    (["--osm", "x.osm"], "--osm goes with --kitti ROOT"),
+    (["--kitti", "{root}", "--sequences", "0003", "--finetune-frames", "-5"],
+     "--finetune-frames must be >= 0"),
+])
+def test_kitti_flags_are_checked_before_any_stage(tmp_path, capsys, extra, message):
+    out = tmp_path / "out"
+    args = [a.replace("{root}", str(tmp_path)) for a in extra]
+    assert main(["benchmark", "--preset", "tiny", "--out", str(out), *args]) == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err and len(err.splitlines()) == 1
+    assert not (out / "data").exists()  # nothing generated

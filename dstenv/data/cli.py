@@ -227,8 +227,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--masses", action="store_true", help="also store the raw (32,H,W) masses")
     p.add_argument("--float32", action="store_true",
                    help="store probabilities as float32 (default uint8, error <= 1/510)")
-    p.add_argument("--compression", default="gzip", choices=["gzip", "lzf", "none"],
-                   help="shard compression (default gzip)")
+    p.add_argument("--compression", default="gzip", choices=["gzip", "none"],
+                   help="shard compression (default gzip; lzf is not offered: h5py's LZF "
+                        "filter does not write the same bytes twice)")
     p.add_argument("--gzip-level", type=int, default=1, choices=range(10), metavar="0-9",
                    help="gzip level (default 1: ~46 KiB per 256x256 frame of the default "
                         "scenario with isal; higher levels shrink it a little at several "

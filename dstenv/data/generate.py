@@ -64,7 +64,8 @@ class GenerateSpec:
             (:mod:`dstenv.data.sampling`); 1 builds a new city for every episode.
         masses: also store the raw ``(32, H, W)`` masses.
         quantize: probabilities as uint8 (error <= 1/510) instead of float32.
-        compression: ``"gzip"``, ``"lzf"`` or ``None``; ``compression_level`` for gzip
+        compression: ``"gzip"`` or ``None`` (not ``"lzf"``: h5py's LZF filter does not
+            write the same bytes twice); ``compression_level`` for gzip
             (1 with the ISA-L engine: ~0.6 ms and < 64 KB per 256x256 frame).
         deflate: gzip engine, ``"isal"`` or ``"zlib"`` (:mod:`dstenv.data.codec`).
     """
@@ -100,6 +101,13 @@ class GenerateSpec:
         if not 1 <= self.episodes_per_map <= 10_000:
             raise ValueError(f"episodes per map must be in [1, 10000], got "
                              f"{self.episodes_per_map}")
+        if self.compression not in ("gzip", None):
+            raise ValueError(
+                f"compression {self.compression!r}: generate writes 'gzip' or none; lzf (h5py's "
+                "filter) does not write the same bytes twice, so shards would differ between "
+                "runs and resumes, and it is 1.5x bigger and 2.6x slower than gzip here "
+                "(docs/throughput.md)" if self.compression == "lzf" else
+                f"compression must be 'gzip' or None, got {self.compression!r}")
         if self.deflate not in DEFLATE_ENGINES:
             raise ValueError(f"unknown deflate engine {self.deflate!r}; choose "
                              f"{', '.join(DEFLATE_ENGINES)}")

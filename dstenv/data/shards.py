@@ -7,7 +7,9 @@ One shard holds ``N`` :class:`dstenv.frame.Frame` records of one grid shape
 one frame per chunk (random access reads exactly one chunk per array; the small
 records ``ego_pose``, ``time``, ``seed``, ``step``, ``class_counts`` 64 frames per
 chunk), compressed (``gzip``, level 1 by default, or ``lzf``: ~1.5x the bytes and
-~2.6x the writer's CPU on stride-10 frames, ``docs/throughput.md``) and checksummed
+~2.6x the writer's CPU on stride-10 frames, ``docs/throughput.md``, and not the same
+bytes twice: h5py's LZF filter leaves its hash table uninitialised, so ``dstenv
+generate`` does not offer it; its shards stay readable) and checksummed
 (``fletcher32``: a corrupted chunk raises on read instead of returning wrong
 numbers). With gzip the writer deflates the grid chunks itself
 (:mod:`dstenv.data.codec`, streams HDF5's built-in filter reads) so that a

@@ -228,3 +228,9 @@ def test_manifest_paths_stay_inside_the_dataset(tmp_path):
     (tmp_path / "d" / "manifest.json").write_text(json.dumps(m))
     with pytest.raises(ManifestError, match="points outside"):
         load_manifest(tmp_path / "d", verify="size")
+
+
+def test_generate_refuses_lzf_with_the_reason():
+    with pytest.raises(ValueError, match="lzf .*does not write the same bytes twice"):
+        _spec(compression="lzf")
+

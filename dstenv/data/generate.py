@@ -101,6 +101,7 @@ class GenerateSpec:
         if not 1 <= self.episodes_per_map <= 10_000:
             raise ValueError(f"episodes per map must be in [1, 10000], got "
                              f"{self.episodes_per_map}")
+        _check_generation_config(self.config)
         if self.compression not in ("gzip", None):
             raise ValueError(
                 f"compression {self.compression!r}: generate writes 'gzip' or none; lzf (h5py's "
@@ -117,6 +118,22 @@ class GenerateSpec:
         d = dataclasses.asdict(self)
         d.pop("config")
         return d
+
+
+def _check_generation_config(config: Mapping[str, Any]) -> None:
+    """What would only fail inside the first shard, after its simulation: refused first."""
+    if not config.get("frame", {}).get("labels", True):
+        raise ValueError("frame.labels = false: generate stores every frame's labels; leave "
+                         "frame.labels true (it is for RL envs that do not show them)")
+    wm = config.get("world", {}).get("map", {})
+    if wm.get("kind") == "osm":
+        from dstenv.sim.osm import resolve_osm_file
+
+        path = resolve_osm_file(str(wm.get("osm_file", "")))
+        if not path.is_file():
+            raise ValueError(f"world.map.osm_file {wm['osm_file']!r}: no such file ({path}); "
+                             "give it absolute, beside the scenario file, or in the current "
+                             "folder")
 
 
 @dataclass(frozen=True)

@@ -131,6 +131,11 @@ def velodyne_path(split: Path, sequence: str, frame: int) -> Path:
     return split / "velodyne" / sequence / f"{frame:06d}.bin"
 
 
+#: [m] farther than any LIDAR return (the HDL-64E ranges ~120 m): a coordinate beyond
+#: this is a damaged scan, not a far point
+MAX_COORDINATE = 1000.0
+
+
 def read_velodyne(path: str | Path) -> np.ndarray:
     """Read one Velodyne scan.
 
@@ -159,6 +164,12 @@ def read_velodyne(path: str | Path) -> np.ndarray:
     points = raw.reshape(-1, 4).astype(np.float32, copy=False)
     if not np.isfinite(points[:, :3]).all():
         raise KittiError(f"{path}: non-finite coordinates in the scan")
+    far = np.abs(points[:, :3]).max(axis=1) > MAX_COORDINATE
+    if far.any():
+        k = int(np.argmax(far))
+        raise KittiError(f"{path}: point {k} lies {float(np.abs(points[k, :3]).max()):.3g} m "
+                         f"from the sensor (an HDL-64E sees {MAX_COORDINATE:g} m at most): a "
+                         "damaged scan")
     return points
 
 

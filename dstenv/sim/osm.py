@@ -45,6 +45,29 @@ WALK_OFFSET = 0.6  # [m] half distance between the two walking lines of a footwa
 KERB_RADIUS = 4.0  # [m] rounding of the kerb at junctions
 
 
+def resolve_osm_file(name: str, base_dir: str | Path | None = None) -> Path:
+    """Where ``world.map.osm_file`` points: an absolute path as is; a relative one looked
+    up in ``base_dir`` (a scenario's folder), the current folder, then the shipped
+    scenarios. Returns the first existing candidate, else the first candidate (the
+    caller's error names it).
+
+    Raises:
+        ConfigError: ``name`` is empty.
+    """
+    from importlib import resources
+
+    from dstenv.config import ConfigError
+
+    if not name:
+        raise ConfigError("world.map.osm_file: required when world.map.kind = 'osm'")
+    path = Path(name)
+    if path.is_absolute():
+        return path
+    bases = [Path(base_dir)] if base_dir is not None else []
+    bases += [Path.cwd(), Path(str(resources.files("dstenv.scenarios")))]
+    return next((b / path for b in bases if (b / path).is_file()), bases[0] / path)
+
+
 def load_osm(path: str | Path, *, resolution: float = 0.2, lane_width: float = 3.0,
              margin: float = 12.0, traffic: dict[str, Any] | None = None) -> WorldMap:
     """Load an OpenStreetMap extract into a map with lanes.

@@ -3,13 +3,12 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from dstenv.config import ConfigError, section
+from dstenv.config import section
 from dstenv.sim import agenttable, pullin, spawn
 from dstenv.sim.citygen import generate_city
 from dstenv.sim.clutter import street_clutter
@@ -383,16 +382,10 @@ class World:
             self.shadow.update(self, reset)
 
     def _load_osm(self) -> WorldMap:
-        from dstenv.sim.osm import load_osm
+        from dstenv.sim.osm import load_osm, resolve_osm_file
 
         m = self.config["map"]
-        path = Path(m["osm_file"])
-        if not m["osm_file"]:
-            raise ConfigError("world.map.osm_file: required when world.map.kind = 'osm'")
-        if not path.is_absolute():
-            bases = [self._base_dir] if self._base_dir else []
-            bases += [Path.cwd(), Path(str(resources.files("dstenv.scenarios")))]
-            path = next((b / path for b in bases if (b / path).is_file()), bases[0] / path)
+        path = resolve_osm_file(m["osm_file"], self._base_dir)
         wm = load_osm(path, resolution=m["resolution"], lane_width=m["osm_lane_width"],
                       margin=m["margin"], traffic=self.config["traffic"])
         # fixed seed: the same file gives the same street clutter

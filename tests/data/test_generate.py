@@ -234,3 +234,14 @@ def test_generate_refuses_lzf_with_the_reason():
     with pytest.raises(ValueError, match="lzf .*does not write the same bytes twice"):
         _spec(compression="lzf")
 
+
+
+def test_generate_refuses_before_simulating_what_would_fail_in_a_shard(tmp_path, monkeypatch):
+    with pytest.raises(ValueError, match="frame.labels = false: generate stores every"):
+        _spec(config={**CONFIG, "frame": {"labels": False}})
+    monkeypatch.chdir(tmp_path)
+    osm = {**CONFIG, "world": {"map": {"kind": "osm", "osm_file": "town.osm"}}}
+    with pytest.raises(ValueError, match=r"world\.map\.osm_file 'town\.osm': no such file"):
+        _spec(config=osm)
+    (tmp_path / "town.osm").write_text("<osm/>")
+    assert _spec(config=osm).frames == 20  # found in the current folder

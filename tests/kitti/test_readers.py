@@ -81,6 +81,11 @@ def test_velodyne_roundtrip_and_truncated(tmp_path):
         read_velodyne(tmp_path / "000002.bin")
     with pytest.raises(KittiError, match=r"000003\.bin: missing Velodyne scan"):
         read_velodyne(tmp_path / "000003.bin")
+    far = pts.copy()
+    far[6, 1] = 1e30  # finite but no LIDAR return: the grids' indices would overflow
+    far.tofile(tmp_path / "000004.bin")
+    with pytest.raises(KittiError, match=r"000004\.bin: point 6 lies 1e\+30 m from the sensor"):
+        read_velodyne(tmp_path / "000004.bin")
 
 
 def test_split_root_accepts_both_levels(tiny_root, tmp_path):

@@ -69,6 +69,8 @@ def _cmd(args: argparse.Namespace) -> int:
     from dstenv.io import atomic_write_text, output_file
 
     names = list(BENCHMARKS) if args.name == "all" else [args.name]
+    if args.repeats < 0:
+        raise ValueError(f"--repeats must be >= 0 (0: automatic), got {args.repeats}")
     if args.json:
         output_file(args.json, "--json")  # before minutes of timing, not after
     results = {}

@@ -118,5 +118,8 @@ def output_file(path: str | Path, option: str) -> Path:
         parent = parent.parent
     if not parent.is_dir():
         raise ValueError(f"{option} {out}: cannot create its folder ({parent} is a file)")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise ValueError(f"{option} {out}: {parent} is not writable; give a path you can "
+                         "write to")
     return out
 

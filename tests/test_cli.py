@@ -45,6 +45,12 @@ def test_bench_json_path_is_checked_before_timing(capsys, tmp_path):
     assert "cannot create its folder" in err and "== bench" not in out_
 
 
+def test_bench_refuses_negative_repeats(capsys):
+    assert main(["bench", "fusion", "--quick", "--repeats", "-1"]) == 2
+    out, err = capsys.readouterr()
+    assert "--repeats must be >= 0" in err and "== bench" not in out
+
+
 def test_unknown_bench_is_rejected(capsys):
     with pytest.raises(SystemExit) as exc:
         main(["bench", "nope"])

@@ -74,6 +74,8 @@ def _generate(args: argparse.Namespace) -> int:
     from dstenv.data.generate import GenerateError, GenerateSpec, generate
     from dstenv.data.sampling import scenario_config
 
+    if not str(args.out).strip():
+        raise CLIError("--out: empty; give the dataset folder (. for the current one)")
     overrides = parse_set(args.set or [])
     grid = overrides.setdefault("grid", {})
     flags = {}

@@ -130,7 +130,16 @@ def _cmd(args: argparse.Namespace) -> int:
     from dstenv.scenario_files import scenario_path
     from dstenv.sim import World
 
+    from dstenv.config import CLIError
+
     png_path(args.out)  # before the simulation, not after
+    if not 0 <= args.seed < 2**63:
+        raise CLIError(f"--seed must be in [0, 2**63), got {args.seed}")
+    if not 0 <= args.steps <= 100_000:
+        raise CLIError(f"--steps must be in 0..100000 (0.1 s each), got {args.steps}")
+    if not (np.isfinite(args.extent) and args.extent >= 0):
+        raise CLIError(f"--extent must be a size in metres >= 0 (0: the whole map), got "
+                       f"{args.extent}")
     path = scenario_path(args.scenario)
     cfg = build_config(path, ("--set", parse_set(args.set or [])))
     world = World(cfg["world"], seed=args.seed, base_dir=path.parent)

@@ -99,3 +99,10 @@ def test_generate_flag_and_set_must_agree(tmp_path, capsys, flags):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "disagree: give one" in err and flags[0] in err
     assert not (tmp_path / "o").exists()
+
+
+def test_generate_refuses_an_empty_out(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert main(["generate", "--frames", "2", "--out", ""]) == 2
+    assert "--out: empty" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []

@@ -46,3 +46,16 @@ def test_world_benchmark_reports_each_stage():
     for key in ("world step", "reference np.sin(256x256)"):
         assert res[key]["ms"] > 0 and np.isfinite(res[key]["x_ref"])
         assert 0 < res[key]["min_ms"] <= res[key]["ms"]
+
+
+def test_render_checks_its_numbers_before_drawing(tmp_path, capsys):
+    out = tmp_path / "scene.png"
+    for flag, value, message in (("--seed", "-1", "--seed must be in [0, 2**63)"),
+                                 ("--steps", "-5", "--steps must be in 0..100000"),
+                                 ("--extent", "nan", "--extent must be a size in metres"),
+                                 ("--extent", "-5", "--extent must be a size in metres")):
+        assert main(["render", "--out", str(out), flag, value]) == 2, flag
+        err = capsys.readouterr().err
+        assert message in err and err.count("\n") == 1, err
+    assert not out.exists()
+

@@ -97,12 +97,16 @@ def _check(cfg: dict[str, Any]) -> None:
     for key in ("epochs", "batch_size"):
         if cfg[key] < 1:
             raise ConfigError(f"train.{key}: must be >= 1, got {cfg[key]}")
-    # written as "not >=" so that NaN fails too
-    if not (cfg["crop"] >= 0 and cfg["max_batches"] >= 0 and cfg["fixed_batches"] >= 0
-            and cfg["lr"] > 0 and math.isfinite(cfg["lr"]) and cfg["weight_power"] >= 0
-            and math.isfinite(cfg["weight_power"]) and 0 <= cfg["flip"] <= 1):
-        raise ConfigError("train.crop, max_batches, fixed_batches and weight_power must be >= 0, "
-                          "train.lr > 0 (finite numbers) and train.flip in [0, 1]")
+    # each written as "not ..." so that NaN fails too; the first bad key is named
+    rules = (("crop", lambda v: v >= 0, "an integer >= 0 (0: no crop)"),
+             ("max_batches", lambda v: v >= 0, ">= 0 (0: every batch)"),
+             ("fixed_batches", lambda v: v >= 0, ">= 0"),
+             ("lr", lambda v: v > 0 and math.isfinite(v), "a finite number > 0"),
+             ("weight_power", lambda v: v >= 0 and math.isfinite(v), "a finite number >= 0"),
+             ("flip", lambda v: 0 <= v <= 1, "in [0, 1]"))
+    for key, ok, what in rules:
+        if not ok(cfg[key]):
+            raise ConfigError(f"train.{key} must be {what}, got {cfg[key]}")
     w = cfg["class_weights"]
     if w is not None and (not all(isinstance(v, (int, float)) and math.isfinite(v) and v >= 0
                                   for v in w) or not any(v > 0 for v in w)):

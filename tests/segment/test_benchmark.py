@@ -130,7 +130,7 @@ def test_cli_train_resumes(tiny, tmp_path, capsys):
     assert load_checkpoint(tmp_path / "last.pt")["history"]["epoch"] == [1, 2]
     # --flip reaches the training config, and a bad one is a one-line error
     assert main([*args, "--epochs", "1", "--flip", "2"]) == 2
-    assert "train.flip in [0, 1]" in capsys.readouterr().err
+    assert "train.flip must be in [0, 1], got 2" in capsys.readouterr().err
     assert main([*args[:4], str(tmp_path / "f"), *args[5:], "--epochs", "1", "--flip",
                  "0.5"]) == 0
     assert load_checkpoint(tmp_path / "f" / "last.pt")["config"]["flip"] == 0.5

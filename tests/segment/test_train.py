@@ -77,13 +77,14 @@ def test_resume_on_other_data_is_refused(tmp_path, make_frames):
 
 
 @pytest.mark.parametrize("over, message", [
-    ({"weight_power": float("nan")}, "weight_power must be >= 0"),
-    ({"lr": float("inf")}, "train.lr > 0"),
+    ({"weight_power": float("nan")}, "train.weight_power must be a finite number >= 0, got nan"),
+    ({"lr": float("inf")}, "train.lr must be a finite number > 0, got inf"),
+    ({"crop": -3}, "train.crop must be an integer >= 0"),
     ({"class_weights": [1, 1, float("nan"), 1, 1]}, "need finite values >= 0"),
     ({"class_weights": [-1, 1, 1, 1, 1]}, "need finite values >= 0"),
     ({"class_weights": [0, 0, 0, 0, 0]}, "not all 0"),
-    ({"flip": 1.5}, "train.flip in"),
-    ({"flip": float("nan")}, "train.flip in"),
+    ({"flip": 1.5}, r"train.flip must be in \[0, 1\], got 1.5"),
+    ({"flip": float("nan")}, r"train.flip must be in \[0, 1\]"),
 ])
 def test_nan_negative_or_zero_weights_are_refused(make_frames, tmp_path, over, message):
     # a NaN weight trained to NaN weights and still exited 0

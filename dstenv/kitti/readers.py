@@ -284,6 +284,9 @@ def read_calib(path: str | Path) -> Calibration:
         key = tok[0].rstrip(":")
         if len(tok) > 1 and tok[1] == ":":  # "key : values"
             tok = [tok[0], *tok[2:]]
+        if key in found:  # two P2 lines: which one is meant cannot be guessed
+            raise KittiError(f"{path}:{lineno}: {key} again (first on line {found[key][1]}); "
+                             "keep one")
         found[key] = (_floats(tok[1:], path, lineno), lineno)
     mats: dict[str, np.ndarray] = {}
     for name, (aliases, count) in _CALIB_KEYS.items():

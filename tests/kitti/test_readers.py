@@ -127,3 +127,14 @@ def test_real_labels_and_calib(real_root):
     c = read_calib(split / "calib" / "0003.txt")
     assert c.Tr_velo_cam[0, 1] == pytest.approx(-0.9999714)
     assert c.Tr_imu_velo[0, 3] == pytest.approx(-0.8086759)
+
+
+def test_calib_with_a_key_twice_names_both_lines(tmp_path):
+    from dstenv.kitti.readers import read_calib
+
+    lines = (FIXTURES / "calib_plain.txt").read_text().splitlines()
+    p2 = next(line for line in lines if line.startswith("P2"))
+    (tmp_path / "c.txt").write_text("\n".join([*lines, p2]) + "\n")
+    with pytest.raises(KittiError, match=rf"c\.txt:{len(lines) + 1}: P2 again \(first on line "):
+        read_calib(tmp_path / "c.txt")
+

@@ -72,7 +72,13 @@ def dataset_lock(folder: str | Path, force: bool = False) -> Iterator[Path]:
             break
         except FileExistsError:
             owner = _owner(path)
-            stale = owner.get("host") == me["host"] and not _alive(int(owner.get("pid", -1)))
+            here = owner.get("host") == me["host"]
+            stale = here and not _alive(int(owner.get("pid", -1)))
+            if force and here and not stale:  # a live writer here: forcing would mix shards
+                raise DatasetLocked(
+                    f"{folder} is being written by pid {owner.get('pid')} on this host, which "
+                    "is still running; --force-unlock is for a lock left by a process that "
+                    "is gone (stop that run first)") from None
             if not (stale or force):
                 who = f"pid {owner.get('pid', '?')} on {owner.get('host', '?')}"
                 raise DatasetLocked(

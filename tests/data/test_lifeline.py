@@ -96,6 +96,10 @@ def test_a_second_writer_is_refused_while_the_first_runs(tmp_path):
         with pytest.raises(DatasetLocked, match=r"being written by pid \d+ on .*--force-unlock"):
             with dataset_lock(tmp_path / "d"):
                 pass
+        # --force-unlock is for a lock whose process is gone, not for a live writer here
+        with pytest.raises(DatasetLocked, match=r"still running; --force-unlock is for a lock"):
+            with dataset_lock(tmp_path / "d", force=True):
+                pass
     assert not (tmp_path / "d" / LOCK_NAME).exists()  # released
 
 

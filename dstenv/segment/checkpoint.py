@@ -11,6 +11,8 @@ classes), so loading never executes code from the file::
 
 from __future__ import annotations
 
+import hashlib
+import json
 from pathlib import Path
 from typing import Any
 
@@ -19,7 +21,8 @@ import torch
 from dstenv.io import atomic_path
 from dstenv.segment.segmenters import TorchSegmenter
 
-__all__ = ["FORMAT", "save_checkpoint", "load_checkpoint", "load_segmenter"]
+__all__ = ["FORMAT", "save_checkpoint", "load_checkpoint", "load_segmenter", "data_identity",
+           "json_ready"]
 
 FORMAT = "dstenv-segmenter"
 _VERSION = 1
@@ -89,3 +92,25 @@ def load_segmenter(path: str | Path, device: str | torch.device = "cpu") -> Torc
                          f"{spec['in_channels']} input channels: {first}") from None
     seg.model.eval()
     return seg
+
+
+def json_ready(value: Any) -> Any:
+    """``value`` as JSON stores it (tuples become lists), for comparisons with saved data."""
+    return json.loads(json.dumps(value))
+
+
+def data_identity(dataset: Any) -> dict[str, Any]:
+    """What training data a checkpoint was made on, cheaply: for shards
+    (:class:`dstenv.data.ShardDataset`) the folder's name, each shard file's name and
+    size, and the frames; for a stream (:class:`dstenv.data.StreamingDataset`) a hash of
+    its configuration, its seed, split and frame sampling."""
+    files = getattr(dataset, "files", None)
+    if files is not None:
+        return {"source": f"shards in {Path(files[0]).parent.parent.name}" if files else
+                "no shards", "frames": len(dataset),
+                "shards": [[f"{Path(f).parent.name}/{Path(f).name}", Path(f).stat().st_size]
+                           for f in files]}
+    config = json.dumps(getattr(dataset, "config", None), sort_keys=True, default=str)
+    return {"source": "stream", "config": hashlib.sha256(config.encode()).hexdigest()[:16],
+            **{k: getattr(dataset, k, None)
+               for k in ("seed", "split", "episode_length", "stride", "warmup")}}

@@ -43,7 +43,8 @@ def _apart(out: str | None, data: str | None) -> None:
 def _train(args: argparse.Namespace) -> int:
     from dstenv.config import CLIError
     from dstenv.data import ShardDataset, StreamingDataset
-    from dstenv.segment.train import data_identity, default_train_config, train
+    from dstenv.segment.checkpoint import data_identity
+    from dstenv.segment.train import default_train_config, train
 
     if Path(args.out).exists() and not Path(args.out).is_dir():
         raise CLIError(f"--out {args.out}: is a file; give a folder for the checkpoints")

@@ -12,8 +12,6 @@ generator seeded by ``(seed, epoch)``, dropout from the restored torch RNG.
 
 from __future__ import annotations
 
-import hashlib
-import json
 
 import math
 from collections.abc import Callable, Mapping
@@ -27,7 +25,7 @@ from tqdm import tqdm
 from dstenv.config import ConfigError, merge_config
 from dstenv.data.datasets import INPUT_CHANNELS, LABELS
 from dstenv.dst.frame import CLASSES
-from dstenv.segment.checkpoint import load_checkpoint, save_checkpoint
+from dstenv.segment.checkpoint import json_ready, load_checkpoint, save_checkpoint
 from dstenv.segment.losses import LOSSES, build_loss, class_statistics, median_frequency_weights
 from dstenv.segment.metrics import ConfusionMeter, iou_per_class, mean_iou
 from dstenv.segment.models import MODELS
@@ -181,7 +179,8 @@ def train(
         resume: continue from ``out_dir/last.pt`` if it exists.
         progress: tqdm bars.
         log: receives one-line messages.
-        data_id: JSON-compatible identity of the training data (:func:`data_identity`),
+        data_id: JSON-compatible identity of the training data
+            (:func:`dstenv.segment.checkpoint.data_identity`),
             kept in the checkpoints: resuming on other data is refused.
 
     Returns:
@@ -381,26 +380,3 @@ def _validate(
     iou = [None if np.isnan(v) else float(v) for v in iou_per_class(meter.all)]
     miou = mean_iou(meter.all)
     return total / max(count, 1), (None if np.isnan(miou) else miou), iou
-
-
-def json_ready(value: Any) -> Any:
-    """``value`` as JSON stores it (tuples become lists), for comparisons with saved data."""
-    return json.loads(json.dumps(value))
-
-
-def data_identity(dataset: Any) -> dict[str, Any]:
-    """What training data a checkpoint was made on, cheaply: for shards
-    (:class:`dstenv.data.ShardDataset`) the folder's name, each shard file's name and
-    size, and the frames; for a stream (:class:`dstenv.data.StreamingDataset`) a hash of
-    its configuration, its seed, split and frame sampling."""
-    files = getattr(dataset, "files", None)
-    if files is not None:
-        return {"source": f"shards in {Path(files[0]).parent.parent.name}" if files else
-                "no shards", "frames": len(dataset),
-                "shards": [[f"{Path(f).parent.name}/{Path(f).name}", Path(f).stat().st_size]
-                           for f in files]}
-    config = json.dumps(getattr(dataset, "config", None), sort_keys=True, default=str)
-    return {"source": "stream", "config": hashlib.sha256(config.encode()).hexdigest()[:16],
-            **{k: getattr(dataset, k, None)
-               for k in ("seed", "split", "episode_length", "stride", "warmup")}}
-

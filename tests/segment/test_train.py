@@ -55,7 +55,7 @@ def test_resume_with_other_settings_is_refused(tmp_path, make_frames):
 
 
 def test_resume_on_other_data_is_refused(tmp_path, make_frames):
-    from dstenv.segment.train import data_identity
+    from dstenv.segment.checkpoint import data_identity
 
     data, other = make_frames(4, seed=1), make_frames(4, seed=2)
     quiet = {"progress": False, "log": lambda m: None}

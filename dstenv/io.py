@@ -121,5 +121,15 @@ def output_file(path: str | Path, option: str) -> Path:
     if not os.access(parent, os.W_OK | os.X_OK):
         raise ValueError(f"{option} {out}: {parent} is not writable; give a path you can "
                          "write to")
+    for folder in (out.parent, *out.parent.parents):  # never among a dataset's files
+        if (folder / "manifest.json").is_file() or next(folder.glob("*/shard-*.h5"), None):
+            raise ValueError(f"{option} {out}: inside the dataset folder {folder}; write it "
+                             "elsewhere")
+    if out.is_file():
+        with open(out, "rb") as fh:
+            head = fh.read(4096)
+        if b"\0" in head:  # a report replaces a report, never a binary file
+            raise ValueError(f"{option} {out}: exists and is not a text file; give a new "
+                             "file name")
     return out
 

@@ -45,3 +45,21 @@ def _umask() -> int:
     old = os.umask(0)
     os.umask(old)
     return old
+
+
+def test_output_file_never_replaces_a_datasets_file_or_a_binary(tmp_path):
+    import pytest
+
+    from dstenv.io import output_file
+
+    ds = tmp_path / "ds"
+    (ds / "test").mkdir(parents=True)
+    (ds / "test" / "shard-00000.h5").write_bytes(b"\x89HDF\r\n\x1a\n\0\0")
+    for target in (ds / "manifest.json", ds / "test" / "shard-00000.h5", ds / "r.json"):
+        with pytest.raises(ValueError, match="inside the dataset folder"):
+            output_file(target, "--json")
+    (tmp_path / "victim.h5").write_bytes(b"\x89HDF\r\n\x1a\n\0\0")
+    with pytest.raises(ValueError, match="exists and is not a text file"):
+        output_file(tmp_path / "victim.h5", "--json")
+    (tmp_path / "old.json").write_text("{}")
+    assert output_file(tmp_path / "old.json", "--json") == tmp_path / "old.json"  # a report

@@ -128,6 +128,9 @@ def summarize(root: Path, manifest: dict[str, Any] | None = None, verify: str = 
     if root.is_file():
         manifest = build_manifest([shard_entry(root.parent, root)])
         source = "single shard"
+        if verify in ("frames", "hash"):  # no manifest to compare with: read it whole
+            _read_whole([root])
+            source += ", every chunk read (checksums)"
     elif manifest is None and (root / MANIFEST_NAME).exists():
         manifest = load_manifest(root, verify=verify)
         source = str(root / MANIFEST_NAME)
@@ -141,6 +144,9 @@ def summarize(root: Path, manifest: dict[str, Any] | None = None, verify: str = 
             raise CLIError(f"{root}: no manifest.json and no shards (*.h5) found")
         manifest = build_manifest([shard_entry(root, p) for p in shards])
         source = "scanned shards (no manifest.json)"
+        if verify in ("frames", "hash"):  # no hashes to compare with: read every chunk
+            _read_whole(shards)
+            source = "scanned shards (no manifest.json), every chunk read (checksums)"
     else:
         source = str(root / MANIFEST_NAME)
     size = sum(int(e["bytes"]) for e in manifest["shards"])
@@ -154,6 +160,15 @@ def summarize(root: Path, manifest: dict[str, Any] | None = None, verify: str = 
                    for k, v in manifest["splits"].items()},
         "class_frequencies": manifest["class_frequencies"],
     }
+
+
+def _read_whole(paths: list[Path]) -> None:
+    """Read every chunk of each shard (its Fletcher-32 checksums): a corrupt one raises."""
+    from dstenv.data.shards import ShardReader
+
+    for path in paths:
+        with ShardReader(path) as r:
+            r.verify()
 
 
 def format_summary(s: dict[str, Any]) -> str:
@@ -194,6 +209,12 @@ def _info(args: argparse.Namespace) -> int:
         s = summarize(root, verify=args.verify)
     except (ManifestError, ShardError) as exc:
         raise CLIError(str(exc)) from None
+    from dstenv.data.lock import writer_of
+
+    busy = writer_of(root) if root.is_dir() else None
+    if busy:
+        print(f"dstenv info: note: {root} is still being written by {busy}: these are the "
+              "shards finished so far", file=sys.stderr)
     print(json.dumps(s, indent=1) if args.json else format_summary(s))
     return 0
 
@@ -252,7 +273,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                                    "dataset directory or shard file.")
     q.add_argument("path", metavar="DIR|FILE")
     q.add_argument("--verify", default="attrs", choices=["none", "size", "attrs", "frames", "hash"],
-                   help="how far to check the manifest against the shards (default size)")
+                   help="how far to check: size (files and sizes), attrs (default: also each "
+                        "shard's frames and settings), frames (also every chunk's checksum), "
+                        "hash (also each file's SHA-256 against the manifest)")
     q.add_argument("--json", action="store_true", help="print JSON")
     q.set_defaults(func=_info)
 

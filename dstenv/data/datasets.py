@@ -37,8 +37,9 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset, IterableDataset, get_worker_info
 
-from dstenv.data.manifest import MANIFEST_NAME, load_manifest, scan_shards
-from dstenv.data.sampling import episode_seeds, iter_frames, scenario_config
+from dstenv.data.lock import LOCK_NAME, writer_of
+from dstenv.data.manifest import MANIFEST_NAME, UNSPLIT, load_manifest, scan_shards
+from dstenv.data.sampling import SPLITS, episode_seeds, iter_frames, scenario_config
 from dstenv.data.shards import N_CLASSES, ShardError, ShardReader
 from dstenv.data.inputs import (
     INPUT_CHANNELS,
@@ -91,6 +92,10 @@ def _resolve_files(root_or_files: str | Path | Sequence[str | Path], split: str 
         root = Path(root_or_files)
         if root.is_file():
             return [(root, None)]
+        busy = writer_of(root)
+        if busy:  # a dataset being generated: its manifest and last shards are missing
+            raise ValueError(f"{root}: still being written by {busy} ({root / LOCK_NAME}); "
+                             "read it when that run is done")
         if (root / MANIFEST_NAME).is_file():
             m = load_manifest(root)
             return [(root / e["file"], int(e["frames"])) for e in m["shards"]
@@ -171,6 +176,12 @@ class ShardDataset(Dataset):
             self.files.append(path)
             lengths.append(n)
             self.class_counts += counts
+        if not self.files and split is not None and split not in (*SPLITS, UNSPLIT):
+            # a known split may be absent (no val split); an unknown one is a typo
+            there = sorted({p.parent.name for p in scan_shards(Path(root_or_files))}) if \
+                folder else []
+            raise ValueError(f"no shard of split {split!r} in {root_or_files} (its splits: "
+                             f"{', '.join(there) or 'none'}; None reads them all)")
         self._ends = np.cumsum(lengths).tolist()
         self._bad: set[int] = set()
         self._readers: dict[int, ShardReader] = {}
@@ -221,8 +232,14 @@ class ShardDataset(Dataset):
         return self.files[k], index - (self._ends[k - 1] if k else 0)
 
     def __getitem__(self, index: int) -> dict[str, torch.Tensor]:
-        for attempt in range(len(self)):
-            i = (index + attempt) % len(self)
+        n = len(self)
+        if not isinstance(index, (int, np.integer)) or isinstance(index, bool):
+            raise TypeError(f"ShardDataset index must be an integer, got {index!r}")
+        if not -n <= index < n:  # IndexError ends a plain `for sample in dataset` loop
+            raise IndexError(f"ShardDataset index {index} out of range for {n} frames")
+        index = int(index) % n
+        for attempt in range(n):  # a corrupt shard skipped (on_error="skip"): the next frame
+            i = (index + attempt) % n
             k = bisect.bisect_right(self._ends, i)
             if k in self._bad:
                 continue

@@ -23,7 +23,7 @@ try:
 except ImportError:  # pragma: no cover - not POSIX: the O_EXCL lock file alone
     fcntl = None  # type: ignore[assignment]
 
-__all__ = ["LOCK_NAME", "DatasetLocked", "dataset_lock"]
+__all__ = ["LOCK_NAME", "DatasetLocked", "dataset_lock", "writer_of"]
 
 LOCK_NAME = ".dstenv.lock"
 
@@ -98,3 +98,18 @@ def dataset_lock(folder: str | Path, force: bool = False) -> Iterator[Path]:
         os.close(fd)
         if _owner(path).get("pid") == me["pid"]:
             path.unlink(missing_ok=True)
+
+
+def writer_of(folder: str | Path) -> str | None:
+    """Who is writing into ``folder`` now: ``"pid N on HOST"`` when its lock is held by a
+    live process here or by any process on another host (it cannot be checked from
+    here); ``None`` when there is no lock, or its process is gone."""
+    path = Path(folder) / LOCK_NAME
+    if not path.is_file():
+        return None
+    owner = _owner(path)
+    here = owner.get("host") == socket.gethostname()
+    if here and not _alive(int(owner.get("pid", -1))):
+        return None
+    return f"pid {owner.get('pid', '?')} on {owner.get('host', '?')}"
+

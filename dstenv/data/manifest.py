@@ -234,9 +234,9 @@ def load_manifest(root: str | Path, verify: str = "attrs") -> dict[str, Any]:
         verify: ``"none"`` (parse only), ``"size"`` (every listed file exists inside
             ``root`` with the listed byte size, no unlisted shard), ``"attrs"`` (the
             default: also open each shard and compare its frame count and the hash of
-            its attributes, which names its seeds, task and configuration; cheap) or
-            ``"hash"`` (also the SHA-256 of every byte). ``"frames"`` is an alias of
-            ``"attrs"`` kept for old scripts.
+            its attributes, which names its seeds, task and configuration; cheap),
+            ``"frames"`` (also read every chunk: its checksum) or ``"hash"`` (instead,
+            the SHA-256 of every byte).
 
     Raises:
         ManifestError: one line naming the manifest and the first mismatch.
@@ -286,6 +286,8 @@ def load_manifest(root: str | Path, verify: str = "attrs") -> dict[str, Any]:
                 if "attrs_sha256" in e and attrs_sha256(r.attrs) != e["attrs_sha256"]:
                     raise ManifestError(f"{path}: {e['file']} was made with other settings or "
                                         f"seeds than the manifest lists ({hint})")
+                if verify == "frames":  # every chunk read: a corrupt one raises ShardError
+                    r.verify()
         if verify == "hash" and file_sha256(f) != e["sha256"]:
             raise ManifestError(f"{path}: {e['file']} content differs from its SHA-256 ({hint})")
     for f in scan_shards(root):

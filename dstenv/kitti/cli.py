@@ -194,6 +194,10 @@ def _evaluate(args: argparse.Namespace) -> int:
 
     from dstenv.segment.cli import run_cli_benchmark
 
+    if args.json:
+        from dstenv.io import output_file
+
+        output_file(args.json, "--json")  # before the scoring, not after
     tmp = None if args.out else tempfile.mkdtemp(prefix="dstenv-kitti-eval-")
     bench = argparse.Namespace(
         preset=None, protocol=None, out=args.out or tmp, data=args.data,

@@ -250,3 +250,33 @@ def test_a_folder_mixing_two_datasets_is_refused(tmp_path, make_frame, shard_att
     with pytest.raises(ShardError, match=r"small\.h5: grid 6 x 10 of 0\.5 m, but "
                                          r"shard-00000\.h5 has 12 x 10 of 0\.5 m"):
         ShardDataset([*files, tmp_path / "small.h5"], on_error="skip")
+
+
+def test_indexing_stops_at_the_end_and_a_typo_split_is_named(dataset_dir):
+    root, _ = dataset_dir
+    ds = ShardDataset(root, split="train")
+    assert len(ds) == 5 and len(list(ds)) == 5  # a plain loop ends
+    assert torch.equal(ds[-1]["x"], ds[4]["x"])
+    for bad in (5, -6, 10**6):
+        with pytest.raises(IndexError, match="out of range for 5 frames"):
+            ds[bad]
+    with pytest.raises(TypeError, match="must be an integer"):
+        ds["0"]
+    with pytest.raises(ValueError, match=r"no shard of split 'training' .*its splits: train, val"):
+        ShardDataset(root, split="training")
+    assert len(ShardDataset(root, split="test")) == 0  # a known split may be absent
+
+
+def test_a_dataset_still_being_written_is_refused(dataset_dir):
+    import json
+    import os
+    import socket
+
+    from dstenv.data.lock import LOCK_NAME
+
+    root, _ = dataset_dir
+    (root / LOCK_NAME).write_text(json.dumps({"host": socket.gethostname(), "pid": os.getpid()}))
+    with pytest.raises(ValueError, match=r"still being written by pid \d+ on "):
+        ShardDataset(root, split="train")
+    (root / LOCK_NAME).write_text(json.dumps({"host": socket.gethostname(), "pid": 2**22 + 7}))
+    assert len(ShardDataset(root, split="train")) == 5  # its writer is gone: a stale lock

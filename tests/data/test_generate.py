@@ -207,6 +207,23 @@ def test_resume_regenerates_a_shard_with_a_corrupt_chunk(tmp_path, capsys):
     assert again == good  # same bytes as the first run, manifest hash included
 
 
+def test_info_verify_frames_reads_every_chunk(tmp_path, capsys):
+    from dstenv.cli import main
+
+    gen.generate(_spec(), tmp_path, progress=False)
+    _flip_a_data_byte(tmp_path / "train" / "shard-00001.h5")
+    assert main(["info", str(tmp_path)]) == 0  # attrs: sizes, frames and settings only
+    capsys.readouterr()
+    assert main(["info", str(tmp_path), "--verify", "frames"]) == 2
+    assert "shard-00001.h5" in capsys.readouterr().err
+    (tmp_path / "manifest.json").unlink()  # without one, frames and hash read every chunk
+    for level in ("frames", "hash"):
+        assert main(["info", str(tmp_path), "--verify", level]) == 2
+        assert "shard-00001.h5" in capsys.readouterr().err
+    assert main(["info", str(tmp_path / "train" / "shard-00000.h5"), "--verify", "hash"]) == 0
+    assert "every chunk read" in capsys.readouterr().out
+
+
 def test_a_same_size_shard_of_another_seed_is_caught_by_default(tmp_path):
     gen.generate(_spec(), tmp_path / "a", progress=False)
     gen.generate(_spec(seed=6), tmp_path / "b", progress=False)

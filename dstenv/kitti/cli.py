@@ -194,6 +194,10 @@ def _evaluate(args: argparse.Namespace) -> int:
 
     from dstenv.segment.cli import run_cli_benchmark
 
+    if args.batch_size < 1:
+        from dstenv.config import CLIError
+
+        raise CLIError(f"--batch-size must be >= 1, got {args.batch_size}")
     if args.json:
         from dstenv.io import output_file
 

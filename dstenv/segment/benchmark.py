@@ -135,10 +135,17 @@ def _same_data(out: Path, data_dir: Path) -> None:
             old = json.loads(path.read_text())
         except (OSError, ValueError):
             old = {}
-        if old.get("sha256") != ident["sha256"]:
-            raise ValueError(f"{out}: holds a benchmark of other data ({old.get('data', '?')}); "
-                             "choose another --out, or remove it to start over")
-        return
+        made = [n for n in ("results.json", "models", "curve", "search.json")
+                if (out / n).exists()]
+        if old.get("sha256") != ident["sha256"] and made:
+            what = (f"the data in {ident['data']} changed since" if old.get("data") ==
+                    ident["data"] else f"it was made on {old.get('data', '?')}")
+            raise ValueError(f"{out}: holds a benchmark of other data ({what}; it has "
+                             f"{', '.join(made)}); choose another --out, or remove it to "
+                             "start over")
+        if old.get("sha256") == ident["sha256"]:
+            return
+        # a run that failed before making anything: its record does not bind the folder
     atomic_write_text(path, json.dumps(ident, indent=1) + "\n")
 
 

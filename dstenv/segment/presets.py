@@ -309,6 +309,15 @@ def check_config(cfg: Mapping[str, Any]) -> None:
     seeds = cfg["train_seeds"]
     if not seeds or len(set(seeds)) != len(seeds):
         raise ConfigError(f"train_seeds: need distinct seeds, got {seeds}")
+    d = cfg["data"]
+    for key, low in (("frames", 1), ("episode_length", 1), ("stride", 1), ("warmup", 0),
+                     ("workers", 1), ("frames_per_shard", 1), ("episodes_per_map", 1),
+                     ("grid", 0)):
+        if not isinstance(d[key], int) or isinstance(d[key], bool) or d[key] < low:
+            raise ConfigError(f"data.{key} must be an integer >= {low}, got {d[key]!r}")
+    if not isinstance(cfg["eval_batch_size"], int) or cfg["eval_batch_size"] < 1:
+        raise ConfigError(f"eval_batch_size must be an integer >= 1, got "
+                          f"{cfg['eval_batch_size']!r}")
     from dstenv.segment.train import default_train_config
 
     if cfg["search"]["values"] and cfg["search"]["key"] not in default_train_config():

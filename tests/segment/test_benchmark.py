@@ -165,3 +165,16 @@ def test_kitti_flags_are_checked_before_any_stage(tmp_path, capsys, extra, messa
     err = capsys.readouterr().err.strip()
     assert message in err and len(err.splitlines()) == 1
     assert not (out / "data").exists()  # nothing generated
+
+
+@pytest.mark.parametrize("item, message", [
+    ("data.frames=-5", "data.frames must be an integer >= 1, got -5"),
+    ("data.stride=0", "data.stride must be an integer >= 1"),
+    ("eval_batch_size=0", "eval_batch_size must be an integer >= 1, got 0"),
+])
+def test_benchmark_numbers_are_checked_before_any_stage(tmp_path, capsys, item, message):
+    out = tmp_path / "out"
+    assert main(["benchmark", "--preset", "tiny", "--out", str(out), "--set", item]) == 2
+    captured = capsys.readouterr()
+    assert message in captured.err and "generating" not in captured.out
+    assert not out.exists() or not any(out.iterdir())

@@ -92,3 +92,11 @@ def test_a_benchmark_folder_refuses_other_data(tmp_path):
     with pytest.raises(ValueError, match="holds a benchmark of other data .*choose another --out"):
         _run(b, out)
     assert (out / "results.json").read_bytes() == before
+    # a run that failed before making anything does not bind its folder to its data
+    from dstenv.segment.benchmark import _DATA_RECORD, _same_data
+
+    failed = tmp_path / "failed"
+    failed.mkdir()
+    _same_data(failed, b)  # recorded, then the run failed: nothing else was written
+    _same_data(failed, a)  # the corrected rerun goes on
+    assert str(a.resolve()) in (failed / _DATA_RECORD).read_text()

@@ -229,6 +229,11 @@ def run(args: Args, command: str) -> str:
     ``args.readme``)."""
     import torch
 
+    if args.torch_threads < 1:
+        raise ValueError(f"--torch-threads must be >= 1, got {args.torch_threads}")
+    if args.episodes < 1 or not 0 <= args.seed <= 2**31 - 1 - args.episodes:
+        raise ValueError(f"--episodes must be >= 1 and the seeds --seed .. --seed + --episodes "
+                         f"- 1 in [0, 2**31), got --seed {args.seed} --episodes {args.episodes}")
     torch.set_num_threads(args.torch_threads)
     seeds = range(args.seed, args.seed + args.episodes)
     rows: list[tuple[str, dict[str, float], dict[str, Any] | None]] = []

@@ -296,7 +296,14 @@ def load(path: str | Path, env: gym.Env) -> tuple[PPO, dict[str, Any]]:
     known = {f for f in Args.__dataclass_fields__}
     args = Args(**{k: v for k, v in meta["args"].items() if k in known})
     model = build_model(args, env)
-    state = torch.load(path, map_location="cpu", weights_only=True)
+    try:
+        state = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # noqa: BLE001 - torch raises many types for a bad file
+        first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+        empty = " (the file is empty)" if path.stat().st_size == 0 else ""
+        raise ValueError(f"{path}: not a readable policy checkpoint{empty}: {first}") from None
+    if not isinstance(state, dict):
+        raise ValueError(f"{path}: not a policy checkpoint (a state_dict of tensors)")
     try:
         model.policy.load_state_dict(state)
     except RuntimeError as exc:

@@ -46,6 +46,29 @@ def test_saved_model_loads_and_evaluates(tmp_path, env_flags: list[str]) -> None
     assert again in readme.read_text() and readme.read_text().startswith("# kept")
 
 
+def test_bad_arguments_and_files_are_one_line(tmp_path, env_flags: list[str]) -> None:
+    import pytest
+
+    for extra, message in ((["--torch-threads", "0"], "--torch-threads must be >= 1"),
+                           (["--seed", "-5"], "--episodes must be >= 1 and the seeds"),
+                           (["--episodes", "0"], "--episodes must be >= 1")):
+        with pytest.raises(ValueError, match=message):  # one line via rl_common.cli
+            evaluate.main([*env_flags, "--policies", "random", "--episodes", "1", *extra])
+    import json
+    from pathlib import Path
+
+    repo = Path(__file__).resolve().parents[2]
+    meta = json.loads((repo / "baselines/checkpoints/ppo_occluded_route_s0_450k.json").read_text())
+    for key in ("observation_space", "action_space"):  # as if trained on this small env
+        meta.pop(key)
+    for name, data in (("empty.pt", b""), ("text.pt", b"not a checkpoint\n")):
+        (tmp_path / name).write_bytes(data)
+        (tmp_path / name.replace(".pt", ".json")).write_text(json.dumps(meta))
+        with pytest.raises(ValueError, match=rf"{name}: not a readable policy checkpoint"):
+            evaluate.main([*env_flags, "--policies", "--episodes", "1", "--checkpoints",
+                           str(tmp_path / name)])
+
+
 def test_temperature_sampling_is_seeded_and_sharpens(tmp_path, env_flags: list[str]) -> None:
     import numpy as np
     import pytest

@@ -63,7 +63,15 @@ class DSTParams:
             raise ValueError(
                 f"unknown DST parameter {unknown[0]!r}; allowed: {', '.join(sorted(allowed))}"
             )
-        return cls(**{k: float(v) for k, v in values.items()})
+        out = {}
+        for k, v in values.items():
+            try:
+                if isinstance(v, bool):
+                    raise TypeError
+                out[k] = float(v)
+            except (TypeError, ValueError):
+                raise ValueError(f"DST parameter {k}: {v!r} is not a number") from None
+        return cls(**out)
 
     def to_dict(self) -> dict[str, float]:
         """Plain dict of every field (JSON-serialisable)."""

@@ -264,6 +264,9 @@ def test_params_validation_and_presets():
     with pytest.raises(ValueError, match="unknown DST parameter 'alfa'"):
         DSTParams.from_dict({"alfa": 0.2})
     assert DSTParams.from_dict(DSTParams.paper().to_dict()) == DSTParams.paper()
+    for bad in ("x", None, [1], True):
+        with pytest.raises(ValueError, match=r"DST parameter alpha: .* is not a number"):
+            DSTParams.from_dict({"alpha": bad})
 
 
 def test_betp_written_into_the_callers_array():

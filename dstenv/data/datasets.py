@@ -322,6 +322,14 @@ class StreamingDataset(IterableDataset):
         self.names = _check_inputs(inputs, single_frames=True)
         if inputs == "masses":
             self.config["frame"]["masses"] = True
+        for name, v, low in (("seed", seed, 0), ("rank", rank, 0)):
+            if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < low:
+                raise ValueError(f"StreamingDataset {name} must be an integer >= {low}, got "
+                                 f"{v!r}")
+        if max_frames is not None and (not isinstance(max_frames, (int, np.integer))
+                                       or isinstance(max_frames, bool) or max_frames < 1):
+            raise ValueError(f"StreamingDataset max_frames must be None or an integer >= 1, "
+                             f"got {max_frames!r}")
         self.inputs, self.seed, self.split, self.rank = inputs, int(seed), split, int(rank)
         self.episode_length, self.stride = episode_length, stride
         self.warmup = stride if warmup is None else warmup

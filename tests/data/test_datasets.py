@@ -280,3 +280,15 @@ def test_a_dataset_still_being_written_is_refused(dataset_dir):
         ShardDataset(root, split="train")
     (root / LOCK_NAME).write_text(json.dumps({"host": socket.gethostname(), "pid": 2**22 + 7}))
     assert len(ShardDataset(root, split="train")) == 5  # its writer is gone: a stale lock
+
+
+def test_streaming_arguments_are_checked():
+    from dstenv.data import StreamingDataset
+
+    for kw, message in (({"seed": -1}, "seed must be an integer >= 0"),
+                        ({"seed": "1"}, "seed must be an integer >= 0, got '1'"),
+                        ({"rank": -1}, "rank must be an integer >= 0"),
+                        ({"max_frames": -1}, "max_frames must be None or an integer >= 1"),
+                        ({"max_frames": 1.5}, "max_frames must be None or an integer >= 1")):
+        with pytest.raises(ValueError, match=message):
+            StreamingDataset("default", **kw)

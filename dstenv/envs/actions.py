@@ -103,7 +103,11 @@ class _Continuous:
         self.scale = np.array([cfg["max_accel"], cfg["max_steer"]], np.float64)
 
     def world_action(self, action: Any) -> tuple[float, float]:
-        a = np.clip(np.asarray(action, np.float64).reshape(2), -1.0, 1.0) * self.scale
+        a = np.asarray(action, np.float64)
+        if a.size != 2 or not np.isfinite(a).all():
+            raise ValueError(f"continuous action: expected 2 finite numbers (acceleration, "
+                             f"steering in [-1, 1]), got {np.asarray(action).tolist()!r}")
+        a = np.clip(a.reshape(2), -1.0, 1.0) * self.scale
         return float(a[0]), float(a[1])
 
     def imitate(self, accel: float, steer: float) -> np.ndarray:

@@ -102,6 +102,16 @@ def test_continuous_has_no_meanings_and_turns_is_gone():
         DSTGridEnv({**SMALL_CITY, "action": {"type": "meta"}})
 
 
+def test_a_continuous_action_of_the_wrong_size_or_nan_is_named():
+    env = DSTGridEnv({**SMALL_CITY, "action": {"type": "continuous"}})
+    env.reset(seed=0)
+    for bad in ([0.0, 0.0, 0.0], [float("nan"), 0.0], [0.5]):
+        with pytest.raises(ValueError, match=r"continuous action: expected 2 finite numbers"):
+            env.step(np.array(bad, np.float32))
+    env.step(np.array([0.2, 0.0], np.float32))  # the env still steps after a refused action
+    env.close()
+
+
 def test_autopilot_action_drives_like_the_world():
     from dstenv.sim import World
 

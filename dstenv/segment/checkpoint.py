@@ -91,6 +91,8 @@ def load_segmenter(path: str | Path, device: str | torch.device = "cpu") -> Torc
         raise ValueError(f"{path}: weights do not fit a {spec['model']} with "
                          f"{spec['in_channels']} input channels: {first}") from None
     seg.model.eval()
+    data = ckpt.get("data")  # what it was trained on (dstenv train since 2026-12-07)
+    seg.trained_cell_size = data.get("cell_size") if isinstance(data, dict) else None
     return seg
 
 
@@ -102,12 +104,19 @@ def json_ready(value: Any) -> Any:
 def data_identity(dataset: Any) -> dict[str, Any]:
     """What training data a checkpoint was made on, cheaply: for shards
     (:class:`dstenv.data.ShardDataset`) the folder's name, each shard file's name and
-    size, and the frames; for a stream (:class:`dstenv.data.StreamingDataset`) a hash of
-    its configuration, its seed, split and frame sampling."""
+    size, the frames and the cell size [m]; for a stream
+    (:class:`dstenv.data.StreamingDataset`) a hash of its configuration, its seed, split
+    and frame sampling."""
     files = getattr(dataset, "files", None)
     if files is not None:
+        cell = None
+        if files:
+            from dstenv.data.shards import ShardReader
+
+            with ShardReader(files[0]) as r:
+                cell = float(r.cell_size)
         return {"source": f"shards in {Path(files[0]).parent.parent.name}" if files else
-                "no shards", "frames": len(dataset),
+                "no shards", "frames": len(dataset), "cell_size": cell,
                 "shards": [[f"{Path(f).parent.name}/{Path(f).name}", Path(f).stat().st_size]
                            for f in files]}
     config = json.dumps(getattr(dataset, "config", None), sort_keys=True, default=str)

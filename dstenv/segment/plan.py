@@ -202,6 +202,17 @@ def fixed_params(value: Mapping[str, Any], key: str) -> dict[str, Any]:
     return v
 
 
+def resolution_note(seg: Any, cell_size: float | None) -> str | None:
+    """A note when a checkpoint trained on other cells than the drives' is scored (it
+    runs, but off the resolution it learned); ``None`` when they agree or are unknown."""
+    trained = getattr(seg, "trained_cell_size", None)
+    if not trained or not cell_size or abs(trained - cell_size) <= 1e-6:
+        return None
+    return (f"note: {getattr(seg, 'checkpoint', seg.label)} was trained on cells of "
+            f"{trained:g} m, these drives have {cell_size:g} m: its scores are of a network "
+            "used at another resolution")
+
+
 def _train_drives(cfg: Mapping[str, Any], train_ds: Any, progress: bool) -> list[Episode]:
     frames, config = split_index(train_ds.files)
     return record_episodes(config, episode_targets(frames, cfg["tune"]["episodes"]), progress)
@@ -297,8 +308,12 @@ def plan_segmenters(cfg: Mapping[str, Any], drives: Drives, datasets: Mapping[st
     taken = () if drives.evaluation_only else cfg["models"]
     pairs = [c if isinstance(c, tuple) else (None, c) for c in checkpoints]
     extra = load_checkpoints([p for _, p in pairs], drives.channels, device=device, taken=taken)
+    cell = drives.episodes[0].cell_size if drives.episodes else None
     for (label, _), seg in zip(pairs, extra):
         seg.label = label or seg.label
+        note = resolution_note(seg, cell)
+        if note:
+            log(note)
     plan = Plan()
     cache: list[list[Episode]] = []
 

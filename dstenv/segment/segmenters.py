@@ -126,6 +126,9 @@ class DSTFreeSegmenter(DSTSegmenter):
 class TorchSegmenter(Segmenter):
     """A network created by :func:`dstenv.segment.models.build_model`.
 
+    ``trained_cell_size`` [m]: the cells of its training data when its checkpoint says
+    (:func:`dstenv.segment.checkpoint.load_segmenter`), else ``None``.
+
     Args:
         model_name: key of :data:`dstenv.segment.models.MODELS`.
         model_kwargs: builder options (JSON-compatible, stored in checkpoints).
@@ -151,6 +154,7 @@ class TorchSegmenter(Segmenter):
         self.in_channels = in_channels
         self.num_classes = num_classes
         self.device = torch.device(device)
+        self.trained_cell_size: float | None = None
         self.model: SegmentationModel = build_model(
             model_name, in_channels, num_classes, **self.model_kwargs
         )

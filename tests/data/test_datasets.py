@@ -292,3 +292,13 @@ def test_streaming_arguments_are_checked():
                         ({"max_frames": 1.5}, "max_frames must be None or an integer >= 1")):
         with pytest.raises(ValueError, match=message):
             StreamingDataset("default", **kw)
+
+
+def test_data_identity_of_shards_names_files_sizes_and_cells(dataset_dir):
+    from dstenv.segment.checkpoint import data_identity
+
+    root, _ = dataset_dir
+    ident = data_identity(ShardDataset(root, split="train"))
+    assert ident["cell_size"] == 0.5 and ident["frames"] == 5
+    assert [f for f, _ in ident["shards"]] == ["train/shard-00000.h5", "train/shard-00001.h5"]
+    assert ident != data_identity(ShardDataset(root, split="val"))

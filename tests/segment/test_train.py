@@ -76,6 +76,24 @@ def test_resume_on_other_data_is_refused(tmp_path, make_frames):
     assert data_identity(a)["config"] != data_identity(StreamingDataset("default"))["config"]
 
 
+def test_a_checkpoint_knows_its_cells_and_a_mismatch_is_noted(tmp_path, make_frames):
+    from dstenv.segment.checkpoint import load_segmenter
+    from dstenv.segment.plan import resolution_note
+
+    ident = {"source": "shards in a", "frames": 4, "cell_size": 0.5, "shards": []}
+    train({**SMALL, "epochs": 1}, make_frames(4), None, tmp_path, data_id=ident,
+          progress=False, log=lambda m: None)
+    seg = load_segmenter(tmp_path / "best.pt")
+    assert seg.trained_cell_size == 0.5
+    seg.checkpoint = "best.pt"
+    assert resolution_note(seg, 0.5) is None
+    assert resolution_note(seg, 0.33) == (
+        "note: best.pt was trained on cells of 0.5 m, these drives have 0.33 m: its scores "
+        "are of a network used at another resolution")
+    seg.trained_cell_size = None  # a checkpoint from before: nothing to compare
+    assert resolution_note(seg, 0.33) is None
+
+
 @pytest.mark.parametrize("over, message", [
     ({"weight_power": float("nan")}, "train.weight_power must be a finite number >= 0, got nan"),
     ({"lr": float("inf")}, "train.lr must be a finite number > 0, got inf"),

@@ -122,7 +122,7 @@ def output_file(path: str | Path, option: str) -> Path:
         raise ValueError(f"{option} {out}: {parent} is not writable; give a path you can "
                          "write to")
     for folder in (out.parent, *out.parent.parents):  # never among a dataset's files
-        if (folder / "manifest.json").is_file() or next(folder.glob("*/shard-*.h5"), None):
+        if (folder / "manifest.json").is_file() or (folder / ".dstenv.lock").is_file():
             raise ValueError(f"{option} {out}: inside the dataset folder {folder}; write it "
                              "elsewhere")
     if out.is_file():

@@ -55,6 +55,7 @@ def test_output_file_never_replaces_a_datasets_file_or_a_binary(tmp_path):
     ds = tmp_path / "ds"
     (ds / "test").mkdir(parents=True)
     (ds / "test" / "shard-00000.h5").write_bytes(b"\x89HDF\r\n\x1a\n\0\0")
+    (ds / "manifest.json").write_text("{}")
     for target in (ds / "manifest.json", ds / "test" / "shard-00000.h5", ds / "r.json"):
         with pytest.raises(ValueError, match="inside the dataset folder"):
             output_file(target, "--json")

@@ -67,8 +67,9 @@ class Args(EnvArgs):
     temperature: float = opt(0.0, "PPO: sample from softmax(logits / T) with T > 0 "
                                   "(seeded per episode; overrides --deterministic); "
                                   "0 = off")
-    readme: str = opt("baselines/README.md", "Markdown file whose results block "
-                                             "--write-readme replaces")
+    readme: str = opt("", "Markdown file whose results block --write-readme replaces "
+                          "(given explicitly: baselines/README.md's block holds rows "
+                          "written by hand)")
     write_readme: bool = opt(False, "replace the results block of --readme (else print only)")
     csv: str = opt("", "write every episode of every policy to this CSV file")
     torch_threads: int = opt(1, "torch CPU threads for the PPO policies")
@@ -101,7 +102,9 @@ class PPOPolicy:
         # a warm start saved before PPO took a step is the imitation policy alone
         learner = ("DAgger" if self.meta.get("warm_start") and not self.meta.get("timesteps")
                    else "PPO")
-        self.name = f"{learner} {extractor} ({self.path.stem})" + (
+        # ppo_grid.py names every run's weights model.pt: the run folder tells them apart
+        stem = self.path.parent.name if self.path.stem == "model" else self.path.stem
+        self.name = f"{learner} {extractor} ({stem})" + (
             f" T={self.temperature:g}" if self.temperature > 0 else "")
         self.model: Any = None
         self.rng = np.random.default_rng(0)
@@ -224,11 +227,23 @@ def write_readme(path: str | Path, block: str) -> None:
     atomic_write_text(path, f"{head}{BEGIN}\n{block}{END}{tail}")
 
 
+def _parsed(env: dict[str, Any]) -> dict[str, Any]:
+    """Env arguments compared by meaning (the config JSON parsed, spacing aside)."""
+    cfg = env.get("env_config") or "{}"
+    try:
+        cfg = json.loads(cfg)
+    except ValueError:
+        pass
+    return {**env, "env_config": cfg}
+
+
 def run(args: Args, command: str) -> str:
     """Evaluate every policy of ``args``; returns the Markdown block (written when
     ``args.readme``)."""
     import torch
 
+    if args.write_readme and not args.readme:
+        raise ValueError("--write-readme needs --readme FILE (the block it replaces whole)")
     if args.torch_threads < 1:
         raise ValueError(f"--torch-threads must be >= 1, got {args.torch_threads}")
     if args.episodes < 1 or not 0 <= args.seed <= 2**31 - 1 - args.episodes:
@@ -255,9 +270,15 @@ def run(args: Args, command: str) -> str:
         else:
             policy = ppo[path]
             env, meta = policy.make_env(args), policy.meta
-            if meta["args"]["env_id"] != args.env_id:
-                print(f"warning: {path} was trained on {meta['args']['env_id']}, "
-                      f"evaluated on {args.env_id}")
+            trained = {k: meta["args"].get(k) for k in ("env_id", "env_config",
+                                                          "max_episode_steps")}
+            now = {"env_id": args.env_id, "env_config": args.env_config,
+                   "max_episode_steps": args.max_episode_steps}
+            if _parsed(trained) != _parsed(now):
+                print(f"warning: {path} was trained with --env-id {trained['env_id']} "
+                      f"--env-config '{trained['env_config']}' --max-episode-steps "
+                      f"{trained['max_episode_steps']}; evaluated with "
+                      + " ".join(f"--{k.replace('_', '-')} {v!r}" for k, v in now.items()))
         if shield:
             policy = shielded(policy, args.shield)
         start = time.monotonic()

@@ -72,7 +72,8 @@ class Args(EnvArgs):
                                      "+ the grid read along the route) | combined (SB3's "
                                      "MultiInputPolicy extractor, NatureCNN)")
     features_dim: int = opt(128, "size of the extracted feature vector")
-    total_timesteps: int = opt(100_000, "environment steps over all envs (the budget)")
+    total_timesteps: int = opt(100_000, "environment steps over all envs (the budget; PPO "
+                                        "rounds it up to whole rollouts of n_steps x n_envs)")
     n_envs: int = opt(2, "parallel environments")
     vec_env: str = opt("subproc", "subproc | dummy")
     map_pool: int = opt(50, "training maps (the env's world.map.pool; 0 = a new map "
@@ -269,8 +270,19 @@ def save(model: PPO, out: Path, args: Args, wall_s: float,
         "observation_space": str(model.observation_space),
         "action_space": str(model.action_space),
     }
-    atomic_write_text(out / "model.json", json.dumps(meta, indent=2) + "\n")
+    atomic_write_text(out / "model.json", json.dumps(_no_nan(meta), indent=2) + "\n")
     return path
+
+
+def _no_nan(value: Any) -> Any:
+    """NaN (a warm start's statistic of no episode) as null: model.json stays strict JSON."""
+    if isinstance(value, float) and value != value:
+        return None
+    if isinstance(value, dict):
+        return {k: _no_nan(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_no_nan(v) for v in value]
+    return value
 
 
 def load(path: str | Path, env: gym.Env) -> tuple[PPO, dict[str, Any]]:
@@ -337,9 +349,17 @@ def train(args: Args) -> tuple[PPO, dict[str, Any]]:
             raise ValueError("--norm-reward with --warm-start: the warm start fits the value "
                              "head to the env's own returns; use one of the two")
         warm_start_steps_per_round(args)  # bad flags fail before any env is built
-    if args.anchor and (not args.warm_start or args.ent_coef <= 0):
-        raise ValueError("--anchor: needs --warm-start (the policy it stays near) and "
-                         f"--ent-coef > 0 (the KL's weight; got {args.ent_coef})")
+    if args.anchor and not args.warm_start:
+        raise ValueError("--anchor needs --warm-start (the imitation policy it stays near)")
+    if args.anchor and args.ent_coef <= 0:
+        raise ValueError(f"--anchor needs --ent-coef > 0 (the KL's weight), got "
+                         f"{args.ent_coef}")
+    if args.tensorboard:
+        try:
+            import tensorboard  # noqa: F401
+        except ImportError:
+            raise ValueError("--tensorboard needs the tensorboard package: pip install -e "
+                             "'.[tensorboard]'") from None
     torch.set_num_threads(args.torch_threads)
     out = Path(args.out)
     env = make_vec_env(args)

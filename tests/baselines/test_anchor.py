@@ -71,12 +71,14 @@ def test_anchored_run_logs_the_kl(env_flags: list[str], tmp_path) -> None:
     assert json.loads((out / "model.json").read_text())["args"]["ent_coef"] == 0.5
 
 
-@pytest.mark.parametrize("flags", [["--anchor", "--ent-coef", "0.5"],
-                                   ["--anchor", "--warm-start", "grid", "--ent-coef", "0",
-                                    "--warm-start-steps", "16"]])
+@pytest.mark.parametrize("flags, message", [
+    (["--anchor", "--ent-coef", "0.5"], "--anchor needs --warm-start"),
+    (["--anchor", "--warm-start", "grid", "--ent-coef", "0", "--warm-start-steps", "16"],
+     r"--anchor needs --ent-coef > 0 \(the KL's weight\), got 0"),
+])
 def test_anchor_needs_a_warm_start_and_a_weight(env_flags: list[str], tmp_path,
-                                                flags: list[str]) -> None:
-    with pytest.raises(ValueError, match="--anchor: needs --warm-start"):
+                                                flags: list[str], message: str) -> None:
+    with pytest.raises(ValueError, match=message):
         ppo_grid.main([*env_flags, "--total-timesteps", "100", "--verbose", "0", *flags,
                        "--out", str(tmp_path / "x")])
     assert not (tmp_path / "x").exists()

@@ -32,7 +32,7 @@ def test_saved_model_loads_and_evaluates(tmp_path, env_flags: list[str]) -> None
     assert readme.read_text() == "# kept\n"  # never written without --write-readme
     table = [line for line in block.splitlines() if line.startswith("| ")]
     assert [row.split(" | ")[0] for row in table[1:]] == [
-        "| random", "| autopilot (privileged)", "| PPO grid-cnn (model)"]
+        "| random", "| autopilot (privileged)", "| PPO grid-cnn (ppo)"]
     assert "32 steps" in table[-1]  # the training budget from model.json
     assert "python baselines/evaluate.py" in block and "--episodes 2" in block
     lines = csv.read_text().splitlines()
@@ -137,9 +137,9 @@ def test_shield_takes_the_slower_action_and_adds_a_row(tmp_path, env_flags: list
     block = evaluate.main([*env_flags, "--policies", "grid-tuned", "--episodes", "1",
                            "--checkpoints", str(out / "model.pt"), "--shield", "grid"])
     rows = [ln.split(" | ")[0] for ln in block.splitlines() if ln.startswith("| ")][1:]
-    assert rows == ["| rule-based (grid, tuned)", "| PPO grid-cnn (model)",
+    assert rows == ["| rule-based (grid, tuned)", "| PPO grid-cnn (ppo)",
                     "| rule-based (grid, tuned) + shield grid",
-                    "| PPO grid-cnn (model) + shield grid"]
+                    "| PPO grid-cnn (ppo) + shield grid"]
     with pytest.raises(ValueError, match="--shield: expected one of"):
         evaluate.main([*env_flags, "--policies", "--episodes", "1", "--checkpoints",
                        str(out / "model.pt"), "--shield", "nope"])

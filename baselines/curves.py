@@ -75,6 +75,9 @@ def plot(args: Args) -> Path:
     last = [max(int(r["timesteps"]) for r in csv.DictReader(open(Path(d) / "episodes.csv")))
             for d in args.runs]
     max_steps = args.max_steps or min(last)
+    if args.bin < 1 or args.bin > max_steps:
+        raise ValueError(f"--bin {args.bin}: give 1 .. {max_steps} env steps (the shortest "
+                         "run's last finished episode), so that a bin holds episodes")
     per_run = [binned_rates(d, args.bin, max_steps) for d in args.runs]
     x = (np.arange(len(per_run[0]["episodes"])) + 1) * args.bin
     refs = reference_rates(args.reference)

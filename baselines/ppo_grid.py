@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import csv
 import io
+import importlib.util
 import json
 import shlex
 import shutil
@@ -354,12 +355,9 @@ def train(args: Args) -> tuple[PPO, dict[str, Any]]:
     if args.anchor and args.ent_coef <= 0:
         raise ValueError(f"--anchor needs --ent-coef > 0 (the KL's weight), got "
                          f"{args.ent_coef}")
-    if args.tensorboard:
-        try:
-            import tensorboard  # noqa: F401
-        except ImportError:
-            raise ValueError("--tensorboard needs the tensorboard package: pip install -e "
-                             "'.[tensorboard]'") from None
+    if args.tensorboard and importlib.util.find_spec("tensorboard") is None:
+        raise ValueError("--tensorboard needs the tensorboard package: pip install -e "
+                         "'.[tensorboard]'")
     torch.set_num_threads(args.torch_threads)
     out = Path(args.out)
     env = make_vec_env(args)

@@ -236,7 +236,6 @@ def export_drive(config: Mapping[str, Any], seed: int, frames: int, out: str | P
     if stage.exists():
         shutil.rmtree(stage)
     (stage / "velodyne").mkdir(parents=True)
-    final, split = split, stage
     calib = sim_calibration()
     mount = np.array([cfg["lidar"]["mount_x"], cfg["lidar"]["mount_y"]])
     poses, speeds, labels = [], [], []
@@ -247,7 +246,7 @@ def export_drive(config: Mapping[str, Any], seed: int, frames: int, out: str | P
         c, s = np.cos(ego[2]), np.sin(ego[2])
         velo = np.array([ego[0] + c * mount[0] - s * mount[1],
                          ego[1] + s * mount[0] + c * mount[1], ego[2]])
-        cloud.points.astype("<f4").tofile(split / "velodyne" / f"{f:06d}.bin")
+        cloud.points.astype("<f4").tofile(stage / "velodyne" / f"{f:06d}.bin")
         on_agent = cloud.surface == SURFACES.index("agent")
         returns = np.bincount(cloud.index[on_agent], minlength=len(world.agents))
         labels += label_rows(f, world.agents, velo, calib, returns,
@@ -275,4 +274,4 @@ def export_drive(config: Mapping[str, Any], seed: int, frames: int, out: str | P
         target.parent.mkdir(parents=True, exist_ok=True)
         os.replace(stage / key, target)
     stage.rmdir()
-    return final
+    return split

@@ -92,13 +92,6 @@ def _generate(args: argparse.Namespace) -> int:
     if config.get("world", {}).get("map", {}).get("kind") == "osm" and not args.quiet:
         print("dstenv generate: note: this scenario has one fixed OSM map; its splits differ "
               "in traffic and route, not in map", file=sys.stderr)
-    if not args.quiet:
-        from dstenv._jitcache import kernels_cached
-
-        if not kernels_cached(Path(__file__).parents[1]):
-            print("dstenv generate: note: first run of this install: compiling the numba "
-                  "kernels first (about a minute, kept for later runs); the first frames' "
-                  "time estimate includes it", file=sys.stderr)
     try:
         spec = GenerateSpec(
             config=config, frames=args.frames, seed=args.seed,
@@ -111,6 +104,13 @@ def _generate(args: argparse.Namespace) -> int:
             compression=None if args.compression == "none" else args.compression,
             compression_level=args.gzip_level, deflate=args.deflate,
         )
+        if not args.quiet:  # once the options are known to be good
+            from dstenv._jitcache import kernels_cached
+
+            if not kernels_cached(Path(__file__).parents[1]):
+                print("dstenv generate: note: first run of this install: compiling the numba "
+                      "kernels first (about a minute, kept for later runs); the first "
+                      "frames' time estimate includes it", file=sys.stderr)
         manifest = generate(spec, args.out, workers=args.workers, ray_address=args.ray,
                             progress=not args.quiet, force_unlock=args.force_unlock)
     except GenerateError as exc:

@@ -176,6 +176,8 @@ class ShardDataset(Dataset):
             self.files.append(path)
             lengths.append(n)
             self.class_counts += counts
+        #: ``(H, W)`` cells and cell size [m] of the kept shards (``None`` without any)
+        self.grid_shape, self.cell_size = first[1] if first else (None, None)
         if not self.files and split is not None and split not in (*SPLITS, UNSPLIT):
             # a known split may be absent (no val split); an unknown one is a typo
             there = sorted({p.parent.name for p in scan_shards(Path(root_or_files))}) if \

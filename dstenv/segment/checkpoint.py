@@ -21,7 +21,7 @@ import torch
 from dstenv.io import atomic_path
 from dstenv.segment.segmenters import TorchSegmenter
 
-__all__ = ["FORMAT", "save_checkpoint", "load_checkpoint", "load_segmenter", "data_identity",
+__all__ = ["FORMAT", "save_checkpoint", "load_checkpoint", "load_segmenter", "training_data",
            "json_ready"]
 
 FORMAT = "dstenv-segmenter"
@@ -101,20 +101,16 @@ def json_ready(value: Any) -> Any:
     return json.loads(json.dumps(value))
 
 
-def data_identity(dataset: Any) -> dict[str, Any]:
-    """What training data a checkpoint was made on, cheaply: for shards
-    (:class:`dstenv.data.ShardDataset`) the folder's name, each shard file's name and
-    size, the frames and the cell size [m]; for a stream
+def training_data(dataset: Any) -> dict[str, Any]:
+    """What training data a checkpoint was made on (kept in it, compared on resume),
+    cheaply: for shards (:class:`dstenv.data.ShardDataset`) the folder's name, each shard
+    file's name and size, the frames and the cell size [m]; for a stream
     (:class:`dstenv.data.StreamingDataset`) a hash of its configuration, its seed, split
-    and frame sampling."""
+    and frame sampling. (A whole dataset folder's identity, which the benchmark keeps, is
+    :func:`dstenv.data.manifest.data_identity`.)"""
     files = getattr(dataset, "files", None)
     if files is not None:
-        cell = None
-        if files:
-            from dstenv.data.shards import ShardReader
-
-            with ShardReader(files[0]) as r:
-                cell = float(r.cell_size)
+        cell = getattr(dataset, "cell_size", None)
         return {"source": f"shards in {Path(files[0]).parent.parent.name}" if files else
                 "no shards", "frames": len(dataset), "cell_size": cell,
                 "shards": [[f"{Path(f).parent.name}/{Path(f).name}", Path(f).stat().st_size]

@@ -43,7 +43,7 @@ def _apart(out: str | None, data: str | None) -> None:
 def _train(args: argparse.Namespace) -> int:
     from dstenv.config import CLIError
     from dstenv.data import ShardDataset, StreamingDataset
-    from dstenv.segment.checkpoint import data_identity
+    from dstenv.segment.checkpoint import training_data
     from dstenv.segment.train import default_train_config, train
 
     if Path(args.out).exists() and not Path(args.out).is_dir():
@@ -109,7 +109,7 @@ def _train(args: argparse.Namespace) -> int:
         resume=not args.no_resume,
         progress=not args.quiet,
         log=(lambda m: None) if args.quiet else print,
-        data_id=data_identity(train_ds),
+        data_id=training_data(train_ds),
     )
     best = max((m for m in history["val_miou"] if m is not None), default=None)
     print(

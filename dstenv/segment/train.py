@@ -180,7 +180,7 @@ def train(
         progress: tqdm bars.
         log: receives one-line messages.
         data_id: JSON-compatible identity of the training data
-            (:func:`dstenv.segment.checkpoint.data_identity`),
+            (:func:`dstenv.segment.checkpoint.training_data`),
             kept in the checkpoints: resuming on other data is refused.
 
     Returns:

@@ -294,11 +294,11 @@ def test_streaming_arguments_are_checked():
             StreamingDataset("default", **kw)
 
 
-def test_data_identity_of_shards_names_files_sizes_and_cells(dataset_dir):
-    from dstenv.segment.checkpoint import data_identity
+def test_training_data_of_shards_names_files_sizes_and_cells(dataset_dir):
+    from dstenv.segment.checkpoint import training_data
 
     root, _ = dataset_dir
-    ident = data_identity(ShardDataset(root, split="train"))
+    ident = training_data(ShardDataset(root, split="train"))
     assert ident["cell_size"] == 0.5 and ident["frames"] == 5
     assert [f for f, _ in ident["shards"]] == ["train/shard-00000.h5", "train/shard-00001.h5"]
-    assert ident != data_identity(ShardDataset(root, split="val"))
+    assert ident != training_data(ShardDataset(root, split="val"))

@@ -55,7 +55,7 @@ def test_resume_with_other_settings_is_refused(tmp_path, make_frames):
 
 
 def test_resume_on_other_data_is_refused(tmp_path, make_frames):
-    from dstenv.segment.checkpoint import data_identity
+    from dstenv.segment.checkpoint import training_data
 
     data, other = make_frames(4, seed=1), make_frames(4, seed=2)
     quiet = {"progress": False, "log": lambda m: None}
@@ -71,9 +71,9 @@ def test_resume_on_other_data_is_refused(tmp_path, make_frames):
     from dstenv.data import StreamingDataset
 
     a, b = StreamingDataset("dense", seed=0), StreamingDataset("dense", seed=1)
-    assert data_identity(a) == data_identity(StreamingDataset("dense", seed=0))
-    assert data_identity(a) != data_identity(b)
-    assert data_identity(a)["config"] != data_identity(StreamingDataset("default"))["config"]
+    assert training_data(a) == training_data(StreamingDataset("dense", seed=0))
+    assert training_data(a) != training_data(b)
+    assert training_data(a)["config"] != training_data(StreamingDataset("default"))["config"]
 
 
 def test_a_checkpoint_knows_its_cells_and_a_mismatch_is_noted(tmp_path, make_frames):

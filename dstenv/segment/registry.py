@@ -50,10 +50,17 @@ class SegmenterEntry:
     description: str
 
 
+def _params(params: DSTParams | dict | None) -> DSTParams:
+    """``params`` as :class:`DSTParams` (a dict of fields is converted); ``None``: the
+    default parameters."""
+    if params is None:
+        return DSTParams.default()
+    return params if isinstance(params, DSTParams) else DSTParams.from_dict(params)
+
+
 def _make_dst(preset: str = "default", params: DSTParams | dict | None = None) -> DSTSegmenter:
     if params is not None:
-        p = params if isinstance(params, DSTParams) else DSTParams.from_dict(params)
-        return DSTSegmenter(p, "dst", "dst (custom)")
+        return DSTSegmenter(_params(params), "dst", "dst (custom)")
     return DSTSegmenter(DSTParams.preset(preset), "dst", f"dst ({preset})")
 
 
@@ -61,8 +68,7 @@ def _make_dst_tuned(
     params: DSTParams | dict | None = None, episodes: Sequence[Any] | None = None, **search: Any
 ) -> DSTSegmenter:
     if params is not None:
-        p = params if isinstance(params, DSTParams) else DSTParams.from_dict(params)
-        return DSTSegmenter(p, "dst-tuned", "dst-tuned")
+        return DSTSegmenter(_params(params), "dst-tuned", "dst-tuned")
     if not episodes:
         raise ValueError(
             "dst-tuned needs training episodes to tune on (episodes=...) or fixed params="
@@ -79,15 +85,11 @@ def _make_dst_complete(
 ) -> DSTSegmenter:
     from dstenv.segment.complete import DSTCompleteSegmenter
 
-    p = DSTParams.default() if params is None else (
-        params if isinstance(params, DSTParams) else DSTParams.from_dict(params))
-    return DSTCompleteSegmenter(p, cell_size, completion)
+    return DSTCompleteSegmenter(_params(params), cell_size, completion)
 
 
 def _make_dst_free(params: DSTParams | dict | None = None) -> DSTFreeSegmenter:
-    p = DSTParams.default() if params is None else (
-        params if isinstance(params, DSTParams) else DSTParams.from_dict(params))
-    return DSTFreeSegmenter(p)
+    return DSTFreeSegmenter(_params(params))
 
 
 def _learned(model_name: str) -> Callable[..., TorchSegmenter]:

@@ -204,13 +204,12 @@ def run_cli_benchmark(args: argparse.Namespace, split: str = "test", kept: bool 
 
 
 def _with_real(args: argparse.Namespace, results: dict[str, Any]) -> dict[str, Any]:
-    """``--kitti``: score the run's segmenters on real drives, in the same report."""
+    """``--kitti``: score the run's segmenters on real drives, in the same report (its
+    options checked by :func:`_check_kitti_flags` before the run)."""
     from dstenv.config import CLIError
     from dstenv.segment import report
     from dstenv.segment.real import real_benchmark
 
-    if not args.sequences:
-        raise CLIError("--kitti needs --sequences LIST (e.g. 0003)")
     if results["data"].get("evaluation_only"):
         raise CLIError("--kitti adds real drives to a simulated benchmark; --data is "
                        "evaluation-only data already (score it with dstenv benchmark --data)")

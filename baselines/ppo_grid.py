@@ -56,6 +56,8 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.logger import configure
 from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecEnv, VecNormalize
 
+from dstenv.segment.checkpoint import read_weights
+
 from extractors import GridCNN
 from imitation import warm_start, warm_start_steps_per_round
 from rl_common import EnvArgs, atomic_write_bytes, atomic_write_text, machine_info, make_env, opt
@@ -309,12 +311,7 @@ def load(path: str | Path, env: gym.Env) -> tuple[PPO, dict[str, Any]]:
     known = {f for f in Args.__dataclass_fields__}
     args = Args(**{k: v for k, v in meta["args"].items() if k in known})
     model = build_model(args, env)
-    try:
-        state = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as exc:  # noqa: BLE001 - torch raises many types for a bad file
-        first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
-        empty = " (the file is empty)" if path.stat().st_size == 0 else ""
-        raise ValueError(f"{path}: not a readable policy checkpoint{empty}: {first}") from None
+    state = read_weights(path, "not a readable policy checkpoint")
     if not isinstance(state, dict):
         raise ValueError(f"{path}: not a policy checkpoint (a state_dict of tensors)")
     try:

@@ -22,7 +22,7 @@ from dstenv.io import atomic_path
 from dstenv.segment.segmenters import TorchSegmenter
 
 __all__ = ["FORMAT", "save_checkpoint", "load_checkpoint", "load_segmenter", "training_data",
-           "json_ready"]
+           "json_ready", "read_weights"]
 
 FORMAT = "dstenv-segmenter"
 _VERSION = 1
@@ -39,6 +39,23 @@ def save_checkpoint(path: str | Path, payload: dict[str, Any]) -> Path:
     return path
 
 
+def read_weights(path: str | Path, what: str) -> Any:
+    """``torch.load`` of a file of tensors only (``weights_only``, on the CPU), so loading
+    never runs code from it.
+
+    Raises:
+        ValueError: one line ``"PATH: WHAT[ (the file is empty)]: <torch's first line>"``
+            for a file torch cannot read (torch raises many exception types).
+    """
+    path = Path(path)
+    try:
+        return torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # noqa: BLE001 - torch raises many types for bad files
+        first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+        empty = " (the file is empty)" if path.stat().st_size == 0 else ""
+        raise ValueError(f"{path}: {what}{empty}: {first}") from None
+
+
 def load_checkpoint(path: str | Path) -> dict[str, Any]:
     """Read a checkpoint written by :func:`save_checkpoint` (weights only, on CPU).
 
@@ -49,12 +66,7 @@ def load_checkpoint(path: str | Path) -> dict[str, Any]:
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"checkpoint not found: {path}")
-    try:
-        ckpt = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as exc:  # noqa: BLE001 - torch raises many types for bad files
-        first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
-        empty = " (the file is empty)" if path.stat().st_size == 0 else ""
-        raise ValueError(f"{path}: cannot read checkpoint{empty}: {first}") from None
+    ckpt = read_weights(path, "cannot read checkpoint")
     if not isinstance(ckpt, dict) or ckpt.get("format") != FORMAT:
         raise ValueError(f"{path}: not a dstenv segmenter checkpoint")
     if ckpt.get("version") != _VERSION:

@@ -361,6 +361,26 @@ def render() -> str:
     return "\n".join(lines) + "\n"
 
 
+def main(argv: list[str] | None = None) -> int:
+    """``python -m dstenv.dst._codegen --write | --check``: rewrite the package's
+    ``_fused.py`` from :func:`render`, or only say whether it is current (exit 1 if not)."""
+    import argparse
+
+    ap = argparse.ArgumentParser(prog="python -m dstenv.dst._codegen",
+                                 description=f"Generate {TARGET.name}, the fused DST kernel.")
+    what = ap.add_mutually_exclusive_group(required=True)
+    what.add_argument("--write", action="store_true", help=f"rewrite {TARGET}")
+    what.add_argument("--check", action="store_true", help="only compare; exit 1 if stale")
+    args = ap.parse_args(argv)
+    current = TARGET.exists() and TARGET.read_text() == render()
+    if args.check:
+        print(f"{TARGET}: {'current' if current else 'stale: run with --write'}")
+        return 0 if current else 1
+    if not current:
+        TARGET.write_text(render())
+    print(f"{'wrote' if not current else 'already current:'} {TARGET}")
+    return 0
+
+
 if __name__ == "__main__":  # pragma: no cover
-    TARGET.write_text(render())
-    print(f"wrote {TARGET}")
+    raise SystemExit(main())

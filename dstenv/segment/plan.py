@@ -180,10 +180,10 @@ def split_drives(test_ds: Any, no_train: bool, progress: bool,
     return Drives(episodes, gen, config, source, evaluation_only, reason, channels)
 
 
-def fixed_params(value: Mapping[str, Any], key: str) -> dict[str, Any]:
+def fixed_params(value: Mapping[str, Any], key: str, inner: str = "params") -> dict[str, Any]:
     """Parameters given as a config value: the fields themselves, or a ``describe``
-    entry / a whole segmenter row of a results.json (their ``params`` or
-    ``completion`` are used).
+    entry / a whole segmenter row of a results.json, whose ``inner`` entry is used
+    (``"params"``: DST parameters; ``"completion"``: ``dst-complete``'s box sizes).
 
     Raises:
         ConfigError: naming ``key`` when nothing usable is found.
@@ -191,13 +191,12 @@ def fixed_params(value: Mapping[str, Any], key: str) -> dict[str, Any]:
     v = dict(value)
     if "describe" in v:
         v = dict(v["describe"])
-    for inner in ("params", "completion"):
-        if inner in v and isinstance(v[inner], Mapping):
-            return dict(v[inner])
+    if isinstance(v.get(inner), Mapping):
+        return dict(v[inner])
     if any(isinstance(x, Mapping) for x in v.values()):
         raise ConfigError(
             f"{key}: expected parameter values or a results.json segmenter entry holding "
-            f"'params', got keys {', '.join(sorted(v))}"
+            f"'{inner}', got keys {', '.join(sorted(v))}"
         )
     return v
 
@@ -268,7 +267,7 @@ def _dst_rows(cfg: Mapping[str, Any], drives: Drives, train: Callable[[], list[E
     base = tuned.params if tuned is not None else gen
     cell = drives.episodes[0].cell_size
     if cfg["complete"]["params"]:
-        settings = fixed_params(cfg["complete"]["params"], "complete.params")
+        settings = fixed_params(cfg["complete"]["params"], "complete.params", "completion")
         plan.add(DSTCompleteSegmenter(base, cell, settings), "baseline")
     elif not drives.evaluation_only:
         t = time.perf_counter()

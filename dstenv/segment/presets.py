@@ -265,7 +265,25 @@ def preset_config(name: str, overrides: Mapping[str, Any] | None = None) -> dict
     if name not in PRESETS:
         raise ConfigError(f"unknown benchmark preset {name!r}; choose from {', '.join(PRESETS)}")
     cfg = merge_config(default_benchmark_config(), PRESETS[name], f"preset {name}")
-    return merge_config(cfg, overrides, "benchmark")
+    if overrides is None:
+        return cfg
+    if not isinstance(overrides, Mapping):
+        raise ConfigError("benchmark: expected a table of settings, got "
+                          f"{type(overrides).__name__}")
+    # merged into the preset first, then checked against the defaults once: a table
+    # that is free-form there (data.overrides, model_kwargs) stays free-form, whatever
+    # keys the preset itself set in it
+    return merge_config(default_benchmark_config(), _layered(PRESETS[name], overrides),
+                        "benchmark")
+
+
+def _layered(base: Mapping[str, Any], over: Mapping[str, Any]) -> dict[str, Any]:
+    """``over`` on top of ``base``: tables merge key by key, other values replace."""
+    out = dict(base)
+    for k, v in over.items():
+        out[k] = (_layered(out[k], v) if isinstance(v, Mapping) and isinstance(out.get(k), Mapping)
+                  else v)
+    return out
 
 
 def _missing_keys(base: Mapping[str, Any], over: Mapping[str, Any], path: str = "") -> list[str]:
@@ -315,6 +333,9 @@ def check_config(cfg: Mapping[str, Any]) -> None:
                      ("grid", 0)):
         if not isinstance(d[key], int) or isinstance(d[key], bool) or d[key] < low:
             raise ConfigError(f"data.{key} must be an integer >= {low}, got {d[key]!r}")
+    from dstenv.config import build_config
+
+    build_config(d["scenario"] or None, ("data.overrides", d["overrides"]))  # names a bad key
     if not isinstance(cfg["eval_batch_size"], int) or cfg["eval_batch_size"] < 1:
         raise ConfigError(f"eval_batch_size must be an integer >= 1, got "
                           f"{cfg['eval_batch_size']!r}")

@@ -11,8 +11,18 @@ from dstenv.dst._kernel import REACHABLE, kernel_params, plane_grid
 
 def test_generated_kernel_is_up_to_date():
     assert _codegen.TARGET.read_text() == _codegen.render(), (
-        "dstenv/dst/_fused.py is stale: run `python -m dstenv.dst._codegen`"
+        "dstenv/dst/_fused.py is stale: run `python -m dstenv.dst._codegen --write`"
     )
+
+
+def test_cli_needs_an_explicit_write(capsys):
+    import pytest
+
+    with pytest.raises(SystemExit):  # no flag: usage, nothing written
+        _codegen.main([])
+    assert "--write" in capsys.readouterr().err
+    assert _codegen.main(["--check"]) == 0
+    assert "current" in capsys.readouterr().out
 
 
 def test_reachable_sets():

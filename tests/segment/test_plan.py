@@ -49,9 +49,17 @@ def test_fixed_params_take_what_results_json_prints(tmp_path):
     assert fixed_params(row, "tune.params") == {"alpha": 0.2}
     assert fixed_params(row["describe"], "tune.params") == {"alpha": 0.2}
     assert fixed_params({"alpha": 0.2}, "tune.params") == {"alpha": 0.2}
-    assert fixed_params({"describe": {"completion": {"length_m": 4.0}}}, "c") == {"length_m": 4.0}
     with pytest.raises(ConfigError, match="tune.params: expected"):
         fixed_params({"tuning": {"budget": 3}}, "tune.params")
+    # dst-complete's entry holds both its DST parameters and its box sizes: complete.params
+    # takes the sizes (it used to pass the DST parameters to the completion: a TypeError)
+    complete = {"kind": "baseline", "describe": {"name": "dst-complete",
+                                                 "params": {"alpha": 0.2},
+                                                 "completion": {"length_m": 4.0}}}
+    assert fixed_params(complete, "complete.params", "completion") == {"length_m": 4.0}
+    assert fixed_params(complete, "tune.params") == {"alpha": 0.2}
+    with pytest.raises(ConfigError, match="complete.params: .* holding 'completion'"):
+        fixed_params(row, "complete.params", "completion")
 
 
 def test_cli_params_from_results_json(tmp_path):

@@ -132,6 +132,14 @@ def test_presets_validate():
     with pytest.raises(ConfigError, match="real_net.moving: unknown 'kitti'; choose from "
                                           "match, run"):
         _check(preset_config("tiny", {"real_net": {"moving": "kitti"}}))
+    # free-form tables stay free-form over a preset that already set keys in them
+    cfg = preset_config("cpu", {"data": {"overrides": {"protocol": {"object_edges": "ignore"}}}})
+    assert cfg["data"]["overrides"]["protocol"] == {"object_edges": "ignore"}
+    assert cfg["data"]["overrides"]["lidar"] == {"model": "hdl64"}  # the preset's, kept
+    cfg = preset_config("smoke", {"model_kwargs": {"unet-light": {"betp_skip": 1.0}}})
+    assert cfg["model_kwargs"]["unet-light"]["betp_skip"] == 1.0
+    with pytest.raises(ConfigError, match="data.overrides.protocol.bogus: unknown key 'bogus'"):
+        _check(preset_config("cpu", {"data": {"overrides": {"protocol": {"bogus": 1}}}}))
 
 
 def test_paper_protocol_names_missing_pipeline_keys():

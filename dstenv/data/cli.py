@@ -25,11 +25,13 @@ def parse_set(items: list[str]) -> dict[str, Any]:
     is read as JSON; anything else is a string).
 
     Raises:
-        CLIError: an item without ``=`` or an empty key.
+        CLIError: an item without ``=``, an empty key, or an item below a value that an
+            earlier item set (``world=5`` then ``world.traffic.cars=3``).
     """
     from dstenv.config import CLIError
 
     out: dict[str, Any] = {}
+    where: dict[tuple[str, ...], str] = {}  # the item that set each value
     for item in items:
         key, sep, text = item.partition("=")
         parts = key.strip().split(".")
@@ -40,9 +42,15 @@ def parse_set(items: list[str]) -> dict[str, Any]:
         except tomllib.TOMLDecodeError:
             value = _json_or_word(text)
         node = out
-        for p in parts[:-1]:
+        for i, p in enumerate(parts[:-1]):
             node = node.setdefault(p, {})
+            if not isinstance(node, dict):
+                by = next(where[tuple(parts[:j])] for j in range(i + 1, 0, -1)
+                          if tuple(parts[:j]) in where)
+                raise CLIError(f"--set {item!r}: {'.'.join(parts[:i + 1])} is already set to "
+                               f"a value by --set {by!r}; give one")
         node[parts[-1]] = value
+        where[tuple(parts)] = item
     return out
 
 

@@ -229,11 +229,12 @@ class PerceptionGridFilter:
         grid = np.asarray(grid)
         if grid.shape != self.shape:
             raise ValueError(f"{name} must have shape {self.shape}, got {grid.shape}")
+        if grid.dtype != np.uint8 and not np.issubdtype(grid.dtype, np.integer):
+            raise ValueError(f"{name} must hold integer codes, got dtype {grid.dtype}")
+        lo, hi = int(grid.min(initial=0)), int(grid.max(initial=0))
+        if lo < 0 or hi > max_code:  # before any cast: 257 must not wrap to 1
+            raise ValueError(f"{name} holds code {lo if lo < 0 else hi}; allowed codes "
+                             f"are 0..{max_code}")
         if grid.dtype != np.uint8:
-            if not np.issubdtype(grid.dtype, np.integer):
-                raise ValueError(f"{name} must hold integer codes, got dtype {grid.dtype}")
             grid = grid.astype(np.uint8)
-        if grid.max(initial=0) > max_code:
-            raise ValueError(
-                f"{name} holds code {int(grid.max())}; allowed codes are 0..{max_code}")
         return np.ascontiguousarray(grid)

@@ -129,6 +129,8 @@ def discount(m: np.ndarray, alpha: float | np.ndarray) -> np.ndarray:
     """
     m = _check(m)
     a = np.asarray(alpha, dtype=np.float64)
+    if not (a.size and np.all((a >= 0.0) & (a <= 1.0))):  # NaN fails too
+        raise ValueError(f"discount: alpha must lie in [0, 1], got {alpha!r}")
     out = m.astype(np.float64) * (1.0 - a)[..., None, :, :] if a.ndim else m * (1.0 - a)
     out = np.array(out, dtype=np.float64)
     out[..., OMEGA, :, :] += a

@@ -27,6 +27,7 @@ of the env names every action.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, Protocol
 
@@ -37,7 +38,7 @@ from dstenv.config import ConfigError, Section, between
 from dstenv.registry import Registry
 
 __all__ = ["META_ACTIONS", "SPEED_ACTIONS", "ActionMode", "ACTIONS", "action_mode",
-           "default_action_config", "SECTION"]
+           "highway_settings", "default_action_config", "SECTION"]
 
 #: ``"discrete"`` action index -> meta-action name (city and highway-env scenes).
 META_ACTIONS: tuple[str, ...] = ("SLOWER", "IDLE", "FASTER", "LEFT", "RIGHT")
@@ -234,6 +235,49 @@ ACTIONS: Registry[ActionMode] = Registry("mode", "action.type", {
 def action_mode(name: str) -> ActionMode:
     """Look up a mode, with an error naming the known ones."""
     return ACTIONS.get(name)
+
+
+def highway_settings(cfg: Mapping[str, Any]) -> dict[str, Any]:
+    """The ``highway`` keys that follow the env's ``action`` section (one section drives
+    either world: the meta-actions' speeds and braking limit reach highway-env's vehicle
+    as they reach the city's controller), after refusing what a world cannot take.
+
+    Raises:
+        ConfigError: speeds that do not increase; on ``source = "highway"``:
+            ``info.autopilot``, ``initial_speed_index`` or ``speed_gain`` (city only),
+            fewer than two speeds, or ``action`` and ``highway`` speeds that differ.
+    """
+    from dstenv.sim.highway import default_config as highway_defaults
+
+    act, speeds = cfg["action"], [float(v) for v in cfg["action"]["target_speeds"]]
+    for key, v in (("action", speeds), ("highway", list(cfg["highway"]["target_speeds"]))):
+        if any(b <= a for a, b in zip(v, v[1:])):
+            raise ConfigError(f"config.{key}.target_speeds: must increase (SLOWER steps "
+                              f"down, FASTER up), got {v}")
+    out = {"action_mode": "continuous" if act["type"] == "continuous" else "meta",
+           "brake_decel": min(act["brake_decel"], act["max_accel"])}
+    if cfg["source"] != "highway":
+        return out
+    if cfg["info"]["autopilot"]:
+        raise ConfigError("config.info.autopilot: highway-env's world has no autopilot to "
+                          "ask; use source 'city' or set info.autopilot = false")
+    mine = default_action_config()
+    for key in ("initial_speed_index", "speed_gain"):
+        if act[key] != mine[key]:
+            raise ConfigError(f"config.action.{key}: the city world's controller only "
+                              f"(highway-env's vehicle tracks its speeds itself); leave it "
+                              f"at {mine[key]}")
+    theirs = [float(v) for v in cfg["highway"]["target_speeds"]]
+    if speeds != mine["target_speeds"] and theirs not in (speeds, highway_defaults()[
+            "target_speeds"]):
+        raise ConfigError(f"config.action.target_speeds {speeds} and config.highway."
+                          f"target_speeds {theirs} differ; set one of them")
+    key = "action" if speeds != mine["target_speeds"] else "highway"
+    out["target_speeds"] = speeds if key == "action" else theirs
+    if len(out["target_speeds"]) < 2:
+        raise ConfigError(f"config.{key}.target_speeds: highway-env's vehicle needs at least "
+                          f"two speeds, got {out['target_speeds']}")
+    return out
 
 
 #: The ``action`` section of the env configuration.

@@ -11,7 +11,7 @@ import numpy as np
 from gymnasium import spaces
 
 from dstenv.config import ConfigError, Validated, build_config
-from dstenv.envs.actions import action_mode, default_action_config
+from dstenv.envs.actions import action_mode, default_action_config, highway_settings
 from dstenv.envs.info import INFO_SECTION, step_info
 from dstenv.envs.navigation import ego_vector, navigation_spaces, route_points
 from dstenv.envs.observation import SECTION as OBSERVATION_SECTION
@@ -38,14 +38,13 @@ class DSTGridEnv(gym.Env):
     ego sweeps (occluded by buildings and road users), the sweep is ray-cast into a
     free/occupied/unknown sensor grid, the map is cut into a GIS grid, and a
     Dempster-Shafer filter (Itkina & Kochenderfer) fuses both into a perception
-    grid over (navigable, non_navigable, building, static, moving). The agent sees
-    that grid, ego-centred, forward up. What hides behind a building stays unknown,
-    so the policy must learn caution where occluded traffic can appear.
+    grid over (navigable, non_navigable, building, static, moving): the agent's view,
+    ego-centred, forward up. What hides behind a building stays unknown.
 
     The world is dstenv's procedural city (``source = "city"``, scenario files in
     ``scenarios/``) or a highway-env scene (``source = "highway"``). Configure with
     ``gym.make(id, config={...})`` (merged over :meth:`default_config`, unknown keys
-    rejected) or per episode with ``reset(options={"config": {...}})``.
+    rejected) or from a reset on with ``reset(options={"config": {...}})`` (kept).
 
     ## Observation Space
 
@@ -222,11 +221,7 @@ class DSTGridEnv(gym.Env):
         mode = observation_mode(obs_cfg["grid"] if obs_name == "dict" else obs_name)
         action = action_mode(cfg["action"]["type"])
         pipe_cfg = {k: copy.deepcopy(v) for k, v in cfg.items() if k not in _ENV_SECTIONS}
-        pipe_cfg["highway"]["action_mode"] = ("continuous" if cfg["action"]["type"] == "continuous"
-                                              else "meta")
-        # one braking limit for the meta-actions, whichever world runs them
-        pipe_cfg["highway"]["brake_decel"] = min(cfg["action"]["brake_decel"],
-                                                 cfg["action"]["max_accel"])
+        pipe_cfg["highway"].update(highway_settings(cfg))  # refuses what a world cannot take
         pipe_cfg["frame"]["masses"] = pipe_cfg["frame"]["masses"] or mode.needs_masses
         # ground truth only when shown (info.labels) or drawn (render)
         pipe_cfg["frame"]["labels"] = bool(cfg["info"]["labels"] or self.render_mode)
@@ -269,33 +264,33 @@ class DSTGridEnv(gym.Env):
                 cfg = build_config(None, ("options.config", options["config"]),
                                    defaults=self.config)
                 saved = {k: getattr(self, k) for k in self._STATE}
+        episode_seed, started = int(self.np_random.integers(2**31 - 1)), False
+        try:
+            if saved is not None:
                 self._configure(cfg)
-                if (self.observation_space, self.action_space) != (
-                        saved["observation_space"], saved["action_space"]):
-                    new = (self.observation_space, self.action_space)
-                    for k, v in saved.items():
-                        setattr(self, k, v)
+                new = (self.observation_space, self.action_space)
+                if new != (saved["observation_space"], saved["action_space"]):
                     raise ConfigError(
                         "reset(options={'config': ...}): the change alters the observation or "
-                        f"action space ({self.observation_space} -> {new[0]}, "
-                        f"{self.action_space} -> {new[1]}); spaces are fixed once an env "
+                        f"action space ({saved['observation_space']} -> {new[0]}, "
+                        f"{saved['action_space']} -> {new[1]}); spaces are fixed once an env "
                         "exists (vector envs and policies rely on them): build a new env "
                         "with gym.make(id, config=...) instead")
-        episode_seed = int(self.np_random.integers(2**31 - 1))
-        try:
+            started = True  # from here on the running episode is gone
             self._frame = self.pipeline.reset(episode_seed)
+            self._world = self.pipeline.world
+            self._controller = self._action.controller(self.config["action"], self._world,
+                                                       self.config["source"])
+            self._accel = self._progress = 0.0
+            self._give_way.reset()
+            zero = StepOutcome(0.0, self._world.ego_speed, 0.0, False, False)
+            info = self._info(reward_terms(zero, self.config["reward"]), False)
         except Exception:
-            if saved is not None:
-                for k, v in saved.items():
-                    setattr(self, k, v)
+            for k, v in (saved or {}).items():  # the old configuration again
+                setattr(self, k, v)
+            if started:  # its episode was replaced: step() asks for a reset first
+                self._frame = None
             raise
-        self._world = self.pipeline.world
-        self._controller = self._action.controller(self.config["action"], self._world,
-                                                   self.config["source"])
-        self._accel = self._progress = 0.0
-        self._give_way.reset()
-        zero = StepOutcome(0.0, self._world.ego_speed, 0.0, False, False)
-        info = self._info(reward_terms(zero, self.config["reward"]), False)
         if self.render_mode == "human":
             self.render()
         return self._observation(), info

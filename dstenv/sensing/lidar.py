@@ -11,7 +11,7 @@ ahead). Each beam returns the distance to the first building or agent it meets:
 * buildings, ``buildings="raster"``: exact Amanatides-Woo traversal of
   ``WorldMap.raster`` up to the first :attr:`MapClass.BUILDING` cell.
 * agents: exact ray / oriented-box intersection (the four edges of
-  :meth:`Agents.corners`), binned by angle like the polygons.
+  :meth:`Agents.corners`), binned by angle like the polygons (a partial fov: its beams).
 * street clutter (``WorldMap.obstacles``): the same exact box intersection, for the
   boxes that the scan plane cuts (``z_min <= plane_height <= z_max``: a trunk
   occludes, the crown above it does not). They are selected once per map.
@@ -250,10 +250,9 @@ def _cast_segment(ax, ay, bx, by, aa, ab, hid, theta0, dtheta, periodic, max_ran
     for wrap in range(2 if not periodic and hi >= period - 1.0 else 1):
         k_lo = int(math.floor(lo - wrap * period))
         k_hi = int(math.floor(hi - wrap * period)) + 1
+        k_lo, k_hi = (k_lo, k_hi) if periodic else (max(k_lo, 0), min(k_hi, nb - 1))
         for kk in range(k_lo, k_hi + 1):
             k = kk % nb if periodic else kk
-            if k < 0 or k >= nb:
-                continue
             ux = cos_t[k]
             uy = sin_t[k]
             den = ux * ey - uy * ex

@@ -18,6 +18,12 @@ def test_parse_set():
         "a": {"b": {"c": True}}}
     with pytest.raises(CLIError, match="expected SECTION.KEY=VALUE"):
         parse_set(["world.cars"])
+    # a key below a value an earlier item set: one line naming both (was a traceback)
+    with pytest.raises(CLIError, match="world is already set to a value by --set 'world=5'"):
+        parse_set(["world=5", "world.traffic.cars=3"])
+    with pytest.raises(CLIError, match="world.a is already set .* --set 'world={a=1}'"):
+        parse_set(["world={a=1}", "world.a.b=2"])
+    assert parse_set(["world={a={c=1}}", "world.a.b=2"]) == {"world": {"a": {"c": 1, "b": 2}}}
 
 
 def test_parse_set_reads_json_objects_and_arrays_as_results_json_prints_them():

@@ -245,6 +245,10 @@ def test_relative_pose_roundtrip():
         (np.zeros((4, 5), np.uint8), np.zeros((4, 4), np.uint8), r"shape \(4, 4\)"),
         (np.zeros((4, 4), np.uint8), np.full((4, 4), 7, np.uint8), "map_classes holds code 7"),
         (np.zeros((4, 4), np.float32), np.zeros((4, 4), np.uint8), "integer codes"),
+        # wide integers are checked before the cast to uint8 (257 used to wrap to 1: free)
+        (np.full((4, 4), 257, np.int64), np.zeros((4, 4), np.uint8),
+         "sensor_states holds code 257"),
+        (np.zeros((4, 4), np.int64), np.full((4, 4), -1, np.int16), "map_classes holds code -1"),
     ],
 )
 def test_bad_inputs(sensor, gis, match):

@@ -88,6 +88,9 @@ def test_modified_rule_routes_conflict():
 def test_discount_and_specialise(rng):
     m = random_masses(rng)
     d = discount(m, 0.25)
+    for bad in (2.0, -0.1, float("nan")):
+        with pytest.raises(ValueError, match="alpha must lie in"):
+            discount(m, bad)
     np.testing.assert_allclose(d[:OMEGA], 0.75 * m[:OMEGA], atol=1e-7)
     np.testing.assert_allclose(d[OMEGA], 0.75 * m[OMEGA] + 0.25, atol=1e-7)
     z = rng.random(m.shape[1:]).astype(np.float32)

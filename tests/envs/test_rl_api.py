@@ -209,6 +209,37 @@ def test_highway_slower_respects_brake_decel():
     env.close()
 
 
+def test_action_speeds_reach_the_highway_world_and_bad_ones_are_refused():
+    env = gym.make("DSTGrid-Highway-v0", config={**SMALL_HIGHWAY,
+                                                 "action": {"target_speeds": [0.0, 5.0, 7.0]}})
+    env.reset(seed=0)
+    assert env.unwrapped.pipeline.config["highway"]["target_speeds"] == [0.0, 5.0, 7.0]
+    for _ in range(60):  # FASTER to the top speed: 7 m/s, not highway-env's own 9
+        _, _, terminated, truncated, info = env.step(2)
+        if terminated or truncated:
+            break
+    assert 6.5 < info["ego_speed"] <= 7.0 + 1e-3
+    bad = [({"action": {"speed_gain": 2.0}}, "action.speed_gain: the city world's"),
+           ({"info": {"autopilot": True}}, "info.autopilot: highway-env's world"),
+           ({"highway": {"target_speeds": [1.0]}}, "highway.target_speeds: .* at least two"),
+           ({"action": {"target_speeds": [0.0, 2.0, 4.0]},
+             "highway": {"target_speeds": [0.0, 3.0]}}, "differ; set one"),
+           ({"source": "city", "action": {"target_speeds": [9.0, 4.5, 0.0]}}, "must increase")]
+    for cfg, match in bad:  # refused when the env is made, not at its first reset
+        with pytest.raises(ConfigError, match=match):
+            gym.make("DSTGrid-Highway-v0", config={**SMALL_HIGHWAY, **cfg})
+
+
+def test_a_refused_reset_option_leaves_the_env_as_it_was():
+    env = gym.make("DSTGrid-RL-v0", config={"grid": {"height": 36, "width": 36}})
+    env.reset(seed=0)
+    with pytest.raises(ConfigError, match="info.autopilot"):
+        env.reset(seed=0, options={"config": {"source": "highway", "info": {"autopilot": True}}})
+    assert env.unwrapped.config["source"] == "city"
+    env.step(1)  # the running episode goes on
+    env.reset(seed=1)  # and later resets run the old configuration
+
+
 def test_human_render_does_not_start_the_audio_mixer(monkeypatch):
     pygame = pytest.importorskip("pygame")
     monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")

@@ -135,6 +135,17 @@ def test_segment_across_the_start_angle(fov, beams, expect_k):
     assert np.all(sw.hit_id[expect_k] == HIT_BUILDING)
 
 
+def test_narrow_fov_casts_only_its_beams():
+    # a wall straight ahead spans ~11 deg; a 0.001 deg fov used to loop over the ~10^4
+    # beam indices of the wall's arc before dropping those outside it (a hang at reset)
+    world = rect_map([(5.0, 5.5, -0.5, 0.5)], extent=(-20.0, 20.0, -20.0, 20.0))
+    car = agents((5.0, 3.0, 0.0, 4.0, 1.0, 0.0))
+    for fov in (0.001, 1.0):
+        sw = Lidar({"fov": fov, "beams": 3}).sweep(world, car, np.zeros(3), _rng())
+        np.testing.assert_allclose(sw.ranges, 5.0, atol=1e-3)
+        assert np.all(sw.hit_id == HIT_BUILDING)
+
+
 def test_raster_and_polygon_modes_agree_in_a_city():
     rects = [(x, x + 7.0, y, y + 5.0) for x in range(-40, 40, 12) for y in range(-40, 40, 11)
              if abs(x + 3) > 6 or abs(y + 2) > 6]

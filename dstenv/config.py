@@ -23,6 +23,7 @@ from __future__ import annotations
 import copy
 import importlib
 import math
+import numbers
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -340,6 +341,10 @@ def _check_type(default: Any, value: Any, path: str) -> Any:
             raise ConfigError(f"{path}: expected true/false, got {value!r}")
         return value
     if isinstance(default, (int, float)):
+        if isinstance(value, numbers.Integral) and not isinstance(value, int):
+            value = int(value)  # np.int64(84) is a number too
+        elif isinstance(value, numbers.Real) and not isinstance(value, (int, float)):
+            value = float(value)
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ConfigError(f"{path}: expected a number, got {value!r}")
         if isinstance(default, int) and not isinstance(default, bool) and isinstance(value, float):

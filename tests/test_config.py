@@ -1,5 +1,6 @@
 """Validated config merging and scenario loading."""
 
+import numpy as np
 import pytest
 
 from pathlib import Path
@@ -39,6 +40,11 @@ def test_type_errors(override, match):
 
 def test_int_promotes_to_float():
     assert merge_config(DEFAULTS, {"world": {"speed": 12}})["world"]["speed"] == 12.0
+    # numpy scalars are numbers (they were refused as "expected a number, got np.int64(84)")
+    got = merge_config(DEFAULTS, {"world": {"speed": np.float32(2.5)}})["world"]["speed"]
+    assert got == 2.5 and type(got) is float
+    lanes = merge_config(DEFAULTS, {"world": {"lanes": np.int64(3)}})["world"]["lanes"]
+    assert lanes == 3 and type(lanes) is int
 
 
 def test_scenario_file_errors(tmp_path):

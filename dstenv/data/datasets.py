@@ -27,6 +27,7 @@ navigable, everything else ignored), to train for real drives labelled that way.
 from __future__ import annotations
 
 import bisect
+import math
 import os
 import warnings
 from collections.abc import Iterator, Mapping, Sequence
@@ -192,13 +193,29 @@ class ShardDataset(Dataset):
         self._cache: dict[int, tuple[int, dict[str, np.ndarray]]] = {}
         # fcn10+sensor+past: per shard, the frame PAST_STEPS steps before each (or -1)
         self._past: dict[int, np.ndarray] = {}
+        if "past" in inputs and self.files and not any(
+                (self._pasts(k) >= 0).any() for k in range(len(self.files))):
+            # frames stored at a stride that skips step - 10 (not just drives too short)
+            gaps = sorted({int(g) for k in range(len(self.files))
+                           for g in np.diff(self._steps(k)) if g > 0})
+            if gaps and PAST_STEPS % math.gcd(*gaps):
+                raise ValueError(
+                    f"{root_or_files}: inputs {inputs!r} read the frame {PAST_STEPS} steps "
+                    f"before each, but no stored frame has one (frames "
+                    f"{'/'.join(map(str, gaps))} steps apart): store frames at a stride that "
+                    f"divides {PAST_STEPS} (--stride), or use fcn10+sensor")
+
+    def _steps(self, k: int) -> np.ndarray:
+        r = self._reader(k)
+        return np.array([int(r.get(i, ("step",))["step"]) for i in range(len(r))], np.int64)
+
+    def _pasts(self, k: int) -> np.ndarray:
+        if k not in self._past:
+            self._past[k] = past_rows(self._steps(k))
+        return self._past[k]
 
     def _past_row(self, k: int, local: int) -> int:
-        if k not in self._past:
-            r = self._reader(k)
-            self._past[k] = past_rows(np.array([int(r.get(i, ("step",))["step"])
-                                                for i in range(len(r))]))
-        return int(self._past[k][local])
+        return int(self._pasts(k)[local])
 
     def _fail(self, exc: ShardError) -> None:
         if self.on_error == "raise":
@@ -340,7 +357,7 @@ class StreamingDataset(IterableDataset):
             raise ValueError(f"episodes per map must be >= 1, got {episodes_per_map}")
         self.episodes_per_map = int(episodes_per_map)
         self.epoch = 0
-        episode_seeds(self.seed, split, ())  # validates the split name early
+        next(episode_seeds(self.seed, split, ()))  # validates the split name early (a generator)
 
     def set_epoch(self, epoch: int) -> None:
         """Use another episode stream for this epoch (like ``DistributedSampler``)."""

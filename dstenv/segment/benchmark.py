@@ -207,7 +207,7 @@ def run_benchmark(
 
     test_ds = ShardDataset(data_dir, split=split, inputs="fcn10")
     if len(test_ds) == 0:
-        raise ValueError(f"{data_dir}: no test frames (no shard of split {split!r})")
+        raise ValueError(f"{data_dir}: no {split} frames (no shard of split {split!r})")
     datasets = {s: ShardDataset(data_dir, split=s, inputs="fcn10") for s in ("train", "val")}
     cells = int(test_ds[0]["labels"].numel())
     for ds in datasets.values():  # later epochs skip decompression when a split fits
@@ -251,6 +251,7 @@ def run_benchmark(
                   for label in sorted(curve, key=lambda k: plan.curve[k])],
         "search": plan.search,
         "unscored": plan.unscored,
+        "notes": plan.notes,
         "histories": plan.histories,
         "timings_s": timings,
     }

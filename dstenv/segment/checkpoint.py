@@ -127,7 +127,9 @@ def training_data(dataset: Any) -> dict[str, Any]:
                 "no shards", "frames": len(dataset), "cell_size": cell,
                 "shards": [[f"{Path(f).parent.name}/{Path(f).name}", Path(f).stat().st_size]
                            for f in files]}
-    config = json.dumps(getattr(dataset, "config", None), sort_keys=True, default=str)
+    cfg = getattr(dataset, "config", None)
+    config = json.dumps(cfg, sort_keys=True, default=str)
+    cell = cfg.get("grid", {}).get("cell_size") if isinstance(cfg, dict) else None
     return {"source": "stream", "config": hashlib.sha256(config.encode()).hexdigest()[:16],
-            **{k: getattr(dataset, k, None)
-               for k in ("seed", "split", "episode_length", "stride", "warmup")}}
+            "cell_size": cell, **{k: getattr(dataset, k, None)
+                                  for k in ("seed", "split", "episode_length", "stride", "warmup")}}

@@ -123,7 +123,9 @@ def _no_map_network(cfg: Mapping[str, Any], datasets: Mapping[str, Any],
         subsets[split] = torch.utils.data.Subset(datasets[split], idx) if idx else None
     if subsets["train"] is None:
         raise ConfigError("no_map.epochs > 0 but no training drive was fused without a map; "
-                          "set data.overrides gis.no_map_prob > 0")
+                          "set no_map.epochs=0 (no map-free network), or data that has such "
+                          "drives (generated with gis.no_map_prob > 0: without --data, "
+                          "data.overrides.gis.no_map_prob)")
     t = time.perf_counter()
     group = f"{name} no-map"
     label = f"{group} (seed {seed})" if seeded else group

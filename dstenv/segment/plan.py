@@ -84,6 +84,7 @@ class Plan:
     seed_groups: dict[str, list[str]] = field(default_factory=dict)
     curve: dict[str, int] = field(default_factory=dict)
     unscored: dict[str, str] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)  # for the report (e.g. resolution_note)
     histories: dict[str, Any] = field(default_factory=dict)
     search: dict[str, Any] | None = None
 
@@ -308,12 +309,13 @@ def plan_segmenters(cfg: Mapping[str, Any], drives: Drives, datasets: Mapping[st
     pairs = [c if isinstance(c, tuple) else (None, c) for c in checkpoints]
     extra = load_checkpoints([p for _, p in pairs], drives.channels, device=device, taken=taken)
     cell = drives.episodes[0].cell_size if drives.episodes else None
+    plan = Plan()
     for (label, _), seg in zip(pairs, extra):
         seg.label = label or seg.label
         note = resolution_note(seg, cell)
         if note:
             log(note)
-    plan = Plan()
+            plan.notes.append(note)
     cache: list[list[Episode]] = []
 
     def train_eps() -> list[Episode]:  # replayed once, shared by both searches

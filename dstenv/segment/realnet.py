@@ -38,6 +38,8 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
+from dstenv.config import ConfigError
+
 __all__ = ["REAL_NET", "real_net_label", "real_moving_speed", "train_real_networks"]
 
 #: name of the networks' rows (with ``(seed N)`` when several seeds are trained)
@@ -102,10 +104,17 @@ def train_real_networks(
     from dstenv.segment.benchmark import generate_data
     from dstenv.segment.train import resolve_device, train
 
+    from dstenv.data.datasets import PAST_STEPS
+
     cfg = sim["config"]
     rn = cfg["real_net"]
     if grid[0] != grid[1]:
         raise ValueError(f"real_net: the real data's grid {grid} is not square")
+    stride = int(cfg["data"]["stride"])
+    if "past" in rn.get("inputs", "") and PAST_STEPS % stride:
+        raise ConfigError(f"real_net.inputs {rn['inputs']!r} read the frame {PAST_STEPS} steps "
+                          f"before each, which data.stride = {stride} never stores: use a "
+                          f"stride that divides {PAST_STEPS}, or real_net.inputs = fcn10+sensor")
     t = time.perf_counter()
     dcfg = {**cfg["data"], "frames": int(rn["frames"]), "grid": int(grid[0]),
             "seed": int(cfg["data"]["seed"]) + _SEED_OFFSET}

@@ -276,6 +276,8 @@ def markdown_table(results: dict[str, Any]) -> str:
         lines += ["## Not scored", ""]
         lines += [f"- **{k}**: {why}" for k, why in results["unscored"].items()]
         lines.append("")
+    if results.get("notes"):
+        lines += ["## Notes", "", *[f"- {n}" for n in results["notes"]], ""]
     lines += _goal_lines(results.get("goal"), results.get("real_goal"))
     if results.get("command"):
         lines += [f"Reproduce with (run of {results.get('date', '?')}):", "", "```",

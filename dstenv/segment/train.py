@@ -220,9 +220,9 @@ def train(
                 "use another output directory or --no-resume"
             )
         theirs = ckpt.get("data")  # checkpoints before 2026-12-07 carry none
-        if data_id is not None and theirs is not None and theirs != json_ready(data_id):
-            diff = sorted(k for k in set(theirs) | set(data_id)
-                          if theirs.get(k) != json_ready(data_id).get(k))
+        # the keys it recorded (a stream's cell_size, added later, follows its config hash)
+        diff = sorted(k for k in theirs or {} if theirs[k] != json_ready(data_id or {}).get(k))
+        if data_id is not None and diff:
             raise ConfigError(
                 f"{last}: checkpoint was trained on other data ({', '.join(diff)} differ: "
                 f"{theirs.get('source', '?')}); give the same --data, another output "

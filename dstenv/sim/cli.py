@@ -142,6 +142,14 @@ def _cmd(args: argparse.Namespace) -> int:
                        f"{args.extent}")
     path = scenario_path(args.scenario)
     cfg = build_config(path, ("--set", parse_set(args.set or [])))
+    if cfg["source"] != "city":  # what this command draws: the city world, the 2-D sweep
+        raise CLIError(f"render draws the city world; source = {cfg['source']!r} is not "
+                       "drawn (a highway-env scene: gym.make('DSTGrid-Highway-v0', "
+                       "render_mode='rgb_array'))")
+    if cfg["lidar"]["model"] != "2d" and not args.no_lidar:
+        raise CLIError(f"render draws the 2-D LIDAR's sweep; lidar.model = "
+                       f"{cfg['lidar']['model']!r} is not drawn: add --no-lidar, or look at its "
+                       "scans with dstenv export-kitti then dstenv kitti render")
     world = World(cfg["world"], seed=args.seed, base_dir=path.parent)
     for _ in range(args.steps):
         world.step()
@@ -173,5 +181,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--lanes", action="store_true", help="draw lane centre-lines")
     p.add_argument("--no-lidar", action="store_true", help="do not draw the LIDAR sweep")
     p.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE",
-                   help="override any config value (TOML value), repeatable, as in generate")
+                   help="override a world or lidar value (TOML value), repeatable, as in "
+                        "generate; the city world and the 2-D sweep are drawn")
     p.set_defaults(func=_cmd)

@@ -220,6 +220,15 @@ def test_past_input_reads_the_frame_one_second_earlier(tmp_path, make_frame, sha
         network_input(x, frames[12].sensor[None], "fcn10+sensor+past")
     with pytest.raises(ValueError, match="earlier frame of the drive"):
         frame_to_sample(frames[12], "fcn10+sensor+past")
+    # frames stored 20 steps apart never have one: refused (it trained on blank channels)
+    sparse = tmp_path / "sparse" / "shard-00000.h5"
+    sparse.parent.mkdir()
+    with ShardWriter(sparse, dict(shard_attrs, split="train")) as w:
+        for i, f in enumerate(frames[::4]):
+            f.step = 20 * i
+            w.add(f)
+    with pytest.raises(ValueError, match=r"no stored frame has one \(frames 20 steps apart\)"):
+        ShardDataset(sparse, inputs="fcn10+sensor+past")
     from dstenv.data.datasets import StreamingDataset
 
     with pytest.raises(ValueError, match="not a StreamingDataset"):
@@ -289,7 +298,9 @@ def test_streaming_arguments_are_checked():
                         ({"seed": "1"}, "seed must be an integer >= 0, got '1'"),
                         ({"rank": -1}, "rank must be an integer >= 0"),
                         ({"max_frames": -1}, "max_frames must be None or an integer >= 1"),
-                        ({"max_frames": 1.5}, "max_frames must be None or an integer >= 1")):
+                        ({"max_frames": 1.5}, "max_frames must be None or an integer >= 1"),
+                        # at construction, not at the first sample inside a worker
+                        ({"split": "validation"}, "unknown split 'validation'")):
         with pytest.raises(ValueError, match=message):
             StreamingDataset("default", **kw)
 

@@ -239,7 +239,9 @@ def test_real_net_is_trained_for_the_real_grid_and_scored_on_it(kitti_root, sim_
     from dstenv.segment.presets import preset_config
     from dstenv.segment.real import real_benchmark
 
-    cfg = preset_config("tiny", {"real_net": {"frames": 10, "epochs": 1, "inputs": inputs}})
+    # the past grid is the frame 10 steps earlier: a stride that stores it (tiny's 4 does not)
+    cfg = preset_config("tiny", {"real_net": {"frames": 10, "epochs": 1, "inputs": inputs},
+                                 **({"data": {"stride": 5}} if "past" in inputs else {})})
     sim = {"config": cfg, "segmenters": {
         "unet-light": {"kind": "learned", "describe": {"checkpoint": str(sim_checkpoint)}}}}
     res = real_benchmark(sim, tmp_path, str(kitti_root), ["0001"], finetune_frames=2,

@@ -85,6 +85,10 @@ def test_real_data_report_has_no_preset_or_goal_line():
     md = report.markdown_table(res)
     assert "preset" not in md and "## Goal" not in md and "--preset" not in md
     assert md.startswith("# Segmenter benchmark on kitti data")
+    assert "## Notes" not in md
+    # notes reach the report too (kitti evaluate runs quiet: the log line alone was lost)
+    res["notes"] = ["note: best.pt was trained on cells of 1 m, these drives have 0.33 m"]
+    assert "## Notes\n\n- note: best.pt was trained on cells of 1 m" in report.markdown_table(res)
 
 
 def test_figures_are_written(tmp_path):

@@ -26,6 +26,16 @@ def test_render_takes_set_overrides(tmp_path, capsys):
     assert len(err) == 1 and "world.map.lot_prob: must be in [0, 1]" in err[0]
 
 
+def test_render_refuses_settings_it_would_not_draw(tmp_path, capsys):
+    # they used to be accepted and ignored: the same picture as without them
+    for item, words in (("lidar.model=hdl64", "lidar.model = 'hdl64' is not drawn"),
+                        ("source=highway", "source = 'highway' is not drawn")):
+        assert main(["render", "--set", item, "--out", str(tmp_path / "x.png")]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and words in err
+    assert not list(tmp_path.iterdir())
+
+
 def test_render_refuses_a_name_that_is_not_png(tmp_path, capsys):
     # the picture is a PNG: a .jpg name would hold PNG bytes; refused before any work
     assert main(["render", "--scenario", "clean", "--out", str(tmp_path / "x.jpg")]) == 2

@@ -71,7 +71,7 @@ def _cmd(args: argparse.Namespace) -> int:
     names = list(BENCHMARKS) if args.name == "all" else [args.name]
     if args.repeats < 0:
         raise ValueError(f"--repeats must be >= 0 (0: automatic), got {args.repeats}")
-    if args.json:
+    if args.json is not None:  # "" too: a name, not "no file"
         output_file(args.json, "--json")  # before minutes of timing, not after
     results = {}
     for name in names:

@@ -110,6 +110,8 @@ def output_file(path: str | Path, option: str) -> Path:
     Raises:
         ValueError: one line naming ``option``, the path and the fix.
     """
+    if not str(path).strip():
+        raise ValueError(f"{option}: empty; give a file name")
     out = Path(path)
     if out.is_dir():
         raise ValueError(f"{option} {out}: is a directory; give a file name")

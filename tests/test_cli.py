@@ -39,6 +39,8 @@ def test_bench_json_path_is_checked_before_timing(capsys, tmp_path):
     assert main(["bench", "fusion", "--quick", "--json", str(tmp_path)]) == 2
     out_, err = capsys.readouterr()
     assert "is a directory" in err and err.count("\n") == 1 and "== bench" not in out_
+    assert main(["bench", "fusion", "--quick", "--json", ""]) == 2  # was silently no file
+    assert "--json: empty; give a file name" in capsys.readouterr().err
     (tmp_path / "file").write_text("x")
     assert main(["bench", "fusion", "--quick", "--json", str(tmp_path / "file" / "b.json")]) == 2
     out_, err = capsys.readouterr()

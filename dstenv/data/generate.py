@@ -306,6 +306,8 @@ def generate(spec: GenerateSpec, out: str | Path, workers: int = 1, ray_address:
     out = Path(out)
     if workers < 1:
         raise ValueError(f"workers must be >= 1, got {workers}")
+    if out.exists() and not out.is_dir():
+        raise GenerateError(f"output directory {out} is a file; give a folder name")
     with contextlib.ExitStack() as stack:
         try:  # one writer per folder, even where HDF5 file locking is off (NFS, Lustre)
             stack.enter_context(dataset_lock(out, force_unlock))

@@ -132,6 +132,9 @@ def _convert(args: argparse.Namespace) -> int:
             "sequence": seq.name, "root": str(Path(args.root).resolve()),
             "map": str(Path(args.osm).resolve()) if args.osm else "none",
         }
+        if cfg["warmup"] >= seq.n_frames:  # before any file or folder is made
+            raise CLIError(f"sequence {seq.name}: --warmup {cfg['warmup']} is past its "
+                           f"{seq.n_frames} frames")
         _same_conversion(path, attrs, args.masses)
         with ShardWriter(path, attrs, masses=args.masses) as writer:
             for frame in convert_sequence(seq, cfg, gis_fn, skipped):
@@ -162,7 +165,9 @@ def _render(args: argparse.Namespace) -> int:
     png_path(args.out)  # before the conversion, not after
     over = _overrides(args)
     every = over.get("update_every", 1)
-    if args.frame < 0 or args.frame % every:
+    if args.frame < 0:
+        raise CLIError(f"--frame must be a frame number >= 0, got {args.frame}")
+    if args.frame % every:
         raise CLIError(f"--frame {args.frame}: the filter runs every {every} frames; "
                        f"pick a multiple of {every}")
     over.update(warmup=args.frame, stride=every * 10**6)  # keep exactly this frame

@@ -137,6 +137,8 @@ def test_unwritable_output_is_one_line(tmp_path):
     blocker.write_text("x")
     with pytest.raises(gen.GenerateError, match=r"output directory .*file/out is not writable"):
         gen.generate(_spec(), blocker / "out", progress=False)
+    with pytest.raises(gen.GenerateError, match=r"output directory .*file is a file; give a"):
+        gen.generate(_spec(), blocker, progress=False)
 
 
 def test_manifest_mismatch_is_reported(tmp_path):

@@ -82,6 +82,13 @@ def test_every_scan_missing_is_an_error(tiny_root, tmp_path, capsys):
     assert not list((tmp_path / "o").rglob("*.h5*"))
 
 
+def test_a_warmup_past_the_sequence_is_named_and_writes_nothing(tiny_root, tmp_path, capsys):
+    assert main(["kitti", "convert", "--root", str(tiny_root), "--sequences", "1",
+                 "--warmup", "45", "--out", str(tmp_path / "o")]) == 2
+    assert "--warmup 45 is past its 6 frames" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
+
+
 def test_render_and_evaluate(tiny_root, tmp_path, capsys):
     png = tmp_path / "f.png"
     assert main(["kitti", "render", "--root", str(tiny_root), "--sequence", "1", "--frame", "3",
@@ -90,6 +97,9 @@ def test_render_and_evaluate(tiny_root, tmp_path, capsys):
     assert main(["kitti", "render", "--root", str(tiny_root), "--sequence", "1", "--frame", "3",
                  "--update-every", "2", "--out", str(png)]) == 2
     assert "pick a multiple of 2" in capsys.readouterr().err
+    assert main(["kitti", "render", "--root", str(tiny_root), "--sequence", "1", "--frame", "-1",
+                 "--out", str(png)]) == 2
+    assert "--frame must be a frame number >= 0, got -1" in capsys.readouterr().err
     assert main(["kitti", "render", "--root", str(tiny_root), "--sequence", "1", "--frame", "9",
                  "--out", str(png)]) == 2
     assert "frame 9 was not converted" in capsys.readouterr().err

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import zipfile
 from pathlib import Path
 from typing import Any
 
@@ -52,8 +53,13 @@ def read_weights(path: str | Path, what: str) -> Any:
         return torch.load(path, map_location="cpu", weights_only=True)
     except Exception as exc:  # noqa: BLE001 - torch raises many types for bad files
         first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
-        empty = " (the file is empty)" if path.stat().st_size == 0 else ""
-        raise ValueError(f"{path}: {what}{empty}: {first}") from None
+        if path.stat().st_size == 0:
+            first = "the file is empty"
+        elif not zipfile.is_zipfile(path):  # torch.save writes a zip archive
+            first = "not a PyTorch file (torch.save writes a zip archive)"
+        elif first.startswith("Weights only load failed"):  # not its advice to run code
+            first = "it holds objects other than tensors; refused (loading them runs code)"
+        raise ValueError(f"{path}: {what}: {first}") from None
 
 
 def load_checkpoint(path: str | Path) -> dict[str, Any]:

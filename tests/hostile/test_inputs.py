@@ -3,6 +3,7 @@ a hang, runaway memory or silently wrong data (one test per attack)."""
 
 from __future__ import annotations
 
+import argparse
 import bz2
 
 import pytest
@@ -154,15 +155,24 @@ def test_huge_seed_is_rejected_before_any_work(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("content, message", [
-    (b"", "the file is empty"), (b"not a zip", "cannot read checkpoint"),
+    (b"", "cannot read checkpoint: the file is empty"),
+    (b"not a zip", "cannot read checkpoint: not a PyTorch file"),
+    (b'{"format": "dstenv-manifest"}', "not a PyTorch file"),  # train --init manifest.json
+    ("pickle", "holds objects other than tensors; refused"),  # not torch's "trust it" advice
 ])
 def test_broken_checkpoints_are_one_line_errors(tmp_path, content, message):
+    import torch
+
     from dstenv.segment.checkpoint import load_segmenter
 
     path = tmp_path / "m.pt"
-    path.write_bytes(content)
-    with pytest.raises(ValueError, match=message):
+    if content == "pickle":
+        torch.save({"model": argparse.Namespace(a=1)}, path)
+    else:
+        path.write_bytes(content)
+    with pytest.raises(ValueError, match=message) as err:
         load_segmenter(path)
+    assert "\n" not in str(err.value) and "trust" not in str(err.value)
 
 
 def test_checkpoint_without_spec_or_with_other_weights(tmp_path):

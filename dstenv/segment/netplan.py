@@ -121,13 +121,14 @@ def _no_map_network(cfg: Mapping[str, Any], datasets: Mapping[str, Any],
     for split in ("train", "val"):
         idx = datasets[split].no_map_indices() if len(datasets[split]) else []
         subsets[split] = torch.utils.data.Subset(datasets[split], idx) if idx else None
-    if subsets["train"] is None:
-        raise ConfigError("no_map.epochs > 0 but no training drive was fused without a map; "
-                          "set no_map.epochs=0 (no map-free network), or data that has such "
-                          "drives (generated with gis.no_map_prob > 0: without --data, "
-                          "data.overrides.gis.no_map_prob)")
-    t = time.perf_counter()
     group = f"{name} no-map"
+    if subsets["train"] is None:  # e.g. --data of a plain `dstenv generate` (map everywhere)
+        plan.unscored[group] = (
+            "no training drive was fused without a map, so there is no map-free network "
+            "to train (data generated with gis.no_map_prob > 0 has some; without --data: "
+            "data.overrides.gis.no_map_prob; no_map.epochs=0 skips it)")
+        return
+    t = time.perf_counter()
     label = f"{group} (seed {seed})" if seeded else group
     mdir = init.parent / f"{init.name}-no-map" if not seeded else \
         init.parent.parent / f"{name}-no-map" / init.name

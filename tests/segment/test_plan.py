@@ -113,3 +113,10 @@ def test_no_map_networks_fine_tune_on_the_map_free_training_frames(tmp_path):
     base = load_checkpoint(tmp_path / "models" / "unet-light" / "best.pt")
     assert tuned["config"]["init"] == str(tmp_path / "models" / "unet-light" / "best.pt")
     assert any(not torch.equal(tuned["model"][k], base["model"][k]) for k in base["model"])
+    # data with a map in every drive (a plain `dstenv generate`): the run goes on and says
+    # why there is no map-free row (it used to stop after training with an error)
+    cfg = preset_config("tiny", {"no_map": {"epochs": 1}, "tune": {"enabled": False},
+                                 "complete": {"enabled": False}})
+    res = run_benchmark(cfg, tmp_path / "mapped", progress=False, log=lambda m: None)
+    assert "unet-light no-map" not in res["segmenters"] and "unet-light" in res["segmenters"]
+    assert "no training drive was fused without a map" in res["unscored"]["unet-light no-map"]

@@ -29,9 +29,17 @@ SET_AXIS = -3
 
 
 def _check(m: np.ndarray, name: str = "m") -> np.ndarray:
+    """``m`` as an array of mass functions: shape ``(..., 32, H, W)``, finite, >= 0 and
+    summing to 1 per cell (to 1e-3; the empty set included)."""
     m = np.asarray(m)
     if m.ndim < 3 or m.shape[SET_AXIS] != NUM_SETS:
         raise ValueError(f"{name} must have shape (..., 32, H, W), got {m.shape}")
+    if not np.all(np.isfinite(m)) or m.min(initial=0.0) < -1e-6:
+        raise ValueError(f"{name}: masses must be finite and >= 0")
+    total = m.sum(axis=SET_AXIS, dtype=np.float64)
+    if total.size and np.abs(total - 1.0).max() > 1e-3:
+        raise ValueError(f"{name}: the masses of a cell must sum to 1, found sums in "
+                         f"[{total.min():.4g}, {total.max():.4g}]")
     return m
 
 
@@ -131,6 +139,13 @@ def discount(m: np.ndarray, alpha: float | np.ndarray) -> np.ndarray:
     a = np.asarray(alpha, dtype=np.float64)
     if not (a.size and np.all((a >= 0.0) & (a <= 1.0))):  # NaN fails too
         raise ValueError(f"discount: alpha must lie in [0, 1], got {alpha!r}")
+    cells = (*m.shape[:-3], *m.shape[-2:])
+    try:
+        fits = not a.ndim or np.broadcast_shapes(a.shape, cells) == cells
+    except ValueError:
+        fits = False
+    if not fits:
+        raise ValueError(f"discount: alpha of shape {a.shape} does not fit the cells {cells}")
     out = m.astype(np.float64) * (1.0 - a)[..., None, :, :] if a.ndim else m * (1.0 - a)
     out = np.array(out, dtype=np.float64)
     out[..., OMEGA, :, :] += a
@@ -151,6 +166,8 @@ def specialise(m: np.ndarray, zeta: np.ndarray) -> np.ndarray:
     """
     m = _check(m)
     z = np.asarray(zeta, dtype=np.float64)
+    if not np.all((z >= 0.0) & (z <= 1.0)):  # NaN fails too
+        raise ValueError("specialise: zeta must lie in [0, 1]")
     out = m.astype(np.float64)
     for a in range(NUM_SETS):
         if a & M and a != M:
@@ -167,17 +184,24 @@ def mass_within(m: np.ndarray, subset: int) -> np.ndarray:
         ``(..., H, W)`` in the input's precision.
     """
     m = _check(m)
+    if not 0 < int(subset) < NUM_SETS:
+        raise ValueError(f"mass_within: subset must be a set index in 1..{NUM_SETS - 1}, "
+                         f"got {subset}")
     return m[..., subsets_of(subset), :, :].sum(axis=SET_AXIS)
 
 
 def pignistic(m: np.ndarray) -> np.ndarray:
-    """Pignistic probability BetP(x) = sum over A containing x of m(A) / |A|.
+    """Pignistic probability BetP(x) = sum over A containing x of m(A) / |A| / (1 - m(empty)).
 
     Args:
-        m: ``(..., 32, H, W)`` mass grid with m(empty) = 0.
+        m: ``(..., 32, H, W)`` mass grid (m(empty) = 0 after Dempster's rule; a
+            conjunctive result's conflict is divided out, Smets' normalisation).
 
     Returns:
         ``(..., 5, H, W) float32`` over ``CLASSES``, summing to 1 per cell.
+
+    Raises:
+        ValueError: masses that are not mass functions, or total conflict somewhere.
     """
     m = _check(m)
     out = np.zeros((*m.shape[:-3], NUM_CLASSES, *m.shape[-2:]), dtype=np.float64)
@@ -188,4 +212,9 @@ def pignistic(m: np.ndarray) -> np.ndarray:
         for x in range(NUM_CLASSES):
             if a >> x & 1:
                 out[..., x, :, :] += ma / CARDINALITY[a]
+    conflict = m[..., EMPTY, :, :].astype(np.float64)
+    if conflict.any():  # only then: m(empty) = 0 keeps the bits of the plain sum
+        if (conflict >= 1.0 - 1e-12).any():
+            raise ValueError("pignistic: total conflict (m(empty) = 1) in some cell")
+        out /= (1.0 - conflict)[..., None, :, :]
     return out.astype(np.float32)

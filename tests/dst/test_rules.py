@@ -122,3 +122,34 @@ def test_mass_within(rng):
 def test_bad_shape_is_rejected():
     with pytest.raises(ValueError, match=r"\(\.\.\., 32, H, W\)"):
         dempster(np.zeros((31, 2, 2)), np.zeros((32, 2, 2)))
+
+
+def test_inputs_that_are_not_mass_functions_are_refused(rng):
+    from dstenv.dst import EMPTY
+
+    m = random_masses(rng)
+    bad_sum = m * 1.5
+    negative = m.copy()
+    negative[FREE], negative[OMEGA] = 1.5, -0.5
+    nan = m.copy()
+    nan[OMEGA, 0, 0] = np.nan
+    for bad, match in ((bad_sum, "must sum to 1"), (negative, "finite and >= 0"),
+                       (nan, "finite and >= 0"), (np.zeros_like(m), "must sum to 1")):
+        with pytest.raises(ValueError, match=match):
+            dempster(bad, m)
+        with pytest.raises(ValueError, match=match):
+            pignistic(bad)
+    with pytest.raises(ValueError, match="zeta must lie in"):
+        specialise(m, np.full(m.shape[1:], 2.0))
+    with pytest.raises(ValueError, match="subset must be a set index"):
+        mass_within(m, 40)
+    with pytest.raises(ValueError, match="does not fit the cells"):
+        discount(m, np.array([0.1, 0.2, 0.3]))
+    # a conjunctive result keeps its conflict on the empty set: BetP divides it out
+    m1, m2 = vacuous((1, 1)), vacuous((1, 1))
+    m1[FREE], m1[OMEGA] = 0.6, 0.4
+    m2[OCCUPIED], m2[OMEGA] = 0.7, 0.3
+    both = conjunctive(m1, m2)
+    assert both[EMPTY, 0, 0] == pytest.approx(0.42)
+    np.testing.assert_allclose(pignistic(both), pignistic(dempster(m1, m2)), atol=1e-6)
+    np.testing.assert_allclose(pignistic(both).sum(0), 1.0, atol=1e-6)

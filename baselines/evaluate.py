@@ -108,6 +108,9 @@ class PPOPolicy:
             f" T={self.temperature:g}" if self.temperature > 0 else "")
         self.model: Any = None
         self.rng = np.random.default_rng(0)
+        from dstenv.segment.checkpoint import read_weights
+
+        read_weights(self.path, "not a readable policy checkpoint")  # before any episode
 
     def make_env(self, args: EnvArgs) -> gym.Env:
         """The evaluation env; the policy is rebuilt on its spaces."""
@@ -215,15 +218,25 @@ def results_markdown(rows: list[tuple[str, dict[str, float], dict[str, Any] | No
     return "\n".join(lines) + "\n"
 
 
-def write_readme(path: str | Path, block: str) -> None:
-    """Replace the results block of ``path`` (append it when the markers are missing)."""
+def _readme_parts(path: str | Path) -> tuple[str, str]:
+    """What stays of ``path`` around its results block (a new file: only the block).
+
+    Raises:
+        ValueError: ``path`` exists without the block's two markers (never appended to
+            another file: a ``.py`` once got a Markdown table at its end).
+    """
     path = Path(path)
-    text = path.read_text() if path.is_file() else "# RL baselines\n"
-    if BEGIN in text and END in text:
-        head, rest = text.split(BEGIN, 1)
-        tail = rest.split(END, 1)[1]
-    else:
-        head, tail = text.rstrip("\n") + "\n\n", "\n"
+    text = path.read_text() if path.is_file() else f"# RL baselines\n\n{BEGIN}\n{END}\n"
+    if not (BEGIN in text and END in text):
+        raise ValueError(f"--readme {path}: has no results block; put the lines {BEGIN} and "
+                         f"{END} where it goes, or give a new file name")
+    head, rest = text.split(BEGIN, 1)
+    return head, rest.split(END, 1)[1]
+
+
+def write_readme(path: str | Path, block: str) -> None:
+    """Replace the results block of ``path`` (:func:`_readme_parts`)."""
+    head, tail = _readme_parts(path)
     atomic_write_text(path, f"{head}{BEGIN}\n{block}{END}{tail}")
 
 
@@ -254,7 +267,11 @@ def run(args: Args, command: str) -> str:
     rows: list[tuple[str, dict[str, float], dict[str, Any] | None]] = []
     episodes: list[tuple[str, list[EpisodeResult]]] = []
     output_file(args.csv, "--csv")
-    # every checkpoint (file, sidecar, temperature) is read before the first episode
+    for name in args.policies:  # names, then every checkpoint (file, sidecar, weights,
+        if name != "random" and name not in DRIVERS:  # temperature): before any episode
+            raise ValueError(f"--policies: unknown policy {name!r}; known: {', '.join(POLICIES)}")
+    if args.write_readme:
+        _readme_parts(args.readme)
     ppo = {path: PPOPolicy(path, args.deterministic, args.temperature)
            for path in args.checkpoints}
     jobs: list[tuple[Any, Any, bool]] = [(name, None, False) for name in args.policies]

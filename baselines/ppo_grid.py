@@ -21,10 +21,9 @@ starts as the rule driver. With ``--critic privileged`` the critic also reads th
 nearest road users' ground truth, the actor still the observation only
 (:mod:`privileged`, an asymmetric actor-critic).
 
-Training uses several envs in parallel (``--n-envs``, ``SubprocVecEnv``) drawing
-their episodes from a pool of maps (``--map-pool``, the env's ``world.map.pool``);
-evaluation (``evaluate.py``) runs on fresh maps of held-out seeds. The budget is a
-number of env steps (``--total-timesteps``), never wall time.
+Training uses several envs in parallel (``--n-envs``) drawing episodes from a pool of
+maps (``--map-pool``); ``evaluate.py`` runs on fresh maps of held-out seeds. The budget
+is a number of env steps (``--total-timesteps``), never wall time.
 
 Outputs in ``--out``: ``model.pt`` (the policy's ``state_dict``, loaded back with
 ``torch.load(weights_only=True)``: no pickled code), ``model.json`` (arguments,
@@ -61,7 +60,7 @@ from dstenv.segment.checkpoint import read_weights
 from extractors import GridCNN
 from imitation import warm_start, warm_start_steps_per_round
 from rl_common import EnvArgs, atomic_write_bytes, atomic_write_text, machine_info, make_env, opt
-from rl_common import check_env_args, cli, parse_args, to_argv
+from rl_common import check_env_args, check_ranges, cli, parse_args, to_argv
 from rule_based import TEACHERS
 
 EXTRACTORS = ("grid-cnn", "route-cnn", "combined")
@@ -328,12 +327,12 @@ RUN_FILES = ("model.pt", "model.json", "episodes.csv", "progress.csv")
 
 def train(args: Args) -> tuple[PPO, dict[str, Any]]:
     """Train PPO as ``args`` says; returns the model and the ``model.json`` content."""
-    for flag, value, lo in (("--total-timesteps", args.total_timesteps, 1),
-                            ("--n-envs", args.n_envs, 1), ("--n-steps", args.n_steps, 2),
-                            ("--batch-size", args.batch_size, 2),
-                            ("--warm-start-retries", args.warm_start_retries, 0)):
-        if value < lo:
-            raise ValueError(f"{flag} {value}: must be at least {lo}")
+    a, lows = args, {"total_timesteps": 1, "n_envs": 1, "n_steps": 2, "batch_size": 2,
+                     "n_epochs": 1, "torch_threads": 1, "features_dim": 1, "checkpoint_every": 0,
+                     "warm_start_retries": 0, "warm_start_epochs": 1, "clip_range": 1e-6,
+                     "ent_coef": 0.0, "vf_coef": 0.0}
+    check_ranges([(f"--{k.replace('_', '-')}", getattr(a, k), lo) for k, lo in lows.items()]
+                 + [("--gamma", a.gamma, 0.0, 1.0), ("--gae-lambda", a.gae_lambda, 0.0, 1.0)])
     check_env_args(args)
     taken = [n for n in RUN_FILES if (Path(args.out) / n).exists()]
     if taken:  # a finished or interrupted run would be overwritten in silence

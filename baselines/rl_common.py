@@ -21,6 +21,7 @@ import argparse
 import csv
 import dataclasses
 import json
+import math
 import os
 import platform
 import sys
@@ -148,6 +149,16 @@ def output_file(path: str, flag: str) -> None:
     """:func:`dstenv.io.output_file` of an optional output (``""``: none)."""
     if path:
         check_output_file(path, flag)
+
+
+def check_ranges(items: Sequence[tuple]) -> None:
+    """``(flag, value, lo[, hi])`` each: refuse a value outside ``[lo, hi]`` (NaN too),
+    before any env is built."""
+    for flag, value, lo, *hi in items:
+        top = hi[0] if hi else math.inf
+        if not lo <= value <= top:
+            raise ValueError(f"{flag} {value}: must be "
+                             + (f"at least {lo}" if top == math.inf else f"in [{lo}, {top}]"))
 
 
 def check_env_args(args: EnvArgs) -> None:

@@ -17,6 +17,14 @@ def test_write_readme_replaces_only_the_block(tmp_path) -> None:
     write_readme(fresh, "t\n")
     write_readme(fresh, "u\n")
     assert fresh.read_text().count(BEGIN) == 1 and "u\n" in fresh.read_text()
+    # a file without the markers is never appended to (a .py got a Markdown table once)
+    import pytest
+
+    code = tmp_path / "notes.py"
+    code.write_text("x = 1\n")
+    with pytest.raises(ValueError, match="has no results block"):
+        write_readme(code, "t\n")
+    assert code.read_text() == "x = 1\n"
 
 
 def test_saved_model_loads_and_evaluates(tmp_path, env_flags: list[str]) -> None:
@@ -25,11 +33,11 @@ def test_saved_model_loads_and_evaluates(tmp_path, env_flags: list[str]) -> None
                    "--batch-size", "32", "--n-epochs", "1", "--total-timesteps", "32",
                    "--map-pool", "2", "--verbose", "0", "--out", str(out)])
     readme, csv = tmp_path / "README.md", tmp_path / "episodes.csv"
-    readme.write_text("# kept\n")
+    readme.write_text(f"# kept\n\n{BEGIN}\n{END}\n")
     argv = [*env_flags, "--policies", "random", "autopilot", "--episodes", "2",
             "--checkpoints", str(out / "model.pt"), "--readme", str(readme), "--csv", str(csv)]
     block = evaluate.main(argv)
-    assert readme.read_text() == "# kept\n"  # never written without --write-readme
+    assert readme.read_text() == f"# kept\n\n{BEGIN}\n{END}\n"  # only with --write-readme
     table = [line for line in block.splitlines() if line.startswith("| ")]
     assert [row.split(" | ")[0] for row in table[1:]] == [
         "| random", "| autopilot (privileged)", "| PPO grid-cnn (ppo)"]
@@ -67,6 +75,21 @@ def test_bad_arguments_and_files_are_one_line(tmp_path, env_flags: list[str]) ->
         with pytest.raises(ValueError, match=rf"{name}: not a readable policy checkpoint"):
             evaluate.main([*env_flags, "--policies", "--episodes", "1", "--checkpoints",
                            str(tmp_path / name)])
+    # names and weights are checked before the first episode of any policy (a bad one
+    # used to fail after the others had run, their results lost)
+    ran: list[str] = []
+    real = evaluate.evaluate_policy
+    evaluate.evaluate_policy = lambda env, policy, *a, **k: ran.append(policy.name) or real(
+        env, policy, *a, **k)
+    try:
+        with pytest.raises(ValueError, match="text.pt: not a readable policy checkpoint"):
+            evaluate.main([*env_flags, "--policies", "random", "--episodes", "1",
+                           "--checkpoints", str(tmp_path / "text.pt")])
+        with pytest.raises(ValueError, match="unknown policy 'bogus'"):
+            evaluate.main([*env_flags, "--policies", "random", "bogus", "--episodes", "1"])
+    finally:
+        evaluate.evaluate_policy = real
+    assert ran == []
 
 
 def test_temperature_sampling_is_seeded_and_sharpens(tmp_path, env_flags: list[str]) -> None:

@@ -98,6 +98,10 @@ def test_atomic_write_leaves_no_temp_file(tmp_path) -> None:
     ("ppo_grid.py", ["--total-timesteps", "-5", "--out", "out"],
      "--total-timesteps -5: must be at least 1"),
     ("ppo_grid.py", ["--n-envs", "0", "--out", "out"], "--n-envs 0: must be at least 1"),
+    # refused before any env is built (they trained nonsense, or crashed after a rollout)
+    ("ppo_grid.py", ["--gamma", "1.5", "--out", "out"], "--gamma 1.5: must be in [0.0, 1.0]"),
+    ("ppo_grid.py", ["--n-epochs", "0", "--out", "out"], "--n-epochs 0: must be at least 1"),
+    ("ppo_grid.py", ["--ent-coef", "nan", "--out", "out"], "--ent-coef nan: must be at least"),
     ("ppo_grid.py", ["--max-episode-steps", "-1", "--out", "out"],
      "--max-episode-steps -1: must be at least 0"),
     ("evaluate.py", ["--env-id", "DSTGrid-Nope-v0", "--policies", "random"],

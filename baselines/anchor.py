@@ -78,3 +78,8 @@ def anchor_to(policy: ActorCriticPolicy) -> ActorCriticPolicy:
     policy._get_action_dist_from_latent = keep_dist  # type: ignore[method-assign]
     policy.evaluate_actions = evaluate_actions  # type: ignore[method-assign]
     return anchor
+
+
+if __name__ == "__main__":
+    raise SystemExit(f"{__file__}: a part of ppo_grid.py, not a script of its own; run "
+                     "python baselines/ppo_grid.py --anchor ... (baselines/README.md)")

@@ -47,7 +47,7 @@ def read_episodes(path: str, policy: str = "") -> tuple[str, dict[int, dict[str,
     if not p.is_file():
         raise FileNotFoundError(f"{path}: no such file")
     try:
-        with p.open(newline="", encoding="utf-8") as fh:
+        with p.open(newline="", encoding="utf-8-sig") as fh:  # -sig: a spreadsheet's BOM
             rows = list(csv.DictReader(fh))
     except (UnicodeDecodeError, csv.Error) as exc:
         raise ValueError(f"{path}: not a CSV text file ({type(exc).__name__}); give an "
@@ -115,8 +115,11 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     name_a, a = read_episodes(args.a, args.policy_a)
     name_b, b = read_episodes(args.b, args.policy_b)
     res = compare(a, b)
+    dropped = len(a) + len(b) - 2 * res["episodes"]
     print(f"A = {name_a} ({args.a})\nB = {name_b} ({args.b})\n"
-          f"{res['episodes']} common seeds\n")
+          f"{res['episodes']} common seeds"
+          + (f" (left out: {len(a) - res['episodes']} seeds of A only, "
+             f"{len(b) - res['episodes']} of B only)" if dropped else "") + "\n")
     print("| outcome | A | B | episodes A only | episodes B only | McNemar p |")
     print("|---|---:|---:|---:|---:|---:|")
     for k in OUTCOMES:

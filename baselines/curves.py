@@ -53,14 +53,28 @@ def binned_rates(path: str | Path, width: int, max_steps: int) -> dict[str, np.n
 
 
 def reference_rates(paths: list[str]) -> dict[str, dict[str, float]]:
-    """``{policy: {rate: value}}`` from evaluation CSVs (one row per episode)."""
-    acc: dict[str, dict[str, list[float]]] = {}
+    """``{policy: {rate: value}}`` from evaluation CSVs (one row per episode); a policy
+    name found in several files is one line per file, named with the file's stem (the
+    files may hold other env configs: they are never pooled).
+
+    Raises:
+        ValueError: a file that is not an ``evaluate.py --csv`` file (one line).
+    """
+    acc: dict[tuple[str, str], dict[str, list[float]]] = {}
     for p in paths:
-        for r in csv.DictReader(open(p)):
-            d = acc.setdefault(r["policy"], {k: [] for k in RATES})
+        with open(p, encoding="utf-8-sig") as fh:
+            rows = list(csv.DictReader(fh))
+        missing = [c for c in ("policy", *RATES) if rows and c not in rows[0]]
+        if not rows or missing:
+            raise ValueError(f"--reference {p}: not an evaluate.py --csv file ("
+                             + (f"no column {missing[0]!r})" if rows else "no rows)"))
+        for r in rows:
+            d = acc.setdefault((r["policy"], str(p)), {k: [] for k in RATES})
             for k in RATES:
                 d[k].append(float(r[k] in ("True", "1")))
-    return {name: {k: float(np.mean(v)) for k, v in d.items()} for name, d in acc.items()}
+    names = [n for n, _ in acc]
+    return {(name if names.count(name) == 1 else f"{name} ({Path(p).stem})"):
+            {k: float(np.mean(v)) for k, v in d.items()} for (name, p), d in acc.items()}
 
 
 def plot(args: Args) -> Path:
@@ -72,8 +86,15 @@ def plot(args: Args) -> Path:
 
     if not args.runs:
         raise ValueError("--runs: give at least one run directory")
-    last = [max(int(r["timesteps"]) for r in csv.DictReader(open(Path(d) / "episodes.csv")))
-            for d in args.runs]
+    last = []
+    for d in args.runs:
+        with open(Path(d) / "episodes.csv") as fh:
+            steps = [int(r["timesteps"]) for r in csv.DictReader(fh)]
+        if not steps:
+            raise ValueError(f"--runs {d}: episodes.csv has no finished episode yet")
+        last.append(max(steps))
+    if args.max_steps < 0:
+        raise ValueError(f"--max-steps must be >= 0 (0: the shortest run's), got {args.max_steps}")
     max_steps = args.max_steps or min(last)
     if args.bin < 1 or args.bin > max_steps:
         raise ValueError(f"--bin {args.bin}: give 1 .. {max_steps} env steps (the shortest "

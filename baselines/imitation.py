@@ -310,3 +310,8 @@ def warm_start(args: Any, model: PPO, venv: VecEnv, on_episode: Callable[..., No
         venv.env_method("reset", options={"config": {"info": {"autopilot": False}}})
     return {"method": method, "timesteps": result.timesteps,
             "wall_s": round(result.wall_s, 1), "rounds": result.rounds}
+
+
+if __name__ == "__main__":
+    raise SystemExit(f"{__file__}: a part of ppo_grid.py, not a script of its own; run "
+                     "python baselines/ppo_grid.py --warm-start ... (baselines/README.md)")

@@ -201,3 +201,8 @@ def policy_class(critic: str) -> type[AsymmetricPolicy]:
     if critic not in POLICIES:
         raise ValueError(f"--critic: expected one of {tuple(POLICIES)}, got {critic!r}")
     return POLICIES[critic]
+
+
+if __name__ == "__main__":
+    raise SystemExit(f"{__file__}: a part of ppo_grid.py, not a script of its own; run "
+                     "python baselines/ppo_grid.py --critic privileged ... (baselines/README.md)")

@@ -96,3 +96,8 @@ def prefer_rule(model: Any, p_rule: float) -> float:
     with torch.no_grad():
         model.policy.action_net.bias[0] += bias
     return bias
+
+
+if __name__ == "__main__":
+    raise SystemExit(f"{__file__}: a part of ppo_grid.py, not a script of its own; run "
+                     "python baselines/ppo_grid.py --residual grid ... (baselines/README.md)")

@@ -96,6 +96,13 @@ def _learned(model_name: str) -> Callable[..., TorchSegmenter]:
     def factory(
         in_channels: int = 10, num_classes: int = 5, device: str = "cpu", **model_kwargs: Any
     ):
+        for key, value in (("in_channels", in_channels), ("num_classes", num_classes)):
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ValueError(f"segmenter {model_name!r}: {key} must be an integer >= 1, "
+                                 f"got {value!r}")
+        from dstenv.segment.train import resolve_device
+
+        device = resolve_device(str(device))  # one line for cuda without a GPU
         return TorchSegmenter(model_name, model_kwargs, in_channels, num_classes, device)
 
     return factory
@@ -150,5 +157,19 @@ def _entry(name: str) -> SegmenterEntry:
 
 
 def create_segmenter(name: str, **kwargs: Any) -> Segmenter:
-    """Create a registered segmenter; ``kwargs`` go to its factory."""
-    return _entry(name).factory(**kwargs)
+    """Create a registered segmenter; ``kwargs`` go to its factory.
+
+    Raises:
+        ValueError: an option the factory does not take (named with the ones it does),
+            or a bad ``in_channels`` / ``num_classes`` / ``device`` of a network.
+    """
+    import inspect
+
+    factory = _entry(name).factory
+    sig = inspect.signature(factory)
+    if not any(p.kind is p.VAR_KEYWORD for p in sig.parameters.values()):
+        unknown = sorted(set(kwargs) - set(sig.parameters))
+        if unknown:
+            raise ValueError(f"segmenter {name!r}: unknown option {unknown[0]!r}; it takes "
+                             + (", ".join(sig.parameters) or "none"))
+    return factory(**kwargs)

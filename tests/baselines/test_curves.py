@@ -44,3 +44,21 @@ def test_plot_writes_png_with_references(tmp_path) -> None:
                        "--out", str(tmp_path / "c.png")])
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert np.isfinite(curves.binned_rates(b, 100, 290)["success"]).all()
+
+
+def test_references_of_several_files_are_never_pooled(tmp_path) -> None:
+    import pytest
+
+    head = "policy,seed,episode_return,length,collision,off_road,arrived,progress,success\n"
+    one, two = tmp_path / "cfg-a.csv", tmp_path / "cfg-b.csv"
+    one.write_text(head + "grid,1,0,1,True,False,False,0,False\n")
+    two.write_text(head + "grid,1,0,1,False,False,False,0,True\n")
+    refs = curves.reference_rates([str(one), str(two)])
+    assert refs["grid (cfg-a)"]["collision"] == 1.0 and refs["grid (cfg-b)"]["collision"] == 0.0
+    bad = tmp_path / "episodes.csv"  # a training log given by mistake
+    bad.write_text("timesteps,success,collision,off_road\n10,1,0,0\n")
+    with pytest.raises(ValueError, match="not an evaluate.py --csv file .no column 'policy'"):
+        curves.reference_rates([str(bad)])
+    run = _run(tmp_path / "r", [])
+    with pytest.raises(ValueError, match="has no finished episode yet"):
+        curves.main(["--runs", str(run), "--out", str(tmp_path / "c.png")])

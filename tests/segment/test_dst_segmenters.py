@@ -91,6 +91,16 @@ def test_presets_and_custom_params():
         create_segmenter("dst-tuned")
     with pytest.raises(ValueError, match="unknown segmenter"):
         create_segmenter("svm")
+    # bad options are named (they raised a TypeError naming a private factory, or torch's
+    # assertion / negative-dimension errors)
+    with pytest.raises(ValueError, match="segmenter 'dst': unknown option 'bogus'; it takes "
+                                         "preset, params"):
+        create_segmenter("dst", bogus=1)
+    for kw, match in (({"num_classes": -1}, "num_classes must be an integer >= 1"),
+                      ({"in_channels": 0}, "in_channels must be an integer >= 1"),
+                      ({"device": "tpu"}, "device 'tpu': not a torch device")):
+        with pytest.raises(ValueError, match=match):
+            create_segmenter("unet-light", **kw)
 
 
 def test_registry_is_extensible():

@@ -83,20 +83,26 @@ def parse_grid(text: str) -> list[dict[str, float]]:
     else:
         raise ValueError("--grid: expected a JSON object such as "
                          "'{\"junction_range\": [20, 30]}' or a list of such objects")
-    known = parameter_names()
+    defaults = parameter_defaults()
     configs = []
     for g in grid_lists:
         for key, values in g.items():
-            if key not in known:
+            if key not in defaults:
                 raise ValueError(f"--grid: unknown parameter {key!r}; known: "
-                                 f"{', '.join(known)}")
-            if (not isinstance(values, list) or not values
-                    or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
-                               and math.isfinite(v) and v > 0 for v in values)):
-                raise ValueError(f"--grid: {key} needs a non-empty list of finite numbers "
-                                 f"> 0, got {values!r}")
+                                 f"{', '.join(defaults)}")
+            flag = isinstance(defaults[key], bool)  # give_way: true / false
+            top = 1.0 if key.endswith("_moving") else math.inf  # a BetP threshold
+            if not isinstance(values, list) or not values or not all(
+                    isinstance(v, bool) if flag else (isinstance(v, (int, float))
+                                                      and not isinstance(v, bool)
+                                                      and math.isfinite(v) and 0 < v <= top)
+                    for v in values):
+                raise ValueError(f"--grid: {key} needs a non-empty list of "
+                                 + ("true / false" if flag else "finite numbers > 0"
+                                    + (f" and <= {top:g}" if top < math.inf else ""))
+                                 + f", got {values!r}")
         keys = list(g)
-        configs += [{k: float(v) for k, v in zip(keys, combo)}
+        configs += [{k: (v if isinstance(v, bool) else float(v)) for k, v in zip(keys, combo)}
                     for combo in itertools.product(*(g[k] for k in keys))]
     return configs
 

@@ -166,6 +166,11 @@ def camera_mask(spec: GridSpec, fov_deg: float) -> np.ndarray:
 
     Returns:
         ``(H, W) bool``: cell centres ahead of the ego within ``fov_deg / 2`` of +x.
+
+    Raises:
+        ValueError: ``fov_deg`` outside (0, 180) (NaN too).
     """
+    if not 0.0 < fov_deg < 180.0:
+        raise ValueError(f"camera_mask: fov_deg must lie in (0, 180), got {fov_deg!r}")
     x, y = spec.cell_centers()
     return (x > 0) & (np.abs(np.arctan2(y, x)) <= np.deg2rad(fov_deg) / 2)

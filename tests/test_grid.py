@@ -51,3 +51,6 @@ def test_camera_mask_is_the_forward_wedge():
     narrow = camera_mask(spec, 30.0)  # only the straight-ahead column at 15 deg
     assert narrow.sum() == 3 and narrow[:3, 3].all()
     assert not camera_mask(spec, 179.0)[3:].any()  # nothing level with or behind the ego
+    for bad in (0.0, 400.0, float("nan")):  # were 4 cells, the 360 mask, none
+        with pytest.raises(ValueError, match="fov_deg must lie in"):
+            camera_mask(spec, bad)

@@ -184,7 +184,7 @@ class ShardDataset(Dataset):
             there = sorted({p.parent.name for p in scan_shards(Path(root_or_files))}) if \
                 folder else []
             raise ValueError(f"no shard of split {split!r} in {root_or_files} (its splits: "
-                             f"{', '.join(there) or 'none'}; None reads them all)")
+                             f"{', '.join(there) or 'none'})")
         self._ends = np.cumsum(lengths).tolist()
         self._bad: set[int] = set()
         self._readers: dict[int, ShardReader] = {}

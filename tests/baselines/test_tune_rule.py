@@ -23,6 +23,9 @@ def test_grid_is_the_cartesian_product_in_key_order() -> None:
     # a list of objects: those configurations, {} = the defaults
     assert tune_rule.parse_grid('[{}, {"margin": 6}]') == [{}, {"margin": 6.0}]
     assert set(tune_rule.parameter_names()) >= {"junction_range", "margin", "corridor"}
+    # the give-way rule on and off (true / false: it was listed but could not be tuned)
+    assert tune_rule.parse_grid('{"give_way": [false, true]}') == [{"give_way": False},
+                                                                  {"give_way": True}]
 
 
 @pytest.mark.parametrize("text, message", [
@@ -37,6 +40,8 @@ def test_grid_is_the_cartesian_product_in_key_order() -> None:
     ('[{"margin": -4}]', "finite numbers > 0"),
     ('[{"nope": 1}]', "unknown parameter 'nope'"),
     ("[]", "expected a JSON object"),
+    ('{"give_way_moving": [7]}', "and <= 1"),  # a BetP threshold
+    ('{"give_way": [0, 1]}', "true / false"),
 ])
 def test_bad_grids_are_refused(text: str, message: str) -> None:
     with pytest.raises(ValueError, match="--grid: ") as err:

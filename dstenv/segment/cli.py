@@ -88,8 +88,16 @@ def _train(args: argparse.Namespace) -> int:
                                     inputs=cfg["inputs"], labels=args.labels)
         val_ds = ShardDataset(args.data, split="val", inputs=cfg["inputs"],
                               labels=args.labels) if args.data else None
+        cell = train_ds.config["grid"]["cell_size"]
+        if val_ds is not None and val_ds.cell_size and abs(val_ds.cell_size - cell) > 1e-9:
+            raise CLIError(f"--data {args.data}: its val split has cells of "
+                           f"{val_ds.cell_size:g} m, the stream {cell:g} m; best.pt would be "
+                           "chosen at another resolution: give data of the stream's cells")
         cfg["max_batches"] = args.steps_per_epoch
     else:
+        if args.steps_per_epoch:
+            raise CLIError("--steps-per-epoch goes with --stream (shards: an epoch is the "
+                           "train split; --data with --stream validates on its val split)")
         if not args.data:
             raise CLIError("give --data DIR (shards from dstenv generate) or --stream SCENARIO")
         train_ds = ShardDataset(args.data, split="train", inputs=cfg["inputs"],
@@ -273,17 +281,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         "Lovasz-softmax). Checkpoints last.pt/best.pt are written "
         "atomically after every epoch; rerun to resume.",
     )
-    p.add_argument("--data", metavar="DIR", help="dataset directory from dstenv generate")
-    p.add_argument(
-        "--stream",
-        metavar="SCENARIO",
-        nargs="?",
-        const="",
-        help="train on frames simulated on the fly (no disk); optional scenario",
-    )
-    p.add_argument(
-        "--steps-per-epoch", type=int, default=0, help="batches per epoch when streaming"
-    )
+    p.add_argument("--data", metavar="DIR", help="dataset directory from dstenv generate "
+                   "(with --stream: its val split validates)")
+    p.add_argument("--stream", metavar="SCENARIO", nargs="?", const="",
+                   help="train on frames simulated on the fly (no disk); optional scenario")
+    p.add_argument("--steps-per-epoch", type=int, default=0,
+                   help="batches per epoch when streaming")
     p.add_argument("--out", required=True, metavar="DIR", help="checkpoint directory")
     p.add_argument("--model", choices=sorted(MODELS), help="default unet-light (with --init: "
                    "the checkpoint's)")

@@ -103,6 +103,18 @@ def test_cli_benchmark_on_existing_data_and_errors(tiny, tmp_path, capsys):
     (tmp_path / "afile").write_text("x")
     assert main(["train", "--data", str(tmp_path), "--out", str(tmp_path / "afile")]) == 2
     assert "is a file; give a folder" in capsys.readouterr().err
+    # --steps-per-epoch without --stream was ignored; a stream validated on shards of other
+    # cells chose best.pt at another resolution
+    assert main(["train", "--data", str(out / "data"), "--steps-per-epoch", "5",
+                 "--out", str(tmp_path.parent / "m1")]) == 2
+    assert "--steps-per-epoch goes with --stream" in capsys.readouterr().err
+    coarse = tmp_path.parent / "coarse"
+    assert main(["generate", "--frames", "2", "--grid", "16", "--cell-size", "1.0",
+                 "--episode-length", "30", "--split", "val", "--quiet", "--out",
+                 str(coarse)]) == 0
+    assert main(["train", "--stream", "--steps-per-epoch", "1", "--loss", "ce", "--data",
+                 str(coarse), "--out", str(tmp_path.parent / "m2")]) == 2
+    assert "best.pt would be chosen at another resolution" in capsys.readouterr().err
     for cmd in (["train", "--data", str(tmp_path), "--out", str(tmp_path / "m")],
                 ["benchmark", "--data", str(tmp_path), "--out", str(tmp_path)]):
         assert main(cmd) == 2

@@ -71,6 +71,8 @@ def _cmd(args: argparse.Namespace) -> int:
     names = list(BENCHMARKS) if args.name == "all" else [args.name]
     if args.repeats < 0:
         raise ValueError(f"--repeats must be >= 0 (0: automatic), got {args.repeats}")
+    if args.goals and args.name not in ("data", "all"):
+        raise ValueError(f"--goals goes with bench data (its goal rows), not bench {args.name}")
     if args.json is not None:  # "" too: a name, not "no file"
         output_file(args.json, "--json")  # before minutes of timing, not after
     results = {}

@@ -41,6 +41,8 @@ def test_bench_json_path_is_checked_before_timing(capsys, tmp_path):
     assert "is a directory" in err and err.count("\n") == 1 and "== bench" not in out_
     assert main(["bench", "fusion", "--quick", "--json", ""]) == 2  # was silently no file
     assert "--json: empty; give a file name" in capsys.readouterr().err
+    assert main(["bench", "fusion", "--quick", "--goals"]) == 2  # was silently ignored
+    assert "--goals goes with bench data" in capsys.readouterr().err
     (tmp_path / "file").write_text("x")
     assert main(["bench", "fusion", "--quick", "--json", str(tmp_path / "file" / "b.json")]) == 2
     out_, err = capsys.readouterr()

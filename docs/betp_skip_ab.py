@@ -12,6 +12,12 @@
 Figures in docs/throughput.md, section 4.
 """
 
+import sys
+
+if __name__ == "__main__" and {"-h", "--help"} & set(sys.argv[1:]):  # usage: the docstring
+    print(__doc__)
+    raise SystemExit(0)
+
 import importlib.util
 import statistics
 import sys

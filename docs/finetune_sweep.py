@@ -10,6 +10,12 @@ Writes ``OUT_DIR/sweep.json``; each setting is a fresh fine-tuning run. ``--scra
 trains the same network from random weights on the same ten frames instead (the
 control: what the simulated pretraining adds), at the rates 1e-4 and 1e-3.
 """
+
+import sys
+
+if __name__ == "__main__" and {"-h", "--help"} & set(sys.argv[1:]):  # usage: the docstring
+    print(__doc__)
+    raise SystemExit(0)
 import json
 import sys
 import time

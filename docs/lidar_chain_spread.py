@@ -10,6 +10,12 @@ other rows; bursts of the shared VM's noise land on whichever row is running::
     python docs/lidar_chain_spread.py 320
 """
 
+import sys
+
+if __name__ == "__main__" and {"-h", "--help"} & set(sys.argv[1:]):  # usage: the docstring
+    print(__doc__)
+    raise SystemExit(0)
+
 import resource
 import sys
 import time

@@ -17,6 +17,12 @@ KITTI scan of ``/work/shared/data`` if present. Then it times both, minimum and 
         /tmp/old 60
 """
 
+import sys
+
+if __name__ == "__main__" and {"-h", "--help"} & set(sys.argv[1:]):  # usage: the docstring
+    print(__doc__)
+    raise SystemExit(0)
+
 import glob
 import sys
 import time

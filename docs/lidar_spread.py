@@ -17,6 +17,12 @@ It also reports the minor page faults per call of the goal row (``getrusage``).
     cd /tmp && PYTHONPATH=/path/to/dstenv python /path/to/dstenv/docs/lidar_spread.py 150
 """
 
+import sys
+
+if __name__ == "__main__" and {"-h", "--help"} & set(sys.argv[1:]):  # usage: the docstring
+    print(__doc__)
+    raise SystemExit(0)
+
 import resource
 import sys
 import time

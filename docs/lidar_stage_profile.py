@@ -14,6 +14,12 @@ The stage calls mirror the two functions; if they change, change this too (the s
 are printed beside the real calls to show a drift).
 """
 
+import sys
+
+if __name__ == "__main__" and {"-h", "--help"} & set(sys.argv[1:]):  # usage: the docstring
+    print(__doc__)
+    raise SystemExit(0)
+
 import math
 import sys
 import time

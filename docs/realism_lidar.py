@@ -12,6 +12,12 @@ from __future__ import annotations
 
 import sys
 
+if __name__ == "__main__" and {"-h", "--help"} & set(sys.argv[1:]):  # usage: the docstring
+    print(__doc__)
+    raise SystemExit(0)
+
+import sys
+
 import numpy as np
 
 from dstenv.kitti.sequence import KittiSequence, convert_sequence

@@ -8,6 +8,12 @@ Figures in docs/throughput.md, section 1 (third pass).
     python docs/throughput_lzf.py default dense
 """
 
+import sys
+
+if __name__ == "__main__" and {"-h", "--help"} & set(sys.argv[1:]):  # usage: the docstring
+    print(__doc__)
+    raise SystemExit(0)
+
 import statistics
 import sys
 import tempfile

@@ -232,6 +232,8 @@ class NetworkBuilder:
         """Pack the lanes; computes headings, curvature limits and connector conflicts
         (an uncontrolled node whose connectors conflict becomes a yield junction)."""
         npts = np.array([len(p) for p in self.polys], np.int64)
+        if not len(npts) or npts.min() < 2:  # the compiled kernels assume both
+            raise ValueError("lane network: needs lanes of at least two points each")
         start = np.concatenate([[0], np.cumsum(npts)[:-1]]).astype(np.int64)
         pts = np.concatenate(self.polys) if self.polys else np.zeros((0, 2))
         # segment headings and lengths of all lanes at once (a lane's last point keeps

@@ -172,6 +172,9 @@ def load_osm(path: str | Path, *, resolution: float = 0.2, lane_width: float = 3
             edge_half.append(width / 2)
             for n in ends:
                 half[n] = max(half.get(n, 0.0), width / 2)
+    if not edges:  # (the lane network of nothing crashed numba: a segfault)
+        raise ValueError(f"{path}: no drivable road in the OSM file (a highway way of at "
+                         "least 1 m between two distinct nodes, inside the map's area)")
     node_xy = np.zeros((len(gid), 2))
     for ref, n in gid.items():
         node_xy[n] = pos[ref]

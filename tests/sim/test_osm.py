@@ -124,6 +124,25 @@ def test_malformed_xml_is_one_line_naming_the_file(tmp_path):
         load_osm(tmp_path / "missing.osm")
 
 
+@pytest.mark.parametrize("body", [
+    # two nodes at one point; a way of 8 cm; nodes without any way; a building alone
+    '<node id="1" lat="46.5" lon="7.5"/><node id="2" lat="46.5" lon="7.5"/>'
+    '<way id="10"><nd ref="1"/><nd ref="2"/><tag k="highway" v="residential"/></way>',
+    '<node id="1" lat="46.5" lon="7.5"/><node id="2" lat="46.5" lon="7.500001"/>'
+    '<way id="10"><nd ref="1"/><nd ref="2"/><tag k="highway" v="residential"/></way>',
+    '<node id="1" lat="46.5" lon="7.5"/><node id="2" lat="46.501" lon="7.5"/>',
+    '<node id="1" lat="46.5" lon="7.5"/><node id="2" lat="46.5001" lon="7.5"/>'
+    '<node id="3" lat="46.5001" lon="7.5001"/><way id="9"><nd ref="1"/><nd ref="2"/>'
+    '<nd ref="3"/><nd ref="1"/><tag k="building" v="yes"/></way>',
+])
+def test_a_map_without_a_drivable_road_is_one_line(tmp_path, body):
+    # each of these crashed the interpreter (a segfault in the lane kernels)
+    path = tmp_path / "x.osm"
+    path.write_text(f'<?xml version="1.0"?><osm version="0.6">{body}</osm>')
+    with pytest.raises(ValueError, match="x.osm: no drivable road in the OSM file"):
+        load_osm(path)
+
+
 def test_world_drives_on_a_loaded_map(tiny):
     w = World({"map": {"kind": "osm", "osm_file": str(tiny)},
                "traffic": {"cars": 2, "pedestrians": 2, "cyclists": 0}}, seed=0)

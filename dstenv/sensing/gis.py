@@ -68,19 +68,21 @@ class MapError:
                 from the world in more than the dropped buildings).
 
         Raises:
-            ValueError: ``missing_building_prob > 0`` but the map has no building
-                polygons to drop.
+            ValueError: ``missing_building_prob > 0`` but the map has building cells
+                and no building polygons to drop (a map without buildings drops none).
         """
         cfg = gis_config(config)
         offset = rng.normal(0.0, cfg["offset_std"], 2) if cfg["offset_std"] > 0 else np.zeros(2)
         rotation = float(rng.normal(0.0, cfg["rotation_std"])) if cfg["rotation_std"] > 0 else 0.0
         p = cfg["missing_building_prob"]
         drop = np.zeros(0, np.int64)
-        if p > 0:
-            if not world_map.buildings:
-                raise ValueError("gis.missing_building_prob > 0 needs WorldMap.buildings "
-                                 "polygons; the map has none")
+        # a map without buildings has none to drop (it used to be an error: a sparse
+        # city's seed without a building stopped a generation run)
+        if p > 0 and world_map.buildings:
             drop = np.flatnonzero(rng.random(len(world_map.buildings)) < p)
+        elif p > 0 and (world_map.raster == MapClass.BUILDING).any():
+            raise ValueError("gis.missing_building_prob > 0 needs WorldMap.buildings "
+                             "polygons; the map has building cells but none")
         none = cfg["source"] == "none" or (cfg["no_map_prob"] > 0
                                            and rng.random() < cfg["no_map_prob"])
         if none:

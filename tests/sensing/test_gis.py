@@ -101,3 +101,7 @@ def test_config_dict_draws_with_the_rng():
     with pytest.raises(ValueError, match="polygons"):
         MapError.sample(rect_map([(0, 1, 0, 1)], polygons=False), {"missing_building_prob": 0.5},
                         np.random.default_rng(0))
+    # a map with no building at all drops none (a sparse city's seed stopped generation)
+    empty = rect_map([], polygons=False)
+    assert not MapError.sample(empty, {"missing_building_prob": 0.5},
+                               np.random.default_rng(0)).dropped

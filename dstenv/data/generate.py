@@ -126,6 +126,10 @@ def _check_generation_config(config: Mapping[str, Any]) -> None:
         raise ValueError("frame.labels = false: generate stores every frame's labels; leave "
                          "frame.labels true (it is for RL envs that do not show them)")
     wm = config.get("world", {}).get("map", {})
+    if wm.get("pool", 0):
+        raise ValueError(f"world.map.pool = {wm['pool']}: generate draws a map per episode seed "
+                         "(splits are disjoint map seeds); a pool would reuse its maps in "
+                         "every split: leave it 0 (--episodes-per-map reuses maps within one)")
     if wm.get("kind") == "osm":
         from dstenv.sim.osm import resolve_osm_file
 

@@ -258,6 +258,9 @@ def test_generate_refuses_lzf_with_the_reason():
 def test_generate_refuses_before_simulating_what_would_fail_in_a_shard(tmp_path, monkeypatch):
     with pytest.raises(ValueError, match="frame.labels = false: generate stores every"):
         _spec(config={**CONFIG, "frame": {"labels": False}})
+    # a map pool would put the same maps in every split (test maps in training)
+    with pytest.raises(ValueError, match="world.map.pool = 3: generate draws a map per"):
+        _spec(config={**CONFIG, "world": {"map": {"pool": 3}}})
     monkeypatch.chdir(tmp_path)
     osm = {**CONFIG, "world": {"map": {"kind": "osm", "osm_file": "town.osm"}}}
     with pytest.raises(ValueError, match=r"world\.map\.osm_file 'town\.osm': no such file"):

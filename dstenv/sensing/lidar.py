@@ -11,18 +11,17 @@ ahead). Each beam returns the distance to the first building or agent it meets:
 * buildings, ``buildings="raster"``: exact Amanatides-Woo traversal of
   ``WorldMap.raster`` up to the first :attr:`MapClass.BUILDING` cell.
 * agents: exact ray / oriented-box intersection (the four edges of
-  :meth:`Agents.corners`), binned by angle like the polygons (a partial fov: its beams).
+  :meth:`Agents.corners`), binned by angle like the polygons.
 * street clutter (``WorldMap.obstacles``): the same exact box intersection, for the
   boxes that the scan plane cuts (``z_min <= plane_height <= z_max``: a trunk
   occludes, the crown above it does not). They are selected once per map.
 
-Noise and dropout come only from the ``np.random.Generator`` passed to
-:meth:`Lidar.sweep`: the same generator state gives the same sweep.
-"""
+Noise and dropout come only from the generator passed to :meth:`Lidar.sweep`."""
 
 from __future__ import annotations
 
 import math
+import weakref
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -112,7 +111,7 @@ class Lidar:
         self._cos = np.cos(self.angles)  # ego-frame beam directions
         self._sin = np.sin(self.angles)
         self._map: WorldMap | None = None
-        self._edge_cache: dict[int, tuple] = {}  # id(map) -> (map, edges, starts, boxes)
+        self._edge_cache: dict[int, tuple] = {}  # id(map) -> (ref, edges, starts, boxes)
         self._edges = np.zeros((0, 4))
         self._starts = np.zeros(1, np.int64)
         self._boxes = np.zeros((0, 4))
@@ -195,7 +194,7 @@ class Lidar:
         if self._map is world_map and len(self._starts) == len(world_map.buildings) + 1:
             return
         cached = self._edge_cache.get(id(world_map))
-        if cached is not None and cached[0] is world_map:
+        if cached is not None and cached[0]() is world_map:
             _, self._edges, self._starts, self._boxes = cached
             self._map = world_map
             return
@@ -223,7 +222,8 @@ class Lidar:
         self._map = world_map
         if len(self._edge_cache) >= _EDGE_CACHE:
             self._edge_cache.pop(next(iter(self._edge_cache)))
-        self._edge_cache[id(world_map)] = (world_map, self._edges, self._starts, self._boxes)
+        self._edge_cache[id(world_map)] = (weakref.ref(world_map), self._edges, self._starts,
+                                           self._boxes)  # weak: never keeps ~13 MB maps alive
 
 
 @numba.njit(cache=True, inline="always")

@@ -230,3 +230,21 @@ def test_building_edges_flattened_like_one_polygon_at_a_time():
     np.testing.assert_array_equal(lidar._starts, starts)
     np.testing.assert_array_equal(lidar._boxes, boxes)
     assert starts[-1] - starts[-2] == 3  # the triangle's closing vertex is not an edge
+
+
+def test_the_edge_cache_does_not_keep_maps_alive():
+    import gc
+    import weakref
+
+    lidar = Lidar({"beams": 36})
+    world = rect_map([WALL], extent=(-30.0, 30.0, -30.0, 30.0))
+    first = lidar.sweep(world, NO_AGENTS, np.zeros(3), _rng())
+    ref = weakref.ref(world)
+    other = rect_map([(5.0, 6.0, -1.0, 1.0)], extent=(-30.0, 30.0, -30.0, 30.0))
+    lidar.sweep(other, NO_AGENTS, np.zeros(3), _rng())  # the lidar now holds `other`
+    again = lidar.sweep(world, NO_AGENTS, np.zeros(3), _rng())  # from the cache
+    np.testing.assert_array_equal(first.ranges, again.ranges)
+    lidar.sweep(other, NO_AGENTS, np.zeros(3), _rng())
+    del world, first, again
+    gc.collect()
+    assert ref() is None  # each default map is ~13 MB: 64 of them were kept before

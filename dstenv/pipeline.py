@@ -39,7 +39,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from dstenv.config import Section, Validated, between, build_config, one_of
+from dstenv.config import ConfigError, Section, Validated, between, build_config, one_of
 from dstenv.dst import DSTParams
 from dstenv.dst.tracker import GridTracker
 from dstenv.frame import IGNORE_INDEX, Frame
@@ -220,6 +220,11 @@ class Pipeline:
             self.lidar: Any = Hdl64(cfg["lidar"])
         else:
             self.lidar = Lidar(cfg["lidar"])
+        mount = (np.array([cfg["lidar"]["mount_x"]]), np.array([cfg["lidar"]["mount_y"]]))
+        if not self.spec.inside(*self.spec.to_cell(*mount))[0]:  # the sensor grid's origin
+            raise ConfigError(f"lidar.mount_x / mount_y {cfg['lidar']['mount_x']:g}, "
+                              f"{cfg['lidar']['mount_y']:g} m: outside the grid (its extent "
+                              f"{self.spec.extent}); mount the LIDAR on it or widen grid")
         self.fuse = bool(fuse)
         self.tracker = GridTracker(self.spec.shape, params, self.spec.cell_size)
         self.odometry = Odometry(self.config["protocol"])

@@ -85,6 +85,12 @@ from dstenv.config import Validated, build_config, section  # noqa: E402
     ({"dst": {"alpha": 1.5}}, r"dst\.alpha: must be in \[0, 1\], got 1\.5"),
     ({"lidar": {"buildings": "voxels"}}, r"lidar\.buildings: unknown value 'voxels'; allowed"),
     ({"world": {"map": {"lanes_min": 3, "lanes_max": 2}}}, r"world\.map\.lanes_max: must be >="),
+    # below the outer streets' sidewalks the ego and agents were placed off the map
+    ({"world": {"map": {"margin": 3.0}}}, r"world\.map\.margin: must reach past the outer"),
+    # 40 x 40 blocks of 1 km: a 46.7 GiB raster, refused by name instead of MemoryError
+    ({"world": {"map": {"blocks_x": 40, "blocks_y": 40, "block_min": 1000.0,
+                        "block_max": 1000.0}}}, r"world\.map\.blocks_x: .* over 10\^9 cells"),
+    ({"world": {"map": {"pool": 5000}}}, r"world\.map\.pool: must be in \[0, 1000\]"),
     ({"highway": {"env_config": {"other_vehicles_type": "evilmod.V"}}},
      r"highway\.env_config\.other_vehicles_type: not an allowed highway-env key"),
     ({"highway": {"env_config": {"duration": "40"}}}, r"highway\.env_config\.duration: must be"),

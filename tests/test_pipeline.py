@@ -144,6 +144,18 @@ def test_hdl64_pipeline_is_deterministic_and_sees_through_kittis_road():
     assert shares[1] > 0.2 and shares[2] > 0.0
 
 
+def test_degenerate_sensor_settings():
+    # a 3-D scan without ground (every beam dropped) is no evidence, not a crash mid-episode
+    p = Pipeline({"grid": {"height": 32, "width": 32},
+                  "lidar": {"model": "hdl64", "hdl64": {"dropout": 1.0, "azimuth_step": 2.0}}})
+    frame = p.reset(seed=0)
+    assert not frame.sensor.any()  # SensorState.UNKNOWN everywhere
+    # a LIDAR mounted off the grid is refused when the pipeline is built (it was refused
+    # by the ray caster at the first reset)
+    with pytest.raises(ConfigError, match="lidar.mount_x / mount_y 10, -10 m: outside the grid"):
+        Pipeline({"grid": {"height": 32, "width": 32}, "lidar": {"mount_x": 10, "mount_y": -10}})
+
+
 def test_protocol_object_edges_ignores_the_occupied_rim_of_road_users():
     from dstenv.sensing.labels import ignore_object_edges
 

@@ -47,6 +47,7 @@ from typing import Any
 import numba
 import numpy as np
 
+from dstenv.dst import SensorState
 from dstenv.grid import GridSpec
 from dstenv.sensing.cast3d import cast_boxes, cast_ground, cast_walls, column_index
 from dstenv.sensing.cloud import cloud_sensor_grid, ray_config
@@ -58,7 +59,7 @@ from dstenv.sensing.draws import (
     stream_keys,
 )
 from dstenv.sensing.fading import fade_returns
-from dstenv.sensing.ground import ground_config
+from dstenv.sensing.ground import CloudError, ground_config
 from dstenv.sensing.raised import raised_distance
 from dstenv.sensing.scene3d import (AGENT, BUILDING, REFLECTANCE, SURFACES, box_table,
                                     building_table, clutter_table)
@@ -111,9 +112,15 @@ class Cloud:
     def sensor_grid(self, spec: GridSpec) -> np.ndarray:
         """``(H, W) uint8`` sensor grid by :func:`dstenv.sensing.cloud.cloud_sensor_grid`
         (ground removal, one ray per point), the road KITTI scans take; the points are
-        shifted by the mount so the grid stays ego-centred."""
-        return cloud_sensor_grid(self.points, spec, self.config["ground"], self.config["rays"],
-                                 offset=(float(self.mount[0]), float(self.mount[1])))[0]
+        shifted by the mount so the grid stays ego-centred. A scan without a usable
+        ground (every beam dropped, a mount below the candidates' height...) says nothing:
+        every cell UNKNOWN (it raised mid-episode)."""
+        try:
+            return cloud_sensor_grid(self.points, spec, self.config["ground"],
+                                     self.config["rays"],
+                                     offset=(float(self.mount[0]), float(self.mount[1])))[0]
+        except CloudError:
+            return np.full(spec.shape, SensorState.UNKNOWN, np.uint8)
 
 
 class Hdl64:

@@ -184,7 +184,7 @@ RULES: dict[str, Any] = {
         "building_depth_min": between(2.0, 200.0, _M),
         "building_depth_max": between(2.0, 200.0, _M),
         "gap_prob": PROB,
-        "pool": between(0, 100_000),
+        "pool": between(0, 1000),  # each map kept in memory: ~13 MB at the defaults
         "gap_min": between(0.0, 100.0, _M),
         "gap_max": between(0.0, 100.0, _M),
         "osm_lane_width": between(2.0, 6.0, _M),
@@ -276,6 +276,19 @@ def _le(a: str, b: str) -> tuple[str, Any, str]:
     return (b, lambda c: c[sa][ka] <= c[sb][kb], f"must be >= {a}")
 
 
+def _raster_cells(m: dict[str, Any]) -> float:
+    """The largest procedural map's raster, in cells."""
+    side = [(m[k] * m["block_max"] + 2 * m["margin"]) / m["resolution"]
+            for k in ("blocks_x", "blocks_y")]
+    return side[0] * side[1]
+
+
+def _street_edge(m: dict[str, Any]) -> float:
+    """[m] from an outer street's centre line to the back of its sidewalk, at most."""
+    return (m["lanes_max"] * (m["lane_width"] + m["lane_width_jitter"]) + m["median_width"] / 2
+            + m["curb_strip_width"] + m["sidewalk_width"])
+
+
 #: The ``world`` section: defaults, rules and the checks that relate two keys.
 SECTION = Section(default_config, RULES, (
     _le("map.lanes_min", "map.lanes_max"),
@@ -290,6 +303,13 @@ SECTION = Section(default_config, RULES, (
      "must be in [0, min(1, curb_strip_width - 1)] m"),
     ("map.sidewalk_jitter", lambda c: _jitter_ok(c, "sidewalk_jitter", "sidewalk_width"),
      "must be in [0, min(1, sidewalk_width - 1)] m"),
+    ("map.blocks_x", lambda c: _raster_cells(c["map"]) <= 1e9,
+     "with blocks_y, block_max, margin and resolution: a raster of over 10^9 cells (~1 GB "
+     "each, several per map); fewer or smaller blocks, or a coarser resolution"),
+    ("map.margin", lambda c: c["map"]["margin"] >= _street_edge(c["map"]),
+     "must reach past the outer streets' sidewalks: >= lanes_max * (lane_width + "
+     "lane_width_jitter) + median_width / 2 + curb_strip_width + sidewalk_width (less put "
+     "agents and the ego off the map)"),
     _mix("map.parking_mix", False),
     ("map.bend_amplitude", lambda c: 2 * 3.14159 * c["map"]["bend_amplitude"]
      <= 0.25 * c["map"]["bend_wavelength"],

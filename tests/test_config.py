@@ -91,6 +91,8 @@ from dstenv.config import Validated, build_config, section  # noqa: E402
     ({"world": {"map": {"blocks_x": 40, "blocks_y": 40, "block_min": 1000.0,
                         "block_max": 1000.0}}}, r"world\.map\.blocks_x: .* over 10\^9 cells"),
     ({"world": {"map": {"pool": 5000}}}, r"world\.map\.pool: must be in \[0, 1000\]"),
+    ({"world": {"map": {"curb_strip_width": 0.0, "sidewalk_width": 1.0, "curb_strip_jitter": 0.0,
+                        "sidewalk_jitter": 0.0}}}, r"world\.map\.sidewalk_width: with curb"),
     ({"highway": {"env_config": {"other_vehicles_type": "evilmod.V"}}},
      r"highway\.env_config\.other_vehicles_type: not an allowed highway-env key"),
     ({"highway": {"env_config": {"duration": "40"}}}, r"highway\.env_config\.duration: must be"),

@@ -108,15 +108,16 @@ class Lidar:
         self.theta0 = -fov / 2
         self.angles = self.theta0 + self.dtheta * np.arange(self.beams, dtype=np.float64)
         self.mount = np.array([c["mount_x"], c["mount_y"]], dtype=np.float64)
-        self._cos = np.cos(self.angles)  # ego-frame beam directions
-        self._sin = np.sin(self.angles)
+        self._cos, self._sin = np.cos(self.angles), np.sin(self.angles)  # beam directions
         self._map: WorldMap | None = None
         self._edge_cache: dict[int, tuple] = {}  # id(map) -> (ref, edges, starts, boxes)
-        self._edges = np.zeros((0, 4))
-        self._starts = np.zeros(1, np.int64)
+        self._edges, self._starts = np.zeros((0, 4)), np.zeros(1, np.int64)
         self._boxes = np.zeros((0, 4))
         self._obs_map: WorldMap | None = None
         self._obs: tuple[np.ndarray, ...] = ()
+
+    def __getstate__(self) -> dict[str, Any]:  # the cache's weak references do not pickle
+        return {**self.__dict__, "_edge_cache": {}}
 
     def sweep(
         self, world_map: WorldMap, agents: Agents, pose: np.ndarray, rng: np.random.Generator

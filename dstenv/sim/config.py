@@ -306,6 +306,9 @@ SECTION = Section(default_config, RULES, (
     ("map.blocks_x", lambda c: _raster_cells(c["map"]) <= 1e9,
      "with blocks_y, block_max, margin and resolution: a raster of over 10^9 cells (~1 GB "
      "each, several per map); fewer or smaller blocks, or a coarser resolution"),
+    ("map.sidewalk_width", lambda c: c["map"]["curb_strip_width"]
+     + c["map"]["sidewalk_width"] >= 2.0,
+     "with curb_strip_width: together >= 2 m (less parked cars overlap the buildings)"),
     ("map.margin", lambda c: c["map"]["margin"] >= _street_edge(c["map"]),
      "must reach past the outer streets' sidewalks: >= lanes_max * (lane_width + "
      "lane_width_jitter) + median_width / 2 + curb_strip_width + sidewalk_width (less put "

@@ -50,7 +50,7 @@ def test_without_pool_every_seed_has_its_map_and_keep_map_keeps_it():
 
 
 def test_pool_must_be_non_negative():
-    with pytest.raises(ConfigError, match=r"world.map.pool: must be in \[0, 100000\], got -1"):
+    with pytest.raises(ConfigError, match=r"world.map.pool: must be in \[0, 1000\], got -1"):
         World({"map": {"pool": -1}})
 
 

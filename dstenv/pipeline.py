@@ -220,11 +220,10 @@ class Pipeline:
             self.lidar: Any = Hdl64(cfg["lidar"])
         else:
             self.lidar = Lidar(cfg["lidar"])
-        mount = (np.array([cfg["lidar"]["mount_x"]]), np.array([cfg["lidar"]["mount_y"]]))
-        if not self.spec.inside(*self.spec.to_cell(*mount))[0]:  # the sensor grid's origin
-            raise ConfigError(f"lidar.mount_x / mount_y {cfg['lidar']['mount_x']:g}, "
-                              f"{cfg['lidar']['mount_y']:g} m: outside the grid (its extent "
-                              f"{self.spec.extent}); mount the LIDAR on it or widen grid")
+        mx, my = cfg["lidar"]["mount_x"], cfg["lidar"]["mount_y"]  # the sensor grid's origin
+        if not self.spec.inside(*self.spec.to_cell(np.array([mx]), np.array([my])))[0]:
+            raise ConfigError(f"lidar.mount_x / mount_y {mx:g}, {my:g} m: outside the grid "
+                              f"(its extent {self.spec.extent}); mount the LIDAR on it")
         self.fuse = bool(fuse)
         self.tracker = GridTracker(self.spec.shape, params, self.spec.cell_size)
         self.odometry = Odometry(self.config["protocol"])
@@ -257,8 +256,10 @@ class Pipeline:
         """Start an episode from ``seed`` and return its first frame.
 
         The filter starts from total ignorance, so the first frame holds one sweep;
-        its ``pignistic_prev`` equals ``pignistic``.
+        its ``pignistic_prev`` equals ``pignistic``. ``seed``: an integer >= 0.
         """
+        if int(seed) < 0:  # (numpy's own error came from deep inside the world's reset)
+            raise ValueError(f"Pipeline.reset: seed must be an integer >= 0, got {seed}")
         self.seed = int(seed)
         if self._world is None:
             self._world = WORLD_SOURCES[self.config["source"]](self.config, self.seed)

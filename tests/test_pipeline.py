@@ -154,6 +154,8 @@ def test_degenerate_sensor_settings():
     # by the ray caster at the first reset)
     with pytest.raises(ConfigError, match="lidar.mount_x / mount_y 10, -10 m: outside the grid"):
         Pipeline({"grid": {"height": 32, "width": 32}, "lidar": {"mount_x": 10, "mount_y": -10}})
+    with pytest.raises(ValueError, match="seed must be an integer >= 0, got -1"):
+        p.reset(seed=-1)
 
 
 def test_protocol_object_edges_ignores_the_occupied_rim_of_road_users():

@@ -40,7 +40,8 @@ from torch.utils.data import Dataset, IterableDataset, get_worker_info
 
 from dstenv.data.lock import LOCK_NAME, writer_of
 from dstenv.data.manifest import MANIFEST_NAME, UNSPLIT, load_manifest, scan_shards
-from dstenv.data.sampling import SPLITS, episode_seeds, iter_frames, scenario_config
+from dstenv.data.sampling import (SPLITS, episode_seeds, frame_steps, iter_frames,
+                                   scenario_config)
 from dstenv.data.shards import N_CLASSES, ShardError, ShardReader
 from dstenv.data.inputs import (
     INPUT_CHANNELS,
@@ -327,7 +328,8 @@ class StreamingDataset(IterableDataset):
         episode_length, stride, warmup: as in ``dstenv generate`` (steps of 0.1 s).
         episodes_per_map: episodes on each procedural city before the next one
             (:mod:`dstenv.data.sampling`; 1: a new city per episode).
-        max_frames: stop each worker after this many frames (``None``: forever).
+        max_frames: stop each worker after this many frames (``None``: forever); a
+            ``DataLoader`` of W workers then yields ``W * max_frames`` per rank.
         rank: process rank for distributed training.
     """
 
@@ -358,9 +360,14 @@ class StreamingDataset(IterableDataset):
         self.episodes_per_map = int(episodes_per_map)
         self.epoch = 0
         next(episode_seeds(self.seed, split, ()))  # validates the split name early (a generator)
+        frame_steps(int(episode_length), int(stride), int(self.warmup))  # and the steps
 
     def set_epoch(self, epoch: int) -> None:
-        """Use another episode stream for this epoch (like ``DistributedSampler``)."""
+        """Use another episode stream for this epoch (like ``DistributedSampler``).
+
+        Call it before each epoch's iteration, with ``DataLoader(persistent_workers=False)``
+        (the default): persistent workers keep the copy of the dataset they started with,
+        so a new epoch never reaches them (make a new ``DataLoader`` per epoch instead)."""
         self.epoch = int(epoch)
 
     def __iter__(self) -> Iterator[dict[str, torch.Tensor]]:

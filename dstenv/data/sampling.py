@@ -84,7 +84,7 @@ def episode_seeds(base_seed: int, split: str | None, stream: Sequence[int]) -> I
     if split is not None and split not in SPLITS:
         raise ValueError(f"unknown split {split!r}; choose from {', '.join(SPLITS)}")
     tag = -1 if split is None else SPLITS.index(split)
-    ss = np.random.SeedSequence([int(base_seed), tag + 1, *(int(s) for s in stream)])
+    ss = np.random.SeedSequence(_entropy(int(base_seed), [tag + 1, *(int(s) for s in stream)]))
     rng = np.random.default_rng(ss)
     while True:
         for seed in rng.integers(0, SEED_LIMIT, size=64, dtype=np.uint64).tolist():
@@ -107,6 +107,24 @@ def frame_steps(episode_length: int, stride: int, warmup: int) -> list[int]:
             f"episode length {episode_length} keeps no frame after a warmup of {warmup} steps"
         )
     return steps
+
+
+#: marks the entropy of a seed of 2**32 and more (:func:`_entropy`)
+_WIDE = 0x5EED_0B16
+
+
+def _entropy(seed: int, rest: list[int]) -> list[int]:
+    """SeedSequence entropy of ``seed`` then ``rest``. A seed below 2**32 is one word, as
+    it always was (every such stream is unchanged); a larger one is its 32-bit words, their
+    count and a marker. (Given as one int, numpy splits it into words and pads short lists
+    with zeros: seed 2**32 with stream (0,) was seed 0 with stream (1,).)"""
+    if seed < 2**32:
+        return [seed, *rest]
+    words = []
+    while seed:
+        words.append(seed & 0xFFFF_FFFF)
+        seed >>= 32
+    return [*words, len(words), *rest, _WIDE]
 
 
 def traffic_seed(map_seed: int, episode: int) -> int:

@@ -300,7 +300,9 @@ def test_streaming_arguments_are_checked():
                         ({"max_frames": -1}, "max_frames must be None or an integer >= 1"),
                         ({"max_frames": 1.5}, "max_frames must be None or an integer >= 1"),
                         # at construction, not at the first sample inside a worker
-                        ({"split": "validation"}, "unknown split 'validation'")):
+                        ({"split": "validation"}, "unknown split 'validation'"),
+                        ({"stride": 0}, "stride must be >= 1"),
+                        ({"episode_length": 1}, "keeps no frame after a warmup")):
         with pytest.raises(ValueError, match=message):
             StreamingDataset("default", **kw)
 

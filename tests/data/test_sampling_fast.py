@@ -111,3 +111,18 @@ def test_paper_protocol_sweeps_only_fused_steps_and_keeps_the_frames():
     full = [p.reset(11)] + [p.step() for _ in range(6)]
     for f in got:
         _same(f, full[f.step])
+
+
+def test_large_base_seeds_give_streams_of_their_own():
+    from dstenv.data.sampling import episode_seeds
+
+    def first(seed, stream):
+        return list(islice(episode_seeds(seed, "train", stream), 4))
+
+    # numpy took 2**32 as the words (0, 1) and padded short lists with zeros: seed 2**32's
+    # shard 0 was seed 0's shard 1, episode for episode
+    assert first(2**32, (0,)) != first(0, (1,))
+    assert first(2**32, (0, 0, 0)) != first(0, (1, 0, 0, 0))
+    assert first(2**64 + 5, (0,)) != first(5, (0, 1))
+    # below 2**32 the streams are the ones every dataset so far was made with
+    assert first(0, (1,))[0] == 2895938922 and first(2**32 - 1, (0,))[0] == 3259647241

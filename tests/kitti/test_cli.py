@@ -47,6 +47,10 @@ def test_convert_writes_shards_and_manifest(tiny_root, tmp_path, capsys):
         assert "kitti-0001.h5 was converted with other settings" in err, err
         assert len(err.strip().splitlines()) == 1
         assert (out / "test" / "kitti-0001.h5").read_bytes() == before
+    # the setting that differs is named by its key, not by two whole configurations
+    assert _convert(tiny_root, out, "--stride", "3") == 2
+    err = capsys.readouterr().err
+    assert "(config.stride: 2, now 3)" in err and len(err) < 300, err
 
 
 def test_convert_paper_rule_and_ignore_free(tiny_root, tmp_path):

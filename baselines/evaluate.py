@@ -110,7 +110,8 @@ class PPOPolicy:
         self.rng = np.random.default_rng(0)
         from dstenv.segment.checkpoint import read_weights
 
-        read_weights(self.path, "not a readable policy checkpoint")  # before any episode
+        # read before any episode, and kept for make_env (not read a second time)
+        self._state = read_weights(self.path, "not a readable policy checkpoint")
 
     def make_env(self, args: EnvArgs) -> gym.Env:
         """The evaluation env; the policy is rebuilt on its spaces."""
@@ -119,7 +120,7 @@ class PPOPolicy:
         run = self.meta["args"]
         env = make_env(args, wrap=env_wrap(run.get("residual", ""), run.get("critic", "")))
         try:
-            self.model, self.meta = load(self.path, env)
+            self.model, self.meta = load(self.path, env, self._state)
         except Exception:
             env.close()
             raise

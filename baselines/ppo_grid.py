@@ -287,11 +287,12 @@ def _no_nan(value: Any) -> Any:
     return value
 
 
-def load(path: str | Path, env: gym.Env) -> tuple[PPO, dict[str, Any]]:
+def load(path: str | Path, env: gym.Env, state: Any = None) -> tuple[PPO, dict[str, Any]]:
     """A PPO model rebuilt from ``model.json`` with the weights of ``model.pt``.
 
     Only tensors are read (``torch.load(weights_only=True)``): a checkpoint cannot
-    run code. ``env`` gives the spaces (it must match those of training).
+    run code. ``env`` gives the spaces (it must match those of training); ``state``:
+    the weights when already read (:func:`read_weights`).
     """
     path = Path(path)
     if not path.is_file():
@@ -310,7 +311,7 @@ def load(path: str | Path, env: gym.Env) -> tuple[PPO, dict[str, Any]]:
     known = {f for f in Args.__dataclass_fields__}
     args = Args(**{k: v for k, v in meta["args"].items() if k in known})
     model = build_model(args, env)
-    state = read_weights(path, "not a readable policy checkpoint")
+    state = read_weights(path, "not a readable policy checkpoint") if state is None else state
     if not isinstance(state, dict):
         raise ValueError(f"{path}: not a policy checkpoint (a state_dict of tensors)")
     try:

@@ -194,17 +194,25 @@ class ShardDataset(Dataset):
         self._cache: dict[int, tuple[int, dict[str, np.ndarray]]] = {}
         # fcn10+sensor+past: per shard, the frame PAST_STEPS steps before each (or -1)
         self._past: dict[int, np.ndarray] = {}
-        if "past" in inputs and self.files and not any(
-                (self._pasts(k) >= 0).any() for k in range(len(self.files))):
-            # frames stored at a stride that skips step - 10 (not just drives too short)
-            gaps = sorted({int(g) for k in range(len(self.files))
-                           for g in np.diff(self._steps(k)) if g > 0})
-            if gaps and PAST_STEPS % math.gcd(*gaps):
-                raise ValueError(
-                    f"{root_or_files}: inputs {inputs!r} read the frame {PAST_STEPS} steps "
-                    f"before each, but no stored frame has one (frames "
-                    f"{'/'.join(map(str, gaps))} steps apart): store frames at a stride that "
-                    f"divides {PAST_STEPS} (--stride), or use fcn10+sensor")
+        if "past" in inputs:
+            self._check_past(root_or_files, inputs)
+
+    def _check_past(self, where: Any, inputs: str) -> None:
+        """Refuse frames stored at a stride that never reaches the frame ``PAST_STEPS``
+        earlier (drives too short to hold one are fine); each shard's steps read once."""
+        gaps: set[int] = set()
+        for k in range(len(self.files)):
+            steps = self._steps(k)
+            self._past[k] = past_rows(steps)
+            if (self._past[k] >= 0).any():
+                return
+            gaps |= {int(g) for g in np.diff(steps) if g > 0}
+        if gaps and PAST_STEPS % math.gcd(*gaps):
+            raise ValueError(
+                f"{where}: inputs {inputs!r} read the frame {PAST_STEPS} steps before each, "
+                f"but no stored frame has one (frames {'/'.join(map(str, sorted(gaps)))} "
+                f"steps apart): store frames at a stride that divides {PAST_STEPS} "
+                "(--stride), or use fcn10+sensor")
 
     def _steps(self, k: int) -> np.ndarray:
         r = self._reader(k)

@@ -231,8 +231,10 @@ class PerceptionGridFilter:
             raise ValueError(f"{name} must have shape {self.shape}, got {grid.shape}")
         if grid.dtype != np.uint8 and not np.issubdtype(grid.dtype, np.integer):
             raise ValueError(f"{name} must hold integer codes, got dtype {grid.dtype}")
-        lo, hi = int(grid.min(initial=0)), int(grid.max(initial=0))
-        if lo < 0 or hi > max_code:  # before any cast: 257 must not wrap to 1
+        # before any cast: 257 must not wrap to 1 (a min pass only where codes can be < 0)
+        lo = int(grid.min(initial=0)) if np.issubdtype(grid.dtype, np.signedinteger) else 0
+        hi = int(grid.max(initial=0))
+        if lo < 0 or hi > max_code:
             raise ValueError(f"{name} holds code {lo if lo < 0 else hi}; allowed codes "
                              f"are 0..{max_code}")
         if grid.dtype != np.uint8:

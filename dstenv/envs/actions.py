@@ -250,7 +250,8 @@ def highway_settings(cfg: Mapping[str, Any]) -> dict[str, Any]:
     from dstenv.sim.highway import default_config as highway_defaults
 
     act, speeds = cfg["action"], [float(v) for v in cfg["action"]["target_speeds"]]
-    for key, v in (("action", speeds), ("highway", list(cfg["highway"]["target_speeds"]))):
+    theirs = [float(v) for v in cfg["highway"]["target_speeds"]]
+    for key, v in (("action", speeds), ("highway", theirs)):
         if any(b <= a for a, b in zip(v, v[1:])):
             raise ConfigError(f"config.{key}.target_speeds: must increase (SLOWER steps "
                               f"down, FASTER up), got {v}")
@@ -267,7 +268,6 @@ def highway_settings(cfg: Mapping[str, Any]) -> dict[str, Any]:
             raise ConfigError(f"config.action.{key}: the city world's controller only "
                               f"(highway-env's vehicle tracks its speeds itself); leave it "
                               f"at {mine[key]}")
-    theirs = [float(v) for v in cfg["highway"]["target_speeds"]]
     if speeds != mine["target_speeds"] and theirs not in (speeds, highway_defaults()[
             "target_speeds"]):
         raise ConfigError(f"config.action.target_speeds {speeds} and config.highway."

@@ -221,8 +221,9 @@ def train(
             )
         theirs = ckpt.get("data")  # checkpoints before 2026-12-07 carry none
         # the keys it recorded (a stream's cell_size, added later, follows its config hash)
-        diff = sorted(k for k in theirs or {} if theirs[k] != json_ready(data_id or {}).get(k))
-        if data_id is not None and diff:
+        ours = json_ready(data_id) if data_id is not None else None
+        diff = sorted(k for k in (theirs or {}) if ours is not None and theirs[k] != ours.get(k))
+        if diff:
             raise ConfigError(
                 f"{last}: checkpoint was trained on other data ({', '.join(diff)} differ: "
                 f"{theirs.get('source', '?')}); give the same --data, another output "

@@ -5,6 +5,7 @@ Agents are rows of the world's state table (:mod:`dstenv.sim.agenttable`), the e
 
 from __future__ import annotations
 
+import warnings
 from typing import Any
 
 import numpy as np
@@ -25,6 +26,18 @@ BODY = {
 }
 #: size ranges of the vehicle classes: (C, 3) low and high length, width, height [m]
 _CLASS_LO, _CLASS_HI = CLASS_LO, CLASS_HI
+#: (key, count asked for) already warned about: a shortfall is said once per process
+_SHORT_WARNED: set[tuple[str, int]] = set()
+
+
+def _say_short(key: str, asked: int, placed: int) -> None:
+    """Warn (once per ``key`` and count) that the map held fewer agents than asked for."""
+    if placed >= asked or (key, asked) in _SHORT_WARNED:
+        return
+    _SHORT_WARNED.add((key, asked))
+    warnings.warn(f"world: {key} = {asked} does not fit on this map ({placed} placed, "
+                  f"no free spot found for the rest); lower {key} or enlarge the map "
+                  "(world.map.blocks_x, blocks_y)", RuntimeWarning, stacklevel=3)
 
 
 def plan_route(net: LaneNetwork, lane: int, rng: np.random.Generator, k: int,
@@ -163,18 +176,23 @@ def populate(world_map: WorldMap, cfg: dict[str, Any], rng: np.random.Generator,
             route=plan_route(net, lane, rng, k), s=s, idm=ego_idm)
     st["mobile"][-1] = False  # moved by the bicycle model, not by the traffic step
     _task(world_map, st, rng, cfg, k, slots, taken)
-    for kind, count, kinds in ((AgentKind.CAR, tr["cars"], (LaneKind.ROAD,)),
-                               (AgentKind.CYCLIST, tr["cyclists"], (LaneKind.ROAD,)),
-                               (AgentKind.PEDESTRIAN, tr["pedestrians"], (LaneKind.SIDEWALK,))):
+    for kind, key, kinds in ((AgentKind.CAR, "cars", (LaneKind.ROAD,)),
+                             (AgentKind.CYCLIST, "cyclists", (LaneKind.ROAD,)),
+                             (AgentKind.PEDESTRIAN, "pedestrians", (LaneKind.SIDEWALK,))):
+        count = int(tr[key])
         lanes = np.flatnonzero(np.isin(net.kind, kinds) & (net.length > 6.0))
         if kind == AgentKind.CYCLIST:
             lanes = lanes[net.rightmost[lanes]]
-        if count == 0 or len(lanes) == 0:
+        if count == 0:
             continue
-        w = net.length[lanes] / net.length[lanes].sum()
-        cdf = w.cumsum()
-        cdf /= cdf[-1]
-        _mobile(world_map, st, rng, cfg, kind, lanes, cdf, k, at=len(st["v"]) - 1, count=count)
+        placed = 0
+        if len(lanes):
+            w = net.length[lanes] / net.length[lanes].sum()
+            cdf = w.cumsum()
+            cdf /= cdf[-1]
+            placed = _mobile(world_map, st, rng, cfg, kind, lanes, cdf, k, at=len(st["v"]) - 1,
+                             count=count)
+        _say_short(f"traffic.{key}", count, placed)
     return st
 
 

@@ -100,3 +100,27 @@ def test_fill_rects_and_paint_where_match_the_plain_versions():
     paint_where(dst, src, 2, 9)
     ref[src == 2] = 9
     assert np.array_equal(dst, ref)
+
+
+def test_more_agents_than_the_map_holds_are_said_once_with_the_key(monkeypatch):
+    import warnings
+
+    from dstenv.sim import spawn
+
+    monkeypatch.setattr(spawn, "_SHORT_WARNED", set())
+    cfg = {"map": {"blocks_x": 1, "blocks_y": 1}, "traffic": {"cars": 400}}
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        world = World(cfg, seed=1)
+        world.reset(2)  # the same shortfall again: not repeated
+    said = [str(w.message) for w in caught if "traffic.cars" in str(w.message)]
+    assert len(said) == 1
+    placed = int(said[0].split("(")[1].split(" placed")[0])
+    assert 0 < placed < 400 and "traffic.cars = 400" in said[0] and "blocks_x" in said[0]
+    # a count that fits says nothing
+    monkeypatch.setattr(spawn, "_SHORT_WARNED", set())
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        World({"map": {"blocks_x": 1, "blocks_y": 1}, "traffic": {"cars": 3, "cyclists": 0,
+                                                                  "pedestrians": 3}}, seed=1)
+    assert not [w for w in caught if "does not fit" in str(w.message)]

@@ -85,6 +85,9 @@ VARIANTS: dict[str, dict[str, Any]] = {
     # six fresh seeds of the same (2026-12-07: the confirmation of the seed choice by
     # the simulated validation drives' static/moving confusion, docs/seed_choice.py)
     "no map past kitti moving seeds 6-11": {"real_net": {**_MAIN, "seeds": [6, 7, 8, 9, 10, 11]}},
+    # six more (2026-12-07: the confirmation of "calibrated + free", docs/calibrated_free.py)
+    "no map past kitti moving seeds 12-17": {"real_net": {**_MAIN,
+                                                          "seeds": [12, 13, 14, 15, 16, 17]}},
     # the same trained twice as long (10 epochs)
     "no map past kitti moving 10 epochs": {"real_net": {**_MAIN, "epochs": 10}},
     # the same with each training sample mirrored left-right at random (train.flip)

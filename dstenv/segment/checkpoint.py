@@ -6,7 +6,8 @@ classes), so loading never executes code from the file::
     {"format": "dstenv-segmenter", "version": 1,
      "spec": {"model", "model_kwargs", "in_channels", "num_classes"},
      "model": state_dict, "optimizer": state_dict | None, "epoch": int,
-     "rng": {"torch": ByteTensor}, "config": {...}, "history": {...}}
+     "rng": {"torch": ByteTensor}, "config": {...}, "history": {...},
+     "decision": {...} (optional: a decision rule, dstenv.segment.decide)}
 """
 
 from __future__ import annotations
@@ -109,6 +110,10 @@ def load_segmenter(path: str | Path, device: str | torch.device = "cpu") -> Torc
         raise ValueError(f"{path}: weights do not fit a {spec['model']} with "
                          f"{spec['in_channels']} input channels: {first}") from None
     seg.model.eval()
+    if ckpt.get("decision") is not None:  # a decision rule (dstenv.segment.decide)
+        from dstenv.segment.decide import check_decision
+
+        seg.decision = check_decision(ckpt["decision"], seg.inputs, str(path))
     data = ckpt.get("data")  # what it was trained on (dstenv train since 2026-12-07)
     seg.trained_cell_size = data.get("cell_size") if isinstance(data, dict) else None
     return seg

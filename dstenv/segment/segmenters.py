@@ -155,6 +155,8 @@ class TorchSegmenter(Segmenter):
         self.num_classes = num_classes
         self.device = torch.device(device)
         self.trained_cell_size: float | None = None
+        #: decision rule on the class scores (:mod:`dstenv.segment.decide`); None: argmax
+        self.decision: dict[str, Any] | None = None
         self.model: SegmentationModel = build_model(
             model_name, in_channels, num_classes, **self.model_kwargs
         )
@@ -162,7 +164,25 @@ class TorchSegmenter(Segmenter):
         # forward); the state dict keeps the same values and loads into either layout
         self.model.to(device=self.device, memory_format=torch.channels_last)
 
+    def logits(self, x: torch.Tensor) -> torch.Tensor:
+        """Class scores ``(B, num_classes, H, W)`` on the CPU (eval mode, no gradients)."""
+        if x.dim() != 4 or x.shape[1] != self.in_channels:
+            raise ValueError(
+                f"{self.name} needs (B, {self.in_channels}, H, W) input, got {tuple(x.shape)}"
+            )
+        was_training = self.model.training
+        self.model.eval()
+        try:
+            with torch.no_grad():
+                return self.model(x.to(self.device)).cpu()
+        finally:
+            self.model.train(was_training)
+
     def predict(self, x: torch.Tensor) -> torch.Tensor:
+        if self.decision is not None:
+            from dstenv.segment.decide import apply_decision
+
+            return apply_decision(self.logits(x), x, self.decision)
         if x.dim() != 4 or x.shape[1] != self.in_channels:
             raise ValueError(
                 f"{self.name} needs (B, {self.in_channels}, H, W) input, got {tuple(x.shape)}"
@@ -181,4 +201,7 @@ class TorchSegmenter(Segmenter):
 
     def describe(self) -> dict[str, Any]:
         n = sum(p.numel() for p in self.model.parameters())
-        return {**super().describe(), **self.spec(), "parameters": n}
+        out = {**super().describe(), **self.spec(), "parameters": n}
+        if self.decision is not None:
+            out["decision"] = {k: v for k, v in self.decision.items() if k != "confusion"}
+        return out

@@ -1,0 +1,149 @@
+"""A network's decision rule: from class scores to one class per cell.
+
+A trained network's ``argmax`` is one decision rule among several. Two others,
+both chosen without a real frame, matter for the sim-only networks on KITTI
+(``real_net``, docs/benchmark.md, "A decision rule chosen on the simulated drives"):
+
+* **The static/moving offset.** Among cells whose ``argmax`` is ``static`` or
+  ``moving``, the cell is ``moving`` iff ``logit(moving) + offset > logit(static)``.
+  Training seeds differ most in how readily they call a still object moving; the
+  offset that minimises the *static/moving confusion* on the simulated validation
+  drives (the share of visible static cells called moving plus the share of visible
+  moving cells called static, KITTI's label convention) corrects each seed's lean
+  (:func:`calibrate_offset`). It never turns an object cell into ground or back.
+* **The free-space rule** (:func:`~dstenv.segment.segmenters.free_space_veto`): no
+  obstacle where the current sweep saw free space (the input's seen-free channel,
+  ``fcn10+sensor`` and ``fcn10+sensor+past``).
+
+A decision is a small dict kept in the checkpoint (``"decision"``), so a decided network
+loads and scores anywhere a checkpoint does (:func:`decide_checkpoint`)::
+
+    {"moving_offset": float, "free_veto": bool, "chosen_on": str,
+     "confusion": {"offsets": [...], "values": [...]}}
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from dstenv.dst.frame import CLASSES
+
+__all__ = ["OFFSETS", "SENSOR_INPUTS", "check_decision", "apply_decision", "offset_confusion",
+           "calibrate_offset", "decide_checkpoint"]
+
+#: candidate static/moving offsets [logits]
+OFFSETS: tuple[float, ...] = tuple(float(x) for x in np.round(np.arange(-4.0, 4.001, 0.25), 2))
+#: inputs whose channel 10 is the current sweep's seen-free grid (the free-space rule)
+SENSOR_INPUTS: tuple[str, ...] = ("fcn10+sensor", "fcn10+sensor+past")
+_STATIC, _MOVING = CLASSES.index("static"), CLASSES.index("moving")
+_FREE_CHANNEL = 10
+
+
+def check_decision(decision: Any, inputs: str, where: str) -> dict[str, Any]:
+    """``decision`` checked against the network's ``inputs``; ``where`` names it in errors.
+
+    Raises:
+        ValueError: one line naming ``where`` and the fix.
+    """
+    if not isinstance(decision, Mapping):
+        raise ValueError(f"{where}: decision must be a dict with moving_offset and free_veto")
+    off, veto = decision.get("moving_offset"), decision.get("free_veto")
+    if isinstance(off, bool) or not isinstance(off, (int, float)) or not np.isfinite(off):
+        raise ValueError(f"{where}: decision.moving_offset must be a finite number, got {off!r}")
+    if not isinstance(veto, bool):
+        raise ValueError(f"{where}: decision.free_veto must be true or false, got {veto!r}")
+    if veto and inputs not in SENSOR_INPUTS:
+        raise ValueError(f"{where}: decision.free_veto needs the current sweep in the input "
+                         f"({' or '.join(SENSOR_INPUTS)}), this network reads {inputs!r}")
+    return {**decision, "moving_offset": float(off)}
+
+
+def apply_decision(logits: torch.Tensor, x: torch.Tensor,
+                   decision: Mapping[str, Any] | None) -> torch.Tensor:
+    """Classes from ``logits (B, 5, H, W)`` and the input ``x (B, C, H, W)`` under
+    ``decision`` (``None``: argmax): ``(B, H, W) int64``."""
+    from dstenv.segment.segmenters import free_space_veto
+
+    pred = logits.argmax(1)
+    if decision is None:
+        return pred
+    off = float(decision["moving_offset"])
+    if off != 0.0:
+        obj = (pred == _STATIC) | (pred == _MOVING)
+        moving = logits[:, _MOVING] + off > logits[:, _STATIC]
+        pred = torch.where(obj, torch.where(moving, _MOVING, _STATIC), pred)
+    if decision["free_veto"]:
+        pred = free_space_veto(pred, x[:, :5], x[:, _FREE_CHANNEL] > 0.5)
+    return pred
+
+
+def offset_confusion(segmenter: Any, dataset: Any, offsets: tuple[float, ...] = OFFSETS,
+                     batch_size: int = 8) -> np.ndarray:
+    """The static/moving confusion (module doc) of ``segmenter`` for each offset:
+    ``(len(offsets),) float64``.
+
+    Args:
+        segmenter: a :class:`~dstenv.segment.segmenters.TorchSegmenter`.
+        dataset: samples ``{"x", "labels", "visible"}`` with KITTI's label convention
+            (``ShardDataset(..., labels="kitti")``), the network's inputs.
+
+    Raises:
+        ValueError: no visible static or no visible moving cell in ``dataset``.
+    """
+    gaps: dict[int, list[np.ndarray]] = {_STATIC: [], _MOVING: []}
+    cells = {_STATIC: 0, _MOVING: 0}
+    for i in range(0, len(dataset), batch_size):
+        batch = [dataset[j] for j in range(i, min(i + batch_size, len(dataset)))]
+        x = torch.stack([torch.as_tensor(s["x"]) for s in batch])
+        y = torch.stack([torch.as_tensor(s["labels"]) for s in batch])
+        seen = torch.stack([torch.as_tensor(s["visible"]) for s in batch]).bool()
+        logits = segmenter.logits(x)
+        top = logits.argmax(1)
+        obj = (top == _STATIC) | (top == _MOVING)
+        gap = logits[:, _MOVING] - logits[:, _STATIC]
+        for cls in (_STATIC, _MOVING):
+            mask = (y == cls) & seen
+            cells[cls] += int(mask.sum())
+            gaps[cls].append(gap[mask & obj].numpy().astype(np.float64))
+    if not cells[_STATIC] or not cells[_MOVING]:
+        raise ValueError(f"no visible {'static' if not cells[_STATIC] else 'moving'} cell to "
+                         "choose a static/moving offset on")
+    g_s, g_m = (np.concatenate(gaps[c]) for c in (_STATIC, _MOVING))
+    return np.array([np.count_nonzero(g_s + off > 0) / cells[_STATIC]
+                     + np.count_nonzero(g_m + off <= 0) / cells[_MOVING] for off in offsets])
+
+
+def calibrate_offset(segmenter: Any, dataset: Any, offsets: tuple[float, ...] = OFFSETS
+                     ) -> tuple[float, np.ndarray]:
+    """The offset with the least static/moving confusion on ``dataset`` (the first, i.e.
+    the most negative, on ties) and the confusion of every offset."""
+    conf = offset_confusion(segmenter, dataset, offsets)
+    return float(offsets[int(np.argmin(conf))]), conf
+
+
+def decide_checkpoint(src: str | Path, dst: str | Path, dataset: Any, chosen_on: str,
+                      free_veto: bool = True) -> dict[str, Any]:
+    """Copy the checkpoint ``src`` to ``dst`` with a decision: the offset calibrated on
+    ``dataset`` (:func:`calibrate_offset`; named ``chosen_on`` in the checkpoint) and the
+    free-space rule if ``free_veto``. Returns the decision. ``dst`` is written
+    atomically; ``src`` is left as it is."""
+    from dstenv.segment.checkpoint import load_checkpoint, load_segmenter, save_checkpoint
+
+    seg = load_segmenter(src)
+    seg.decision = None  # calibrate the plain network, whatever src holds
+    off, conf = calibrate_offset(seg, dataset)
+    decision = check_decision({"moving_offset": off, "free_veto": bool(free_veto),
+                               "chosen_on": chosen_on,
+                               "confusion": {"offsets": list(OFFSETS),
+                                             "values": [round(float(c), 6) for c in conf]}},
+                              seg.inputs, str(src))
+    ckpt = load_checkpoint(src)
+    ckpt.pop("format", None)
+    ckpt.pop("version", None)
+    save_checkpoint(dst, {**ckpt, "decision": decision})
+    return decision

@@ -158,9 +158,17 @@ class ShardDataset(Dataset):
         self.class_counts = np.zeros(N_CLASSES, dtype=np.int64)
         folder = isinstance(root_or_files, (str, Path)) and Path(root_or_files).is_dir()
         first: tuple[Path, Any, Any] | None = None  # path, geometry, config
+        # generate and kitti convert write manifest.json last: without it, their run died
+        unfinished = folder and not (Path(root_or_files) / MANIFEST_NAME).is_file()
         for path, _ in _resolve_files(root_or_files, split):
             try:
                 with ShardReader(path) as r:
+                    if unfinished and (r.attrs.get("source") == "kitti" or "task" in r.attrs):
+                        made = "kitti convert" if "task" not in r.attrs else "generate"
+                        raise ValueError(
+                            f"{root_or_files}: no {MANIFEST_NAME}, but its shards come from "
+                            f"dstenv {made}, which writes it last: that run did not finish; "
+                            "rerun its command to complete the folder (or pass shard files)")
                     if split is not None and r.attrs.get("split") != split:
                         continue
                     if inputs == "masses" and not r.has_masses:

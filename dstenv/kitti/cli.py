@@ -113,10 +113,9 @@ def _leaf_diffs(old: Any, new: Any, at: str = "") -> list[tuple[str, Any, Any]]:
 
 def _convert(args: argparse.Namespace) -> int:
     from dstenv.config import CLIError
-    from dstenv.data.manifest import MANIFEST_NAME, scan_shards, shard_entry, write_manifest
-    from dstenv.data.shards import ShardWriter
-    from dstenv.dst import CLASSES
-    from dstenv.kitti.sequence import KittiSequence, convert_sequence, kitti_config
+    from dstenv.data.lock import DatasetLocked, dataset_lock
+    from dstenv.data.manifest import MANIFEST_NAME, scan_shards, write_manifest
+    from dstenv.kitti.sequence import KittiSequence, kitti_config
 
     out = Path(args.out)
     cfg = kitti_config(_overrides(args))
@@ -126,43 +125,69 @@ def _convert(args: argparse.Namespace) -> int:
     if foreign:
         raise CLIError(f"{out}: holds other shards ({foreign[0].relative_to(out)}); "
                        "choose an empty output directory")
-    # every sequence (and its map) is read before anything is written: a bad one in the
-    # list leaves no shard of the good ones without a manifest
+    # every sequence (and its map) is read, and every check made, before anything is
+    # written; the old manifest goes first and the new one comes last, so a run that
+    # dies half-way leaves a folder that readers refuse until the command is rerun
     seqs = [KittiSequence(args.root, name) for name in args.sequences]
     maps = [_gis(args, seq) for seq in seqs]
-    entries = []
-    for seq, (gis_fn, note) in zip(seqs, maps, strict=True):
-        print(f"sequence {seq.name}: {seq.n_frames} frames, DST every {cfg['update_every']}, "
-              f"keep every {cfg['stride']} from {cfg['warmup']}, labels {cfg['labels']['rule']}; "
-              f"{note}")
-        skipped: list[str] = []
+    plans = []
+    for seq in seqs:
         path = out / args.split / f"kitti-{seq.name}.h5"
         attrs = {
             "config": cfg, "seed": int(seq.name), "split": args.split, "source": "kitti",
             "sequence": seq.name, "root": str(Path(args.root).resolve()),
             "map": str(Path(args.osm).resolve()) if args.osm else "none",
         }
-        if cfg["warmup"] >= seq.n_frames:  # before any file or folder is made
+        if cfg["warmup"] >= seq.n_frames:
             raise CLIError(f"sequence {seq.name}: --warmup {cfg['warmup']} is past its "
                            f"{seq.n_frames} frames")
         _same_conversion(path, attrs, args.masses)
-        with ShardWriter(path, attrs, masses=args.masses) as writer:
-            for frame in convert_sequence(seq, cfg, gis_fn, skipped):
-                writer.add(frame)
-            if writer.n_frames == 0:
-                raise CLIError(f"sequence {seq.name}: no usable frame ({len(skipped)} skipped)")
-        for msg in skipped:
-            print(f"  warning: {msg}")
-        entry = shard_entry(out, path)
-        entries.append(entry)
-        counts = dict(zip(CLASSES, entry["class_counts"], strict=True))
-        print(f"  wrote {path} ({writer.n_frames} frames; labelled cells: "
-              + ", ".join(f"{k} {v}" for k, v in counts.items()) + ")")
-    meta = {"command": "kitti convert", "root": str(args.root), "sequences": args.sequences,
-            "osm": args.osm or None, "config": cfg}
-    write_manifest(out, entries, meta)
+        plans.append((path, attrs))
+    try:
+        with dataset_lock(out):
+            (out / MANIFEST_NAME).unlink(missing_ok=True)
+            entries = [_write_sequence(seq, cfg, gis_fn, note, path, attrs, args.masses, out)
+                       for seq, (gis_fn, note), (path, attrs) in zip(seqs, maps, plans,
+                                                                     strict=True)]
+            meta = {"command": "kitti convert", "root": str(args.root),
+                    "sequences": args.sequences, "osm": args.osm or None, "config": cfg}
+            write_manifest(out, entries, meta)
+    except DatasetLocked as exc:
+        raise CLIError(f"{out}: another run writes into it ({exc}); wait for it or use "
+                       "another --out") from None
     print(f"wrote {out / MANIFEST_NAME}")
     return 0
+
+
+def _write_sequence(seq: Any, cfg: dict[str, Any], gis_fn: Any, note: str, path: Path,
+                    attrs: dict[str, Any], masses: bool, out: Path) -> dict[str, Any]:
+    """Convert one sequence into its shard; returns its manifest entry."""
+    from dstenv.config import CLIError
+    from dstenv.data.manifest import shard_entry
+    from dstenv.data.shards import ShardWriter
+    from dstenv.dst import CLASSES
+    from dstenv.kitti.sequence import convert_sequence
+
+    print(f"sequence {seq.name}: {seq.n_frames} frames, DST every {cfg['update_every']}, "
+          f"keep every {cfg['stride']} from {cfg['warmup']}, labels {cfg['labels']['rule']}; "
+          f"{note}")
+    skipped: list[str] = []
+    with ShardWriter(path, attrs, masses=masses) as writer:
+        for frame in convert_sequence(seq, cfg, gis_fn, skipped):
+            writer.add(frame)
+        if writer.n_frames == 0:
+            raise CLIError(f"sequence {seq.name}: no usable frame ({len(skipped)} skipped)")
+    for msg in [*seq.notes, *skipped]:
+        print(f"  warning: {msg}")
+    entry = shard_entry(out, path)
+    counts = dict(zip(CLASSES, entry["class_counts"], strict=True))
+    if not sum(counts.values()):  # not even the ground it saw: a broken pose or calibration
+        path.unlink()
+        raise CLIError(f"sequence {seq.name}: no labelled cell in {writer.n_frames} frames; "
+                       "check its calib (Tr_velo_cam) and oxts files")
+    print(f"  wrote {path} ({writer.n_frames} frames; labelled cells: "
+          + ", ".join(f"{k} {v}" for k, v in counts.items()) + ")")
+    return entry
 
 
 def _render(args: argparse.Namespace) -> int:

@@ -34,6 +34,7 @@ __all__ = [
 #: Object types of the tracking labels, in the devkit's order; index = ``Labels.type``.
 OBJECT_TYPES: tuple[str, ...] = (
     "Car", "Van", "Truck", "Pedestrian", "Person_sitting", "Cyclist", "Tram", "Misc", "DontCare",
+    "Person",  # in the tracking labels beside the devkit's list (TrackEval: person sitting)
 )
 DONTCARE: int = OBJECT_TYPES.index("DontCare")
 
@@ -144,7 +145,8 @@ def read_velodyne(path: str | Path) -> np.ndarray:
         (x forward, y left, z up) [m].
 
     Raises:
-        KittiError: missing file, or a size that is not a whole number of points.
+        KittiError: missing file, a size that is not a whole number of points,
+            non-finite or implausibly far coordinates, reflectance outside [0, 1].
     """
     path = Path(path)
     try:
@@ -170,12 +172,16 @@ def read_velodyne(path: str | Path) -> np.ndarray:
         raise KittiError(f"{path}: point {k} lies {float(np.abs(points[k, :3]).max()):.3g} m "
                          f"from the sensor (an HDL-64E sees {MAX_COORDINATE:g} m at most): a "
                          "damaged scan")
+    refl = points[:, 3]
+    if not (np.isfinite(refl).all() and refl.min() >= 0.0 and refl.max() <= 1.0):
+        raise KittiError(f"{path}: reflectance outside [0, 1] (KITTI stores x, y, z, "
+                         "reflectance as 4 float32 a point): not a KITTI Velodyne scan")
     return points
 
 
 def _read_lines(path: Path, what: str) -> list[str]:
     try:
-        return path.read_text().splitlines()
+        return path.read_text(encoding="utf-8-sig").splitlines()  # a BOM is not a key
     except FileNotFoundError:
         raise KittiError(f"{path}: missing {what} file") from None
     except (OSError, UnicodeDecodeError) as exc:
@@ -198,6 +204,8 @@ def read_labels(path: str | Path) -> Labels:
     """
     path = Path(path)
     rows: list[tuple[int, int, int, np.ndarray]] = []
+    lines: list[int] = []  # the file line of each row
+    seen: dict[tuple[int, int], int] = {}  # (frame, track) -> line
     for lineno, line in enumerate(_read_lines(path, "label"), start=1):
         tok = line.split()
         if not tok:
@@ -214,9 +222,18 @@ def read_labels(path: str | Path) -> Labels:
             raise KittiError(f"{path}:{lineno}: frame and track id must be integers") from None
         if frame < 0:
             raise KittiError(f"{path}:{lineno}: negative frame index {frame}")
+        if tok[2] != "DontCare":  # DontCare regions carry track -1; objects a track each
+            if track < 0:
+                raise KittiError(f"{path}:{lineno}: negative track id {track} on a "
+                                 f"{tok[2]} (only DontCare rows have -1)")
+            if (frame, track) in seen:
+                raise KittiError(f"{path}:{lineno}: track {track} appears twice in frame "
+                                 f"{frame} (also line {seen[frame, track]})")
+            seen[frame, track] = lineno
         rows.append((frame, track, OBJECT_TYPES.index(tok[2]), _floats(tok[3:17], path, lineno)))
+        lines.append(lineno)
     vals = np.array([r[3] for r in rows], dtype=np.float64).reshape(-1, 14)
-    _check_boxes(path, vals, [r[2] for r in rows])
+    _check_boxes(path, vals, [r[2] for r in rows], lines)
     return Labels(
         frame=np.array([r[0] for r in rows], dtype=np.int64),
         track=np.array([r[1] for r in rows], dtype=np.int64),
@@ -233,21 +250,26 @@ _MAX_HWL = (6.0, 6.0, 30.0)
 _MAX_DISTANCE = 500.0
 
 
-def _check_boxes(path: Path, vals: np.ndarray, types: list[int]) -> None:
-    """Reject non-finite or absurd boxes (DontCare rows carry the -1/-1000/-10 fillers)."""
+def _check_boxes(path: Path, vals: np.ndarray, types: list[int], lines: list[int]) -> None:
+    """Reject non-finite or absurd boxes (DontCare rows carry the -1/-1000/-10 fillers);
+    ``lines``: each row's line in the file."""
     dontcare = OBJECT_TYPES.index("DontCare")
     for i, row in enumerate(vals):
         if not np.isfinite(row).all():
-            raise KittiError(f"{path}: label row {i + 1}: non-finite value; a corrupt label file")
+            raise KittiError(f"{path}:{lines[i]}: non-finite value; a corrupt label file")
         if types[i] == dontcare:
             continue
         hwl, loc = row[7:10], row[10:13]
         if (hwl <= 0).any() or (hwl > _MAX_HWL).any():
-            raise KittiError(f"{path}: label row {i + 1}: implausible box size h, w, l = "
+            raise KittiError(f"{path}:{lines[i]}: implausible box size h, w, l = "
                              f"{hwl.tolist()} m (allowed (0, {_MAX_HWL}] m)")
         if np.abs(loc).max() > _MAX_DISTANCE:
-            raise KittiError(f"{path}: label row {i + 1}: box {loc.tolist()} m away from the "
+            raise KittiError(f"{path}:{lines[i]}: box {loc.tolist()} m away from the "
                              f"camera (more than {_MAX_DISTANCE:g} m)")
+
+
+#: the farthest two sensors of one car are apart in a calibration [m]
+_MAX_MOUNT = 5.0
 
 
 def _check_rotation(path: Path, name: str, m: np.ndarray) -> None:
@@ -258,6 +280,10 @@ def _check_rotation(path: Path, name: str, m: np.ndarray) -> None:
     if not np.allclose(r @ r.T, np.eye(3), atol=2e-2) or not abs(np.linalg.det(r) - 1) < 2e-2:
         raise KittiError(f"{path}: {name} is not a rotation (+ translation); a corrupt or "
                          "hand-edited calibration file")
+    if m.shape[1] == 4 and np.abs(m[:3, 3]).max() > _MAX_MOUNT:
+        raise KittiError(f"{path}: {name} translates by {m[:3, 3].round(3).tolist()} m, more "
+                         f"than {_MAX_MOUNT:g} m between two sensors of one car (translations "
+                         "are metres)")
 
 
 def _pad4(m: np.ndarray) -> np.ndarray:
@@ -331,7 +357,8 @@ def read_oxts(path: str | Path) -> np.ndarray:
 
     Raises:
         KittiError: missing or empty file, wrong column count, non-numbers,
-            latitudes outside [-90, 90], a jump of more than 11 m between rows.
+            latitudes outside [-90, 90], roll or pitch beyond +-pi/2 or yaw beyond
+            +-pi (degrees for radians), a jump of more than 11 m between rows.
     """
     path = Path(path)
     rows = []
@@ -344,6 +371,10 @@ def read_oxts(path: str | Path) -> np.ndarray:
         row = _floats(tok, path, lineno)
         if not np.isfinite(row[:6]).all() or abs(row[0]) >= 90.0:
             raise KittiError(f"{path}:{lineno}: invalid latitude/longitude/attitude")
+        if max(abs(row[3]), abs(row[4])) > np.pi / 2 or abs(row[5]) > np.pi + 1e-6:
+            raise KittiError(f"{path}:{lineno}: roll, pitch, yaw = {row[3]:g}, {row[4]:g}, "
+                             f"{row[5]:g}: outside +-pi/2, +-pi/2, +-pi (OXTS angles are "
+                             "radians)")
         if rows:
             jump = _ground_distance(rows[-1], row)
             if jump > _MAX_STEP:

@@ -133,6 +133,7 @@ class KittiSequence:
         name: the 4-digit sequence name.
         calib, trajectory, labels, boxes, world_xy: parsed files (see the readers).
         n_frames: number of OXTS rows (frames with a pose).
+        notes: what the files leave out (scans past the OXTS rows, an empty label file).
 
     Raises:
         KittiError: a missing or malformed sequence file, or labels for frames
@@ -164,6 +165,15 @@ class KittiSequence:
             )
         self.boxes = boxes_in_velodyne(self.labels, self.calib)
         self.world_xy = world_centres(self.boxes, self.trajectory)
+        #: what the files leave out, for the user (scans without a pose, no label at all)
+        self.notes: list[str] = []
+        scans = sum(1 for p in (self.split / "velodyne" / self.name).glob("*.bin")
+                    if p.stem.isdigit() and int(p.stem) >= self.n_frames)
+        if scans:
+            self.notes.append(f"sequence {self.name}: {scans} scans past the OXTS file's "
+                              f"{self.n_frames} rows have no pose and are not used")
+        if not len(self.labels):
+            self.notes.append(f"{label_path}: no object labelled in any frame")
 
     def scan_path(self, frame: int) -> Path:
         """Path of one frame's Velodyne scan."""

@@ -22,10 +22,9 @@ def _json_arg(text: str) -> dict[str, Any]:
 
 
 def _sequence_list(text: str) -> list[str]:
-    names = [s.strip() for s in text.split(",") if s.strip()]
-    if not names:
-        raise argparse.ArgumentTypeError("expected a comma-separated list like 0003,0005")
-    return names
+    from dstenv.kitti.cli import _sequences  # one rule for sequence names: 3 -> 0003
+
+    return _sequences(text)
 
 
 def _apart(out: str | None, data: str | None) -> None:
@@ -256,6 +255,13 @@ def _check_kitti_flags(args: argparse.Namespace) -> None:
         raise CLIError(f"--osm {args.osm}: no such file")
     if args.finetune_frames is not None and args.finetune_frames < 0:
         raise CLIError(f"--finetune-frames must be >= 0, got {args.finetune_frames}")
+    from dstenv.kitti.sequence import KittiSequence
+
+    for name in args.sequences:  # the real drives are read now, not after the simulated run
+        try:
+            KittiSequence(args.kitti, name)
+        except (OSError, ValueError) as exc:
+            raise CLIError(f"--kitti {args.kitti}: {exc}") from None
 
 
 def _benchmark(args: argparse.Namespace) -> int:

@@ -65,6 +65,7 @@ def convert_sequences(root: str, sequences: Sequence[str], osm: str | None, data
     from dstenv.config import CLIError
 
     if (data / "manifest.json").is_file():
+        _same_drives(root, sequences, osm, data)
         return
     args = ["kitti", "convert", "--root", str(root), "--sequences", ",".join(sequences),
             "--stride", "1", "--warmup", "0", "--out", str(data)]
@@ -72,6 +73,23 @@ def convert_sequences(root: str, sequences: Sequence[str], osm: str | None, data
         args += ["--osm", str(osm)]
     if main(args) != 0:
         raise CLIError(f"--kitti {root}: converting sequences {','.join(sequences)} failed")
+
+
+def _same_drives(root: str, sequences: Sequence[str], osm: str | None, data: Path) -> None:
+    """Refuse a conversion in ``data`` of other drives (another root, sequences or map)."""
+    from dstenv.config import CLIError
+    from dstenv.data.manifest import load_manifest
+
+    meta = load_manifest(data, verify="none").get("meta", {})
+    here = (str(Path(meta.get("root") or "").resolve()), list(meta.get("sequences") or []),
+            str(Path(meta["osm"]).resolve()) if meta.get("osm") else None)
+    want = (str(Path(root).resolve()), [f"{int(s):04d}" if str(s).isdigit() else str(s)
+                                        for s in sequences],
+            str(Path(osm).resolve()) if osm else None)
+    if here != want:
+        said = (f"{here[0]} sequences {','.join(here[1])}, map {here[2] or 'none'}")
+        raise CLIError(f"{data} holds the drives of another --kitti run ({said}); use "
+                       "another --out, or remove that folder to convert these")
 
 
 def start_scores(ckpts: Mapping[str, Path], ds: Any, picked: Sequence[int]

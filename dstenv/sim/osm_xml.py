@@ -94,7 +94,11 @@ def parse_osm(path: Path) -> tuple[dict, list, list, tuple | None]:
             for _, el in ET.iterparse(fh, events=("end",)):
                 tag = el.tag
                 if tag == "node":
-                    nodes[int(el.get("id"))] = (float(el.get("lat")), float(el.get("lon")))
+                    lat, lon = float(el.get("lat")), float(el.get("lon"))
+                    if not (abs(lat) < 90.0 and abs(lon) <= 180.0):  # NaN fails too
+                        raise ValueError(f"node {el.get('id')}: lat, lon = {lat}, {lon} are "
+                                         "not coordinates in degrees")
+                    nodes[int(el.get("id"))] = (lat, lon)
                     if len(nodes) > OSM_LIMITS["nodes"]:
                         raise ValueError(f"{path}: more than {OSM_LIMITS['nodes']} nodes; "
                                          "cut a smaller extract")

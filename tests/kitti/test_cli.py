@@ -156,3 +156,67 @@ def test_a_root_one_level_too_deep_says_where_to_point(tiny_root, tmp_path, caps
                  "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "point the root at the folder that holds training/" in err
+
+
+def test_a_convert_that_dies_leaves_a_folder_readers_refuse(tiny_root, tmp_path, capsys):
+    from .conftest import make_sequence
+
+    make_sequence(tiny_root.parent / "k2", seq="0002")
+    for name in ("velodyne/0002", "calib/0002.txt", "oxts/0002.txt", "label_02/0002.txt"):
+        src = tiny_root.parent / "k2" / "training" / name
+        src.rename(tiny_root / "training" / name)
+    for scan in (tiny_root / "training" / "velodyne" / "0002").glob("*.bin"):
+        scan.write_bytes(b"")  # every scan of the second sequence is unusable
+    out = tmp_path / "o"
+    assert _convert(tiny_root, out) == 0  # 0001 alone: complete, with a manifest
+    assert main(["kitti", "convert", "--root", str(tiny_root), "--sequences", "0001,0002",
+                 "--stride", "2", "--warmup", "0", "--out", str(out)]) == 2
+    assert "sequence 0002: no usable frame" in capsys.readouterr().err
+    # the old manifest went first: 0001's shard alone is not taken for the dataset
+    assert not (out / "manifest.json").exists()
+    with pytest.raises(ValueError, match="no manifest.json, but its shards come from dstenv "
+                                         "kitti convert.*rerun its command"):
+        ShardDataset(out)
+    assert main(["kitti", "evaluate", "--data", str(out)]) == 2
+    assert "did not finish" in capsys.readouterr().err
+    assert _convert(tiny_root, out) == 0 and len(ShardDataset(out)) > 0  # rerun: complete
+
+
+def test_convert_warns_of_scans_without_a_pose_and_refuses_a_held_folder(tiny_root, tmp_path,
+                                                                         capsys):
+    from dstenv.data.lock import dataset_lock
+
+    oxts = tiny_root / "training" / "oxts" / "0001.txt"
+    rows = oxts.read_text().splitlines()
+    labels = tiny_root / "training" / "label_02" / "0001.txt"
+    labels.write_text("\n".join(r for r in labels.read_text().splitlines()
+                                if int(r.split()[0]) < 5) + "\n")
+    oxts.write_text("\n".join(rows[:5]) + "\n")
+    out = tmp_path / "o"
+    assert _convert(tiny_root, out) == 0
+    said = capsys.readouterr().out
+    assert "warning: sequence 0001: 1 scans past the OXTS file's 5 rows have no pose" in said
+    with dataset_lock(out):  # another live writer
+        assert _convert(tiny_root, out) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "another run writes into it" in err
+
+
+def test_benchmark_refuses_the_drives_of_another_kitti_run(tiny_root, tmp_path, capsys):
+    from dstenv.config import CLIError
+    from dstenv.segment.real import convert_sequences
+
+    data = tmp_path / "run" / "kitti" / "data"
+    convert_sequences(str(tiny_root), ["0001"], None, data)
+    convert_sequences(str(tiny_root) + "/", ["1"], None, data)  # the same drives: resumes
+    other = tmp_path / "elsewhere"
+    tiny_root.rename(other)
+    with pytest.raises(CLIError, match=r"holds the drives of another --kitti run \(.*kitti "
+                                       r"sequences 0001, map none\); use another --out"):
+        convert_sequences(str(other), ["0001"], None, data)
+    # a sequence the root lacks is named before the simulated benchmark runs
+    assert main(["benchmark", "--preset", "smoke", "--kitti", str(other), "--sequences",
+                 "0002", "--out", str(tmp_path / "b")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "0002: missing scan folder" in err
+    assert not (tmp_path / "b").exists()

@@ -70,8 +70,15 @@ def test_oxts_wrong_column_count_names_line():
 
 def test_velodyne_roundtrip_and_truncated(tmp_path):
     pts = np.arange(40, dtype=np.float32).reshape(10, 4)
+    pts[:, 3] = np.linspace(0.0, 1.0, 10)  # reflectance in [0, 1]
     pts.tofile(tmp_path / "000000.bin")
     np.testing.assert_array_equal(read_velodyne(tmp_path / "000000.bin"), pts)
+    # x, y, z only (12 bytes a point) whose size happens to be a multiple of 16: the
+    # fourth column is then a coordinate, out of reflectance's range
+    xyz = np.tile(np.array([5.0, -3.0, 2.5], np.float32), 8)
+    xyz.tofile(tmp_path / "xyz.bin")
+    with pytest.raises(KittiError, match=r"xyz\.bin: reflectance outside \[0, 1\]"):
+        read_velodyne(tmp_path / "xyz.bin")
     (tmp_path / "000001.bin").write_bytes(pts.tobytes()[:-6])  # 154 bytes
     msg = r"000001\.bin: 154 bytes is not a positive multiple of 16"
     with pytest.raises(KittiError, match=msg):
@@ -138,3 +145,68 @@ def test_calib_with_a_key_twice_names_both_lines(tmp_path):
     with pytest.raises(KittiError, match=rf"c\.txt:{len(lines) + 1}: P2 again \(first on line "):
         read_calib(tmp_path / "c.txt")
 
+
+
+def _label_file(tmp_path, rows):
+    path = tmp_path / "0001.txt"
+    path.write_text("\n".join(rows) + "\n")
+    return path
+
+
+_CAR = "0 0 0.0 500.0 150.0 700.0 250.0 1.5 1.7 4.2 2.0 1.6 10.0 -1.57"
+
+
+def test_labels_a_track_twice_in_one_frame_or_negative_is_named(tmp_path):
+    twice = _label_file(tmp_path, [f"3 2 Car {_CAR}", f"3 4 Van {_CAR}", f"3 2 Car {_CAR}"])
+    with pytest.raises(KittiError, match=r"0001\.txt:3: track 2 appears twice in frame 3 "
+                                         r"\(also line 1\)"):
+        read_labels(twice)
+    neg = _label_file(tmp_path, [f"3 -1 Car {_CAR}"])
+    with pytest.raises(KittiError, match=r"0001\.txt:1: negative track id -1 on a Car"):
+        read_labels(neg)
+    # DontCare regions share track -1, and one track in two frames is a track
+    ok = _label_file(tmp_path, [f"3 -1 DontCare {_CAR}", f"3 -1 DontCare {_CAR}",
+                                f"3 2 Car {_CAR}", f"4 2 Car {_CAR}"])
+    assert read_labels(ok).track.tolist() == [-1, -1, 2, 2]
+
+
+def test_labels_person_bom_and_the_line_of_a_bad_box(tmp_path):
+    lab = _label_file(tmp_path, [f"0 1 Person {_CAR}"])
+    lab.write_bytes(b"\xef\xbb\xbf" + lab.read_bytes())  # a UTF-8 byte-order mark
+    got = read_labels(lab)
+    assert OBJECT_TYPES[int(got.type[0])] == "Person" and got.frame.tolist() == [0]
+    big = _CAR.replace("1.5 1.7 4.2", "1.5 1.7 42.0")
+    bad = _label_file(tmp_path, [f"0 1 Car {_CAR}", "", "", f"1 1 Car {big}"])
+    with pytest.raises(KittiError, match=r"0001\.txt:4: implausible box size"):
+        read_labels(bad)
+
+
+def test_oxts_angles_in_degrees_are_named(tmp_path):
+    row = ["49.0", "8.4", "110.0", "0.01", "0.02", "1.2"] + ["0"] * 24
+    good = tmp_path / "good.txt"
+    good.write_text(" ".join(row) + "\n")
+    assert read_oxts(good).shape == (1, 30)
+    deg = tmp_path / "deg.txt"
+    deg.write_text(" ".join(row[:5] + ["68.75"] + row[6:]) + "\n")
+    with pytest.raises(KittiError, match=r"deg\.txt:1: roll, pitch, yaw = .* radians"):
+        read_oxts(deg)
+
+
+def test_calib_translation_in_centimetres_is_named(tmp_path):
+    text = (FIXTURES / "calib_colons.txt").read_text()
+    lines = []
+    for line in text.splitlines():
+        if line.startswith("Tr_velo_cam"):
+            key, vals = line.split(":", 1)
+            v = [float(x) for x in vals.split()]
+            v[3], v[7], v[11] = v[3] * 100, v[7] * 100, v[11] * 100
+            line = f"{key}: " + " ".join(str(x) for x in v)
+        lines.append(line)
+    cm = tmp_path / "calib.txt"
+    cm.write_text("\n".join(lines) + "\n")
+    with pytest.raises(KittiError, match=r"calib\.txt: Tr_velo_cam translates by .* "
+                                         r"\(translations are metres\)"):
+        read_calib(cm)
+    bom = tmp_path / "bom.txt"
+    bom.write_bytes(b"\xef\xbb\xbf" + text.encode())
+    np.testing.assert_array_equal(read_calib(bom).Tr_velo_cam, TR_VELO_CAM)

@@ -100,6 +100,8 @@ def png_path(path: str | Path, option: str = "--out") -> Path:
     out = Path(path)
     if out.suffix.lower() != ".png":
         raise ValueError(f"{option} {out}: the picture is a PNG; give a name ending in .png")
+    if out.is_dir():  # before any work, not when the picture is written
+        raise ValueError(f"{option} {out}: is a directory; give a file name ending in .png")
     return out
 
 

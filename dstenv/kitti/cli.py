@@ -208,6 +208,9 @@ def _render(args: argparse.Namespace) -> int:
     over.update(warmup=args.frame, stride=every * 10**6)  # keep exactly this frame
     cfg = kitti_config(over)
     seq = KittiSequence(args.root, args.sequence)
+    if args.frame >= seq.n_frames:  # before converting the frames up to it
+        raise CLIError(f"--frame {args.frame}: sequence {seq.name} has {seq.n_frames} frames "
+                       f"(0 .. {seq.n_frames - 1})")
     gis_fn, note = _gis(args, seq)
     frame = None
     for fr in convert_sequence(seq, cfg, gis_fn):

@@ -157,6 +157,9 @@ class KittiSequence:
         self.trajectory = oxts_to_trajectory(oxts, self.calib.Tr_imu_velo)
         self.n_frames = len(oxts)
         label_path = self.split / "label_02" / f"{self.name}.txt"
+        if not label_path.is_file() and self.split.name == "testing":
+            raise KittiError(f"{label_path}: missing; KITTI's testing split has no labels "
+                             "(point --root at the training split)")
         self.labels = read_labels(label_path)
         if len(self.labels) and self.labels.frame.max() >= self.n_frames:
             raise KittiError(

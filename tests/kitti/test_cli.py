@@ -106,7 +106,7 @@ def test_render_and_evaluate(tiny_root, tmp_path, capsys):
     assert "--frame must be a frame number >= 0, got -1" in capsys.readouterr().err
     assert main(["kitti", "render", "--root", str(tiny_root), "--sequence", "1", "--frame", "9",
                  "--out", str(png)]) == 2
-    assert "frame 9 was not converted" in capsys.readouterr().err
+    assert "--frame 9: sequence 0001 has 6 frames (0 .. 5)" in capsys.readouterr().err
     assert main(["kitti", "render", "--root", str(tiny_root), "--sequence", "1", "--frame", "3",
                  "--out", str(tmp_path / "f.jpg")]) == 2
     assert "give a name ending in .png" in capsys.readouterr().err
@@ -220,3 +220,11 @@ def test_benchmark_refuses_the_drives_of_another_kitti_run(tiny_root, tmp_path, 
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "0002: missing scan folder" in err
     assert not (tmp_path / "b").exists()
+
+
+def test_render_into_a_folder_is_refused_before_converting(tiny_root, tmp_path, capsys):
+    (tmp_path / "pic.png").mkdir()
+    assert main(["kitti", "render", "--root", str(tiny_root), "--sequence", "1", "--frame", "3",
+                 "--out", str(tmp_path / "pic.png")]) == 2
+    err = capsys.readouterr()
+    assert "pic.png: is a directory" in err.err and "sequence 0001" not in err.out

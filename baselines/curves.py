@@ -32,7 +32,8 @@ class Args:
     reference: list[str] = opt([], "evaluation CSVs: policy rates drawn as lines")
     bin: int = opt(2000, "[env steps] width of a bin")
     max_steps: int = opt(0, "[env steps] plot up to here; 0 = the shortest run")
-    out: str = opt("baselines/learning_curves.png", "output PNG")
+    out: str = opt("runs/learning_curves.png", "output PNG (the committed figures in "
+                                                "baselines/ are written only when named)")
 
 
 def binned_rates(path: str | Path, width: int, max_steps: int) -> dict[str, np.ndarray]:

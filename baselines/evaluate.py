@@ -104,8 +104,10 @@ class PPOPolicy:
                    else "PPO")
         # ppo_grid.py names every run's weights model.pt: the run folder tells them apart
         stem = self.path.parent.name if self.path.stem == "model" else self.path.stem
-        self.name = f"{learner} {extractor} ({stem})" + (
-            f" T={self.temperature:g}" if self.temperature > 0 else "")
+        residual = self.meta["args"].get("residual")  # the policy drives on top of a rule
+        self.name = f"{learner} {extractor}" + (f" + residual {residual}" if residual else "") \
+            + f" ({stem})" + (f" T={self.temperature:g}" if self.temperature > 0 else
+                              " sampled" if not deterministic else "")
         self.model: Any = None
         self.rng = np.random.default_rng(0)
         from dstenv.segment.checkpoint import read_weights
@@ -271,11 +273,19 @@ def run(args: Args, command: str) -> str:
     for name in args.policies:  # names, then every checkpoint (file, sidecar, weights,
         if name != "random" and name not in DRIVERS:  # temperature): before any episode
             raise ValueError(f"--policies: unknown policy {name!r}; known: {', '.join(POLICIES)}")
+    refs: dict[str, tuple[Any, gym.Env]] = {}
+    for name in args.policies:  # each driver on this env; the defaults only where they can
+        try:
+            refs[name] = _reference(name, args)
+        except ValueError as exc:
+            if args.policies != Args().policies:
+                raise
+            print(f"note: default policy {name} left out on this env: {exc}")
     if args.write_readme:
         _readme_parts(args.readme)
     ppo = {path: PPOPolicy(path, args.deterministic, args.temperature)
            for path in args.checkpoints}
-    jobs: list[tuple[Any, Any, bool]] = [(name, None, False) for name in args.policies]
+    jobs: list[tuple[Any, Any, bool]] = [(name, None, False) for name in refs]
     jobs += [(None, path, False) for path in args.checkpoints]
     if args.shield:
         check_shield(args.shield)  # before any episode
@@ -283,7 +293,7 @@ def run(args: Args, command: str) -> str:
         jobs += [(name, path, True) for name, path, _ in jobs if name != "autopilot"]
     for name, path, shield in jobs:
         if path is None:
-            policy, env = _reference(name, args)
+            policy, env = refs.pop(name) if name in refs else _reference(name, args)
             meta = None
         else:
             policy = ppo[path]

@@ -15,21 +15,19 @@ steering, target speed, next junction, "route": the route ahead}``
 * ``combined``: stable-baselines3's own ``MultiInputPolicy`` extractor (NatureCNN on
   the grid), out of the box.
 
-With ``--residual grid`` the policy drives on top of the grid rule driver
-(:mod:`residual`): one more action, ``0`` = the rule driver's, and the fresh policy
-starts as the rule driver. With ``--critic privileged`` the critic also reads the
-nearest road users' ground truth, the actor still the observation only
-(:mod:`privileged`, an asymmetric actor-critic).
+With ``--residual grid`` the policy drives on top of the grid rule driver (:mod:`residual`):
+one more action, ``0`` = the rule driver's, and the fresh policy starts as it. With
+``--critic privileged`` the critic also reads the nearest road users' ground truth, the
+actor the observation only (:mod:`privileged`, an asymmetric actor-critic).
 
-Training uses several envs in parallel (``--n-envs``) drawing episodes from a pool of
-maps (``--map-pool``); ``evaluate.py`` runs on fresh maps of held-out seeds. The budget
-is a number of env steps (``--total-timesteps``), never wall time.
+Training runs ``--n-envs`` envs drawing episodes from a pool of maps (``--map-pool``);
+``evaluate.py`` runs on fresh maps of held-out seeds. The budget is env steps, not time.
 
 Outputs in ``--out``: ``model.pt`` (the policy's ``state_dict``, loaded back with
 ``torch.load(weights_only=True)``: no pickled code), ``model.json`` (arguments,
 timesteps, wall time, machine), ``progress.csv`` (stable-baselines3's log),
-``episodes.csv`` (one row per finished training episode: the learning curve) and,
-with ``--tensorboard``, tensorboard event files. Run::
+``episodes.csv`` (one row per finished training episode: the learning curve), with
+``--tensorboard`` event files. Run::
 
     python baselines/ppo_grid.py --total-timesteps 200000 --n-envs 2 --out runs/ppo_grid
 """
@@ -110,10 +108,13 @@ class Args(EnvArgs):
                           "privileged-vectors: that truth, ego and route, no grid")
     anchor: bool = opt(False, "with --warm-start: PPO's entropy bonus becomes a KL penalty "
                               "to the warm-started policy (anchor.py), --ent-coef its weight")
-    checkpoint_every: int = opt(10_000, "save the model every this many steps; 0: at the end")
+    checkpoint_every: int = opt(10_000, "save the model every this many steps (before the "
+                                        "update of the rollout reaching them); 0: at the end")
     keep_checkpoints: bool = opt(False, "keep every checkpoint as model_<steps>.pt (+ .json) "
                                         "beside model.pt, which each one overwrites; with "
-                                        "--warm-start also the policy right after it")
+                                        "--warm-start also the policy right after it "
+                                        "(model_N.pt = the end of a run of R x (ceil(N / R) "
+                                        "- 1) steps, R = n_steps x n_envs)")
     tensorboard: bool = opt(False, "also log to tensorboard (needs the tensorboard extra)")
     out: str = opt("runs/ppo_grid", "output directory")
     verbose: int = opt(1, "0: quiet, 1: stable-baselines3 log table on stdout")
@@ -151,9 +152,8 @@ class TrainingLog(BaseCallback):
             ep = info.get("episode")
             if ep is not None:
                 self.write_episode(self.offset + self.num_timesteps, rank, ep, "ppo")
-        every = self.args.checkpoint_every
-        if every > 0 and self.num_timesteps - self._last_ckpt >= every:
-            self._last_ckpt = self.num_timesteps
+        if 0 < self.args.checkpoint_every <= self.num_timesteps - self._last_ckpt:
+            self._last_ckpt = self.num_timesteps  # mid-rollout: before this rollout's update
             self.checkpoint(self.model)
         return True
 
@@ -386,8 +386,8 @@ def train(args: Args) -> tuple[PPO, dict[str, Any]]:
     finally:
         env.close()
     meta = json.loads((out / "model.json").read_text())
-    print(f"saved {out / 'model.pt'}: {meta['timesteps']} steps in {meta['wall_time_s']} s "
-          f"({meta['timesteps'] / max(meta['wall_time_s'], 1e-9):.1f} steps/s)")
+    n, wall = meta.get("env_steps", meta["timesteps"]), meta["wall_time_s"]  # warm start too
+    print(f"saved {out / 'model.pt'}: {n} env steps in {wall} s ({n / max(wall, 1e-9):.1f}/s)")
     return model, meta
 
 

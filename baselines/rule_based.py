@@ -117,9 +117,9 @@ class GridRuleDriver:
         self.give_way_moving = give_way_moving
         self.give_way_ahead, self.give_way_side = give_way_ahead, give_way_side
 
-    def reset(self, env: gym.Env, seed: int) -> None:
-        from dstenv.envs.navigation import EGO_FEATURES, JUNCTION_RANGE, SPEED_SCALE
-
+    @staticmethod
+    def check(env: gym.Env) -> None:
+        """Refuse an env this driver cannot drive (before any episode)."""
         cfg = env.unwrapped.config
         obs_cfg = cfg["observation"]
         if obs_cfg["type"] != "dict" or obs_cfg["grid"] != "image":
@@ -129,6 +129,13 @@ class GridRuleDriver:
                 env.unwrapped.get_action_meanings()[:3] != ["SLOWER", "IDLE", "FASTER"]:
             raise ValueError(f"GridRuleDriver: needs the speed or discrete meta-actions, not "
                              f"action.type {kind!r}")
+
+    def reset(self, env: gym.Env, seed: int) -> None:
+        from dstenv.envs.navigation import EGO_FEATURES, JUNCTION_RANGE, SPEED_SCALE
+
+        self.check(env)
+        cfg = env.unwrapped.config
+        obs_cfg = cfg["observation"]
         self.speeds = np.asarray(cfg["action"]["target_speeds"], np.float64)
         self.cell = float(cfg["grid"]["cell_size"])
         self.shape = (int(cfg["grid"]["height"]), int(cfg["grid"]["width"]))
@@ -347,12 +354,18 @@ def shielded(policy: Any, shield: str) -> SlowerOf:
 
 def reference_driver(name: str, args: EnvArgs, constant_action: int = 2) -> tuple[Any, gym.Env]:
     """A reference driver by name and the env it drives."""
-    if name in ("grid", "grid-tuned"):
-        return grid_driver(name == "grid-tuned"), make_env(args)
+    if name in ("grid", "grid-tuned", "constant"):  # each checks its env before an episode
+        env = make_env(args)
+        policy = (ConstantPolicy(constant_action) if name == "constant" else
+                  grid_driver(name == "grid-tuned"))
+        try:
+            policy.reset(env, 0) if name == "constant" else GridRuleDriver.check(env)
+        except ValueError:
+            env.close()
+            raise
+        return policy, env
     if name == "autopilot":
         return AutopilotPolicy(), make_env(args, AUTOPILOT_CONFIG)
-    if name == "constant":
-        return ConstantPolicy(constant_action), make_env(args)
     if name in ("advice", "cautious"):
         return (AdvicePolicy() if name == "advice" else CautiousDriver()), make_env(
             args, ADVICE_CONFIG)

@@ -227,8 +227,7 @@ ACTIONS: Registry[ActionMode] = Registry("mode", "action.type", {
     "discrete": ActionMode("discrete", META_ACTIONS, {"city": _CityMeta, "highway": _HighwayMeta}),
     "speed": ActionMode("speed", SPEED_ACTIONS, {"city": _CityMeta, "highway": _HighwayMeta}),
     "continuous": ActionMode("continuous", (), {"city": _Continuous, "highway": _Continuous}),
-    "autopilot": ActionMode("autopilot", ("AUTOPILOT",),
-                            {"city": _Autopilot, "highway": _Autopilot}),
+    "autopilot": ActionMode("autopilot", ("AUTOPILOT",), {"city": _Autopilot}),
 })
 
 
@@ -244,8 +243,9 @@ def highway_settings(cfg: Mapping[str, Any]) -> dict[str, Any]:
 
     Raises:
         ConfigError: speeds that do not increase; on ``source = "highway"``:
-            ``info.autopilot``, ``initial_speed_index`` or ``speed_gain`` (city only),
-            fewer than two speeds, or ``action`` and ``highway`` speeds that differ.
+            ``info.autopilot``, ``action.type = "autopilot"``, ``initial_speed_index``
+            or ``speed_gain`` (city only), fewer than two speeds, or ``action`` and
+            ``highway`` speeds that differ.
     """
     from dstenv.sim.highway import default_config as highway_defaults
 
@@ -262,6 +262,10 @@ def highway_settings(cfg: Mapping[str, Any]) -> dict[str, Any]:
     if cfg["info"]["autopilot"]:
         raise ConfigError("config.info.autopilot: highway-env's world has no autopilot to "
                           "ask; use source 'city' or set info.autopilot = false")
+    if act["type"] == "autopilot":  # its IDLE keeps lane and speed: no driver of its own
+        raise ConfigError("config.action.type: 'autopilot' is the city world's driver; "
+                          "highway-env's world has none (use source 'city', or action.type "
+                          "'discrete' and IDLE to keep lane and speed)")
     mine = default_action_config()
     for key in ("initial_speed_index", "speed_gain"):
         if act[key] != mine[key]:

@@ -113,6 +113,16 @@ def observation_mode(name: str) -> ObservationMode:
     return OBSERVATIONS.get(name)
 
 
+def _known_type(c: dict[str, Any]) -> bool:
+    """``observation.type``: a grid mode or ``dict`` (the error names both kinds)."""
+    from dstenv.config import ConfigError
+
+    if c["type"] == "dict" or c["type"] in OBSERVATIONS:
+        return True
+    raise ConfigError(f"observation.type: unknown mode {c['type']!r}; known: "
+                      f"{', '.join([*OBSERVATIONS, 'dict'])}")
+
+
 def _section() -> "object":
     from dstenv.config import Section
 
@@ -123,8 +133,7 @@ def _section() -> "object":
         "route_points": between(0, 64),
         "route_spacing": between(0.0, 100.0, "m", lo_open=True),
     }, (
-        ("type", lambda c: c["type"] == "dict" or observation_mode(c["type"]) is not None,
-         "unknown mode"),
+        ("type", _known_type, "unknown mode"),
         ("grid", lambda c: observation_mode(c["grid"]) is not None, "unknown grid mode"),))
 
 

@@ -188,3 +188,20 @@ def test_an_imitation_checkpoint_is_named_for_its_learner():
     warm = PPOPolicy(root / "dagger_occluded_route_s0_100k.pt")  # saved before PPO's first step
     assert warm.name == "DAgger route-cnn (dagger_occluded_route_s0_100k)"
     assert PPOPolicy(root / "ppo_occluded_route_s0_450k.pt").name.startswith("PPO route-cnn")
+
+
+def test_default_policies_that_cannot_drive_the_env_are_left_out_with_a_note(capsys) -> None:
+    import json
+
+    import pytest
+    from conftest import SMALL_CONFIG
+
+    flags = ["--env-id", "DSTGrid-Continuous-v0", "--env-config", json.dumps(SMALL_CONFIG),
+             "--max-episode-steps", "5", "--episodes", "1"]
+    block = evaluate.main(flags)  # the defaults: random, grid, autopilot, constant
+    out = capsys.readouterr().out
+    assert "note: default policy grid left out on this env" in out
+    assert "note: default policy constant left out on this env" in out
+    assert "| random |" in block and "autopilot" in block and "rule-based" not in block
+    with pytest.raises(ValueError, match="not action.type 'continuous'"):  # named: refused
+        evaluate.main([*flags, "--policies", "grid"])

@@ -141,6 +141,25 @@ def test_norm_reward_scales_the_update_not_the_log(trained: dict, tmp_path) -> N
             for n in (32, 64)] == [32, 64]
 
 
+def test_a_kept_checkpoint_is_the_end_of_a_run_of_its_whole_rollouts_before(tmp_path) -> None:
+    """model_N.pt is saved within the rollout that reaches N, before its update: the end of
+    a run of R x (ceil(N / R) - 1) steps (R = 64 here), as --keep-checkpoints says."""
+    from conftest import SMALL_CONFIG
+
+    flags = [*TINY, "--env-config", json.dumps(SMALL_CONFIG), "--max-episode-steps", "30",
+             "--seed", "0"]
+    ppo_grid.main([*flags, "--total-timesteps", "192", "--checkpoint-every", "32",
+                   "--keep-checkpoints", "--out", str(tmp_path / "long")])
+    ppo_grid.main([*flags, "--out", str(tmp_path / "short")])  # 64 steps
+    kept = sorted(int(p.stem.split("_")[1]) for p in (tmp_path / "long").glob("model_*.pt"))
+    assert kept == [32, 64, 96, 128, 160, 192]
+    k96, k128, end = (torch.load(p, weights_only=True) for p in (
+        tmp_path / "long" / "model_96.pt", tmp_path / "long" / "model_128.pt",
+        tmp_path / "short" / "model.pt"))
+    assert all(torch.equal(k96[k], end[k]) and torch.equal(k128[k], end[k]) for k in end)
+    assert json.loads((tmp_path / "long" / "model_96.json").read_text())["timesteps"] == 96
+
+
 def test_norm_reward_refuses_a_warm_start(tmp_path) -> None:
     with pytest.raises(ValueError, match="--norm-reward with --warm-start"):
         ppo_grid.main([*TINY, "--norm-reward", "--warm-start", "grid", "--out", str(tmp_path)])

@@ -86,10 +86,17 @@ def test_info_reports_progress_success_and_termination_reason():
     ("autopilot", ["AUTOPILOT"]),
 ])
 def test_action_meanings_and_spaces_depend_on_the_type_only(kind, names):
-    for cfg in (SMALL_CITY, SMALL_HIGHWAY):
+    for cfg in (SMALL_CITY, SMALL_HIGHWAY) if kind != "autopilot" else (SMALL_CITY,):
         env = DSTGridEnv({**cfg, "action": {"type": kind}})
         assert env.get_action_meanings() == names
         assert env.action_space == gym.spaces.Discrete(len(names))
+
+
+def test_highway_has_no_autopilot_to_drive():
+    # its IDLE only keeps lane and speed: no 'autopilot' row that is IDLE by another name
+    with pytest.raises(ConfigError, match="config.action.type: 'autopilot' is the city world's "
+                                          "driver; highway-env's world has none"):
+        DSTGridEnv({**SMALL_HIGHWAY, "action": {"type": "autopilot"}})
 
 
 def test_continuous_has_no_meanings_and_turns_is_gone():

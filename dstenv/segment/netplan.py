@@ -115,7 +115,7 @@ def _no_map_network(cfg: Mapping[str, Any], datasets: Mapping[str, Any],
                     timings: dict[str, float]) -> None:
     """Fine-tune one trained network on the training frames fused without a map."""
     from dstenv.segment.checkpoint import load_segmenter
-    from dstenv.segment.train import train
+    from dstenv.segment.train import start_changed, train
 
     subsets = {}
     for split in ("train", "val"):
@@ -134,9 +134,11 @@ def _no_map_network(cfg: Mapping[str, Any], datasets: Mapping[str, Any],
         init.parent.parent / f"{name}-no-map" / init.name
     ncfg = {**tcfg, "init": str(init / "best.pt"), "epochs": int(cfg["no_map"]["epochs"]),
             "lr": float(cfg["no_map"]["lr"]), "fixed_batches": 0}
-    log(f"{label}: fine-tuning on {len(subsets['train'])} training frames without a map")
+    fresh = start_changed(mdir, init / "best.pt")  # its start was trained further since
+    log(f"{label}: fine-tuning on {len(subsets['train'])} training frames without a map"
+        + (" (again: its starting network changed since)" if fresh else ""))
     _, plan.histories[label] = train(ncfg, subsets["train"], subsets["val"], mdir,
-                                     progress=progress, log=log)
+                                     progress=progress, log=log, resume=not fresh)
     timings[f"train_{label}_s"] = time.perf_counter() - t
     seg = load_segmenter(mdir / "best.pt", torch.device(tcfg["device"]))
     seg.label = label

@@ -137,7 +137,7 @@ def _finetune(ckpts: Mapping[str, Path], data: Path, frames: int, epochs: Sequen
 
     from dstenv.data import ShardDataset
     from dstenv.segment.shardindex import split_index
-    from dstenv.segment.train import train
+    from dstenv.segment.train import start_changed, train
 
     cands = sorted({int(e) for e in epochs})
     if not cands or cands[0] < 1:
@@ -159,6 +159,10 @@ def _finetune(ckpts: Mapping[str, Path], data: Path, frames: int, epochs: Sequen
     inputs = spec.get("inputs", "fcn10")
     # the network's own inputs to train on; the real labels are KITTI's already: "full"
     tds = ds if inputs == ds.inputs else ShardDataset(data, split="test", inputs=inputs)
+    if start_changed(out, ckpts[best]):  # its start was trained further, or another one won
+        log(f"fine-tuning {best} again: the fine-tuning in {out} started from other weights")
+        for old in (*out.glob("epochs-*.pt"), out / "last.pt"):
+            old.unlink()
     length: dict[int, float] = {}
     for e in cands:
         snap = out / f"epochs-{e}.pt"

@@ -4,7 +4,7 @@
 dataset of ``{"x", "labels", "visible"}`` dicts (``dstenv.data.ShardDataset`` or
 a streaming ``IterableDataset``). After every epoch it writes ``last.pt`` (model,
 optimizer, epoch, torch RNG state, history, configuration) and, when the
-validation mIoU improves, ``best.pt``; both atomically. Calling it again with the
+validation mIoU improves, ``best.pt`` (first); both atomically. Calling it again with the
 same output directory resumes after the last finished epoch and gives the same
 weights as an uninterrupted run (on CPU): batch order and crops come from a
 generator seeded by ``(seed, epoch)``, dropout from the restored torch RNG.
@@ -25,7 +25,7 @@ from tqdm import tqdm
 from dstenv.config import ConfigError, merge_config
 from dstenv.data.datasets import INPUT_CHANNELS, LABELS
 from dstenv.dst.frame import CLASSES
-from dstenv.segment.checkpoint import json_ready, load_checkpoint, save_checkpoint
+from dstenv.segment.checkpoint import file_digest, json_ready, load_checkpoint, save_checkpoint
 from dstenv.segment.losses import LOSSES, build_loss, class_statistics, median_frequency_weights
 from dstenv.segment.metrics import ConfusionMeter, iou_per_class, mean_iou
 from dstenv.segment.models import MODELS
@@ -207,12 +207,19 @@ def train(
             ckpt = load_checkpoint(last)
         except ValueError as exc:  # a damaged last.pt: say how to start over
             raise ValueError(f"{exc}; start over with --no-resume (resume=False)") from None
+    init_digest = file_digest(cfg["init"]) if cfg["init"] else ""
     if ckpt is not None:
         # options added since the checkpoint was written count as their defaults
         saved = {k: v for k, v in {**default_train_config(), **ckpt["config"]}.items()
                  if k != "epochs"}
         mine = {k: v for k, v in cfg.items() if k not in ("epochs", "class_weights")}
         saved.pop("class_weights", None)
+        if ckpt.get("init_sha256") and init_digest:  # the starting weights, wherever they lie
+            if ckpt["init_sha256"] != init_digest:
+                raise ConfigError(f"{last}: checkpoint started from other weights than "
+                                  f"train.init {cfg['init']} holds now (it changed since); "
+                                  "use another output directory or --no-resume")
+            saved["init"] = mine["init"]
         if saved != mine:
             diff = sorted(k for k in mine if saved.get(k) != mine[k])
             raise ConfigError(
@@ -250,13 +257,8 @@ def train(
         eps=1e-8,
         weight_decay=cfg["weight_decay"],
     )
-    history: dict[str, list] = {
-        "epoch": [],
-        "train_loss": [],
-        "val_loss": [],
-        "val_miou": [],
-        "val_iou": [],
-    }
+    history: dict[str, list] = {k: [] for k in ("epoch", "train_loss", "val_loss", "val_miou",
+                                                 "val_iou")}
     start = 0
     if ckpt is not None:
         model.load_state_dict(ckpt["model"])
@@ -336,14 +338,27 @@ def train(
                 "config": cfg,
                 "history": history,
                 **({"data": json_ready(data_id)} if data_id is not None else {}),
+                **({"init_sha256": init_digest} if init_digest else {}),
             }
-            save_checkpoint(last, payload)
             score = val_miou if val_miou is not None else -(total / max(count, 1))
-            if score > best:
-                best = score
+            if score > best:  # best.pt first: a run killed between the two files redoes
+                best = score  # this epoch on resume (the same bytes) and writes both
                 save_checkpoint(out / "best.pt", payload)
+            save_checkpoint(last, payload)
     model.eval()
     return seg, history
+
+
+def start_changed(out_dir: str | Path, init: str | Path) -> bool:
+    """Whether the training in ``out_dir`` (its ``last.pt``) started from other weights than
+    ``init`` holds now (by content; by path for checkpoints written before 2026-12-07).
+    ``False`` when there is nothing to resume."""
+    last = Path(out_dir) / "last.pt"
+    if not last.exists():
+        return False
+    ckpt = load_checkpoint(last)
+    digest = ckpt.get("init_sha256")
+    return digest != file_digest(init) if digest else ckpt["config"].get("init") != str(init)
 
 
 def _init_weights(cfg: dict[str, Any], seg: TorchSegmenter) -> dict[str, Any]:

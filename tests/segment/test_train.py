@@ -299,3 +299,55 @@ def test_flip_changes_training_and_stays_seeded(tmp_path, make_frames):
     wa, wb, wc = _weights(a), _weights(b), _weights(c)
     assert not all(torch.equal(wa[k], wb[k]) for k in wa)
     assert all(torch.equal(wb[k], wc[k]) for k in wb)
+
+
+def test_a_kill_between_the_two_checkpoints_resumes_to_the_same_files(tmp_path, make_frames,
+                                                                      monkeypatch):
+    """best.pt is written before last.pt: a run killed between them redoes that epoch."""
+    import dstenv.segment.train as train_mod
+
+    data, val = make_frames(8, seed=1), make_frames(4, seed=2)
+    quiet = {"progress": False, "log": lambda m: None}
+    train({**SMALL, "epochs": 2}, data, val, tmp_path / "whole", **quiet)
+    real_save, calls = train_mod.save_checkpoint, []
+
+    def dying(path, payload):  # dies when epoch 2 (index 1) would write last.pt
+        calls.append((path.name, payload["epoch"]))
+        if path.name == "last.pt" and payload["epoch"] == 1:
+            raise KeyboardInterrupt
+        return real_save(path, payload)
+
+    monkeypatch.setattr(train_mod, "save_checkpoint", dying)
+    with pytest.raises(KeyboardInterrupt):
+        train({**SMALL, "epochs": 2}, data, val, tmp_path / "cut", **quiet)
+    assert ("best.pt", 0) in calls and calls.index(("best.pt", 0)) < calls.index(("last.pt", 0))
+    monkeypatch.setattr(train_mod, "save_checkpoint", real_save)
+    train({**SMALL, "epochs": 2}, data, val, tmp_path / "cut", **quiet)
+    for name in ("best.pt", "last.pt"):
+        a, b = (load_checkpoint(tmp_path / d / name) for d in ("whole", "cut"))
+        assert a["epoch"] == b["epoch"] and a["history"] == b["history"]
+        assert all(torch.equal(a["model"][k], b["model"][k]) for k in a["model"])
+
+
+def test_a_fine_tuning_knows_its_start_by_content(tmp_path, make_frames):
+    from dstenv.segment.train import start_changed
+
+    data = make_frames(4, seed=1)
+    quiet = {"progress": False, "log": lambda m: None}
+    train({**SMALL, "epochs": 1}, data, None, tmp_path / "a", **quiet)
+    start = tmp_path / "a" / "best.pt"
+    tune = {**SMALL, "epochs": 1, "init": str(start)}
+    train(tune, data, None, tmp_path / "b", **quiet)
+    assert not start_changed(tmp_path / "b", start) and not start_changed(tmp_path / "x", start)
+    # the start moved with its folder: the same weights, resumes
+    moved = tmp_path / "moved"
+    (tmp_path / "a").rename(moved)
+    assert not start_changed(tmp_path / "b", moved / "best.pt")
+    train({**tune, "epochs": 2, "init": str(moved / "best.pt")}, data, None, tmp_path / "b",
+          **quiet)
+    # the start trained further: other weights, named; start_changed says so
+    train({**SMALL, "epochs": 2}, data, None, moved, **quiet)
+    assert start_changed(tmp_path / "b", moved / "best.pt")
+    with pytest.raises(ConfigError, match="started from other weights than train.init"):
+        train({**tune, "epochs": 3, "init": str(moved / "best.pt")}, data, None, tmp_path / "b",
+              **quiet)

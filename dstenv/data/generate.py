@@ -25,6 +25,7 @@ from typing import Any
 
 from dstenv.data.codec import DEFLATE_ENGINES
 from dstenv.data.lifeline import sigterm_as_interrupt
+from dstenv.config import CLIError
 from dstenv.data.lock import DatasetLocked, dataset_lock
 from dstenv.data.manifest import (
     MANIFEST_NAME,
@@ -42,7 +43,7 @@ from dstenv.data.shards import (
 __all__ = ["GenerateError", "GenerateSpec", "ShardTask", "plan", "write_shard", "generate"]
 
 
-class GenerateError(RuntimeError):
+class GenerateError(CLIError, RuntimeError):  # one line wherever it surfaces
     """Generation cannot proceed; the one-line message says why and what was kept."""
 
 

@@ -36,8 +36,13 @@ def save_checkpoint(path: str | Path, payload: dict[str, Any]) -> Path:
     A killed process leaves either the previous file or the new one, never half.
     """
     path = Path(path)
-    with atomic_path(path) as tmp:
-        torch.save({"format": FORMAT, "version": _VERSION, **payload}, tmp)
+    try:
+        with atomic_path(path) as tmp:
+            torch.save({"format": FORMAT, "version": _VERSION, **payload}, tmp)
+    except RuntimeError as exc:  # torch's zip writer reports a full disk this way
+        first = (str(exc).strip().splitlines() or ["write failed"])[0]
+        raise OSError(f"{path}: cannot write the checkpoint ({first}); is the disk full?"
+                      ) from None
     return path
 
 
@@ -50,6 +55,14 @@ def read_weights(path: str | Path, what: str) -> Any:
             for a file torch cannot read (torch raises many exception types).
     """
     path = Path(path)
+    try:
+        with zipfile.ZipFile(path) as archive:  # torch.load skips the entries' CRC-32s
+            bad = archive.testzip()
+    except (zipfile.BadZipFile, OSError, EOFError):
+        bad = None  # not a zip, unreadable: torch.load below names it
+    if bad is not None:
+        raise ValueError(f"{path}: {what}: damaged ({bad} fails its checksum); train it "
+                         "again or restore the file")
     try:
         return torch.load(path, map_location="cpu", weights_only=True)
     except Exception as exc:  # noqa: BLE001 - torch raises many types for bad files

@@ -42,6 +42,7 @@ def _apart(out: str | None, data: str | None) -> None:
 def _train(args: argparse.Namespace) -> int:
     from dstenv.config import CLIError
     from dstenv.data import ShardDataset, StreamingDataset
+    from dstenv.data.lock import DatasetLocked, dataset_lock
     from dstenv.segment.checkpoint import training_data
     from dstenv.segment.train import default_train_config, train
 
@@ -108,16 +109,13 @@ def _train(args: argparse.Namespace) -> int:
     if args.class_weights is not None:
         cfg["class_weights"] = args.class_weights
     out = Path(args.out)
-    _, history = train(
-        cfg,
-        train_ds,
-        val_ds,
-        out,
-        resume=not args.no_resume,
-        progress=not args.quiet,
-        log=(lambda m: None) if args.quiet else print,
-        data_id=training_data(train_ds),
-    )
+    try:
+        with dataset_lock(out):  # one training per folder at a time
+            _, history = train(cfg, train_ds, val_ds, out, resume=not args.no_resume,
+                               progress=not args.quiet, data_id=training_data(train_ds),
+                               log=(lambda m: None) if args.quiet else print)
+    except DatasetLocked as exc:
+        raise CLIError(f"--out {out}: another dstenv train writes into it ({exc})") from None
     best = max((m for m in history["val_miou"] if m is not None), default=None)
     print(
         f"checkpoints in {out} (last.pt, best.pt)"

@@ -97,6 +97,10 @@ def default_benchmark_config() -> dict[str, Any]:
             # faster than 10 cm a 0.1 s frame, 1 m/s); "run", the simulated run's
             # (labels.moving_threshold, 0.1 m/s)
             "moving": "match",
+            # also score each network with the decision rule chosen on its simulated
+            # validation drives (dstenv.segment.decide: a static/moving offset and the
+            # free-space rule), rows "... calibrated + free" (docs/benchmark.md)
+            "decide": True,
         },
         "curve": {
             "frames": [],  # training-set sizes, e.g. [140, 1400, 14000]
@@ -365,6 +369,8 @@ def check_config(cfg: Mapping[str, Any]) -> None:
     if rn["inputs"] not in REAL_NET_INPUTS:
         raise ConfigError(f"real_net.inputs: unknown {rn['inputs']!r}; choose from "
                           + ", ".join(REAL_NET_INPUTS))
+    if not isinstance(rn["decide"], bool):
+        raise ConfigError(f"real_net.decide: true or false, got {rn['decide']!r}")
     if rn["model"] not in MODELS:
         raise ConfigError(f"real_net.model: unknown model {rn['model']!r}; choose from "
                           + ", ".join(MODELS))

@@ -280,6 +280,8 @@ def real_benchmark(
             kdir / "real_net", progress, log, real_map=osm is not None,
             real_moving=real_moving_speed(manifest))
         ckpts.update(more)
+    decided = {f"{k}, calibrated + free": Path(v["checkpoint"])
+               for k, v in (facts or {}).get("decided", {}).items() if "checkpoint" in v}
     cfg = default_benchmark_config()
     cfg.update(models=[], device="cpu", examples=min(int(sim["config"]["examples"]), 2))
     segs = sim["segmenters"]
@@ -291,7 +293,7 @@ def real_benchmark(
         cfg["complete"]["params"] = dict(segs["dst-complete"]["describe"]["completion"])
     else:
         cfg["complete"]["enabled"] = False
-    labelled = [(f"{k} (sim only)", p) for k, p in ckpts.items()]
+    labelled = [(f"{k} (sim only)", p) for k, p in {**ckpts, **decided}.items()]
     finetuned: list[str] = []
     dst_rows = []
     start: dict[str, Any] = {}

@@ -20,6 +20,10 @@ for real drives"):
   ``real_net.map = "match"`` every simulated drive is then fused without a map too
   (the simulated run has a map in most drives), so the network never learns to lean on
   map evidence the real drives lack.
+* **How it decides.** Training seeds differ most in how readily they call a still object
+  moving; with ``real_net.decide`` each network is also scored with a static/moving
+  offset chosen on its own simulated validation drives and the free-space rule
+  (:mod:`dstenv.segment.decide`), rows ``... calibrated + free``.
 * **What moves.** KITTI's labels call an object moving above 10 cm a 0.1 s frame
   (1 m/s, :func:`dstenv.kitti.objects.moving_flags`); the simulator's above 0.1 m/s, so
   a car creeping in a queue is moving there and static in KITTI. With
@@ -146,10 +150,26 @@ def train_real_networks(
                                     mdir, progress=progress, log=log)
         timings[f"train_{label}_s"] = time.perf_counter() - t
         ckpts[label] = mdir / "best.pt"
+    decided = {}
+    if rn.get("decide", False) and len(data["val"]):  # runs older than real_net.decide: off
+        from dstenv.segment.decide import decide_checkpoint
+
+        for label, best in ckpts.items():
+            try:
+                rule = decide_checkpoint(best, best.parent / "decided.pt", data["val"],
+                                         f"the simulated validation drives in {out / 'data'}")
+            except ValueError as exc:  # e.g. no visible moving cell in a tiny val split
+                decided[label] = {"unchosen": str(exc)}
+                log(f"real_net: {label}: no decision rule ({exc})")
+                continue
+            decided[label] = {"checkpoint": str(best.parent / "decided.pt"),
+                              "moving_offset": rule["moving_offset"]}
+            log(f"real_net: {label}: static/moving offset {rule['moving_offset']:+g} "
+                "(least confusion on the simulated validation drives), free-space rule")
     facts = {"data": str(out / "data"), "grid": list(grid), "cell_size": cell_size,
              "frames": {s: len(d) for s, d in data.items()}, "seeds": seeds,
              "inputs": inputs, "labels": "kitti", "no_map": no_map,
              "moving_threshold": moving,
-             "checkpoints": {k: str(v) for k, v in ckpts.items()},
+             "checkpoints": {k: str(v) for k, v in ckpts.items()}, "decided": decided,
              "histories": histories, "timings_s": timings}
     return ckpts, facts

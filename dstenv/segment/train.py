@@ -210,10 +210,13 @@ def train(
     init_digest = file_digest(cfg["init"]) if cfg["init"] else ""
     if ckpt is not None:
         # options added since the checkpoint was written count as their defaults
+        free = ("epochs", "class_weights", "num_workers")  # workers: the same batches
         saved = {k: v for k, v in {**default_train_config(), **ckpt["config"]}.items()
-                 if k != "epochs"}
-        mine = {k: v for k, v in cfg.items() if k not in ("epochs", "class_weights")}
-        saved.pop("class_weights", None)
+                 if k not in free}
+        mine = {k: v for k, v in cfg.items() if k not in free}
+        given = cfg["class_weights"]  # None: computed from the data, then kept
+        if given is not None and json_ready(given) != ckpt["config"]["class_weights"]:
+            mine["class_weights"] = given  # named in the refusal below
         if ckpt.get("init_sha256") and init_digest:  # the starting weights, wherever they lie
             if ckpt["init_sha256"] != init_digest:
                 raise ConfigError(f"{last}: checkpoint started from other weights than "
@@ -222,14 +225,13 @@ def train(
             saved["init"] = mine["init"]
         if saved != mine:
             diff = sorted(k for k in mine if saved.get(k) != mine[k])
-            raise ConfigError(
-                f"{last}: checkpoint was trained with other settings ({', '.join(diff)}); "
-                "use another output directory or --no-resume"
-            )
+            raise ConfigError(f"{last}: checkpoint was trained with other settings "
+                              f"({', '.join(diff)}); use another output directory or --no-resume")
         theirs = ckpt.get("data")  # checkpoints before 2026-12-07 carry none
         # the keys it recorded (a stream's cell_size, added later, follows its config hash)
         ours = json_ready(data_id) if data_id is not None else None
-        diff = sorted(k for k in (theirs or {}) if ours is not None and theirs[k] != ours.get(k))
+        diff = sorted(k for k in (theirs or {}) if ours is not None and k != "source"
+                      and theirs[k] != ours.get(k))  # the folder's name: a copy resumes
         if diff:
             raise ConfigError(
                 f"{last}: checkpoint was trained on other data ({', '.join(diff)} differ: "
@@ -244,7 +246,12 @@ def train(
                          cfg["inputs"])
     model = seg.model
     if cfg["init"] and ckpt is None:
-        model.load_state_dict(_init_weights(cfg, seg))
+        try:
+            model.load_state_dict(_init_weights(cfg, seg))
+        except RuntimeError as exc:  # keys or shapes that do not fit the spec's network
+            first = (str(exc).strip().splitlines() or ["mismatch"])[-1].strip()
+            raise ConfigError(f"train.init: {cfg['init']}: its weights do not fit a "
+                              f"{cfg['model']}: {first}") from None
         log(f"starting from the weights of {cfg['init']}")
     weights = (
         None if cfg["class_weights"] is None else np.asarray(cfg["class_weights"], dtype=np.float32)
@@ -293,13 +300,8 @@ def train(
             n_batches = min(n_batches, cfg["max_batches"])
         model.train()
         total, count = 0.0, 0
-        bar = tqdm(
-            loader,
-            total=n_batches,
-            desc=f"epoch {epoch + 1}/{cfg['epochs']}",
-            disable=not progress,
-            leave=False,
-        )
+        bar = tqdm(loader, total=n_batches, desc=f"epoch {epoch + 1}/{cfg['epochs']}",
+                   disable=not progress, leave=False)
         for b, batch in enumerate(bar):
             if b >= n_batches:
                 break

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import subprocess
@@ -118,4 +119,97 @@ def test_a_stale_lock_of_a_dead_process_is_taken_over(tmp_path):
         pass
     (d / LOCK_NAME).write_text(json.dumps({"host": "other-host", "pid": 1}))
     with dataset_lock(d, force=True):
+        pass
+
+
+def test_an_unowned_lock_blocks_only_while_young_and_a_failed_start_leaves_none(tmp_path,
+                                                                               monkeypatch):
+    import os
+    import time
+
+    import pytest
+
+    from dstenv.data import lock as lock_mod
+    from dstenv.data.lock import LOCK_NAME, DatasetLocked, dataset_lock, writer_of
+
+    d = tmp_path / "d"
+    d.mkdir()
+    (d / LOCK_NAME).write_bytes(b"")  # created, owner never written (e.g. a full disk)
+    assert writer_of(d) == "a run that is starting"
+    with pytest.raises(DatasetLocked, match="a run that is starting"):
+        with dataset_lock(d):
+            pass
+    old = time.time() - 2 * lock_mod._UNOWNED_STALE_S
+    os.utime(d / LOCK_NAME, (old, old))
+    assert writer_of(d) is None
+    with dataset_lock(d):  # taken over
+        pass
+    # the owner cannot be written: no lock is left behind
+    real_write = os.write
+
+    def full(fd, data):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(lock_mod.os, "write", full)
+    with pytest.raises(OSError, match="No space left"):
+        with dataset_lock(d):
+            pass
+    monkeypatch.setattr(lock_mod.os, "write", real_write)
+    assert not (d / LOCK_NAME).exists()
+
+
+def test_a_pid_reused_by_another_process_does_not_hold_the_lock(tmp_path):
+    import os
+    import socket
+
+    from dstenv.data.lock import LOCK_NAME, dataset_lock, writer_of
+
+    d = tmp_path / "d"
+    d.mkdir()
+    # our own live pid, but a start time that is not this process's: a reused pid
+    (d / LOCK_NAME).write_text(json.dumps({"host": socket.gethostname(), "pid": os.getpid(),
+                                           "started": "-1"}))
+    assert writer_of(d) is None
+    with dataset_lock(d):
+        pass
+
+
+def test_several_processes_taking_a_stale_lock_at_once_get_it_one_at_a_time(tmp_path):
+    import multiprocessing as mp
+    import socket
+
+    from dstenv.data.lock import LOCK_NAME
+
+    d = tmp_path / "d"
+    d.mkdir()
+    ctx = mp.get_context("fork")
+    for _ in range(5):
+        (d / LOCK_NAME).write_text(json.dumps({"host": socket.gethostname(), "pid": 2**22 + 7}))
+        held = ctx.Value("i", 0)
+        most = ctx.Value("i", 0)
+        start = ctx.Event()
+        procs = [ctx.Process(target=_hold_briefly, args=(d, held, most, start)) for _ in range(4)]
+        for p in procs:
+            p.start()
+        start.set()
+        for p in procs:
+            p.join(20)
+        assert most.value == 1  # never two holders at once
+
+
+def _hold_briefly(d, held, most, start) -> None:
+    import time
+
+    from dstenv.data.lock import DatasetLocked, dataset_lock
+
+    start.wait()
+    try:
+        with dataset_lock(d):
+            with held.get_lock():
+                held.value += 1
+                most.value = max(most.value, held.value)
+            time.sleep(0.05)
+            with held.get_lock():
+                held.value -= 1
+    except DatasetLocked:
         pass

@@ -267,6 +267,11 @@ def test_real_net_is_trained_for_the_real_grid_and_scored_on_it(kitti_root, sim_
     # agents labelled moving by the real labels' rule (real_net.moving "match"): KITTI's
     # 10 cm a 0.1 s frame = 1 m/s, not the simulator's 0.1 m/s
     assert facts["moving_threshold"] == pytest.approx(1.0)
+    # real_net.decide: the tiny drives' val split has no visible moving cell to choose
+    # an offset on: no decided row, and the reason recorded
+    assert set(facts["decided"]) == {label} and "no visible moving cell" in facts[
+        "decided"][label]["unchosen"]
+    assert not any("calibrated + free" in k for k in res["segmenters"])
     for shard in sorted(rdata.rglob("*.h5")):
         with ShardReader(shard) as r:
             assert r.attrs["config"]["labels"]["moving_threshold"] == pytest.approx(1.0)

@@ -30,6 +30,7 @@ from pathlib import Path
 from typing import Any
 
 __all__ = [
+    "leaf_diffs",
     "CLIError",
     "ConfigError",
     "Rule",
@@ -49,6 +50,15 @@ __all__ = [
 
 class ConfigError(ValueError):
     """A configuration or scenario file is invalid; the message names the problem."""
+
+
+def leaf_diffs(old: Any, new: Any, at: str = "") -> list[tuple[str, Any, Any]]:
+    """``(dotted key, old, new)`` of every setting that differs (tables compared key by
+    key, so a message names ``config.stride``, not two whole configurations)."""
+    if isinstance(old, dict) and isinstance(new, dict):
+        return [d for k in sorted(set(old) | set(new))
+                for d in leaf_diffs(old.get(k), new.get(k), f"{at}.{k}" if at else str(k))]
+    return [] if old == new else [(at, old, new)]
 
 
 class CLIError(Exception):

@@ -25,11 +25,12 @@ from typing import Any
 
 from dstenv.data.codec import DEFLATE_ENGINES
 from dstenv.data.lifeline import sigterm_as_interrupt
-from dstenv.config import CLIError
+from dstenv.config import CLIError, leaf_diffs
 from dstenv.data.lock import DatasetLocked, dataset_lock
 from dstenv.data.manifest import (
     MANIFEST_NAME,
     ManifestError,
+    file_sha256,
     load_manifest,
     scan_shards,
     shard_entry,
@@ -215,12 +216,13 @@ def write_shard(task: ShardTask, out: str | Path,
     return shard_entry(out, out / task.file)
 
 
-def _existing(out: Path, task: ShardTask) -> dict[str, Any] | None:
+def _existing(out: Path, task: ShardTask, listed: str = "") -> dict[str, Any] | None:
     """Manifest entry of a finished shard for ``task``, or None if it must be (re)made.
 
-    A kept shard is read in full first (every chunk's checksum): a shard with a
-    corrupt chunk is set aside as ``NAME.corrupt`` and made again, never listed in the
-    manifest with the hash of its corrupt bytes.
+    A kept shard is read in full first (every chunk's checksum) and, when the last
+    manifest listed it (``listed``: its SHA-256), its bytes must still hash to that: a
+    shard with a corrupt chunk, or changed since, is set aside as ``NAME.corrupt`` and
+    made again, never listed in the manifest with the hash of its corrupt bytes.
     """
     path = out / task.file
     if not path.exists():
@@ -231,6 +233,9 @@ def _existing(out: Path, task: ShardTask) -> dict[str, Any] | None:
             same = old_config == _pipeline_config(task.spec) and old_task == task.describe()
             if same:
                 r.verify()
+        sha = file_sha256(path) if same and listed else ""
+        if sha and sha != listed:
+            raise ShardError(f"{path}: its bytes changed since the manifest listed them")
     except ShardError as exc:
         keep = path.with_name(path.name + ".corrupt")
         path.replace(keep)
@@ -238,8 +243,10 @@ def _existing(out: Path, task: ShardTask) -> dict[str, Any] | None:
         return None
     new_task = task.describe()
     if old_config != _pipeline_config(task.spec):
-        raise GenerateError(f"{path} was made with another configuration; use another --out "
-                            "or remove the old shards")
+        diff = leaf_diffs(old_config, json.loads(json.dumps(_pipeline_config(task.spec))))
+        said = "; ".join(f"{k}: {a!r}, now {b!r}" for k, a, b in diff[:3]) or "?"
+        raise GenerateError(f"{path} was made with another configuration ({said}); use "
+                            "another --out or remove the old shards")
     if old_task != new_task:
         diff = sorted(k for k in set(new_task) | set(old_task or {})
                       if (old_task or {}).get(k) != new_task.get(k))
@@ -253,7 +260,7 @@ def _existing(out: Path, task: ShardTask) -> dict[str, Any] | None:
         raise GenerateError(f"{path} was made with other settings ({k}: "
                             f"{(old_task or {}).get(k)!r}, now {new_task.get(k)!r}); use another "
                             "--out or remove the old shards")
-    return shard_entry(out, path)
+    return shard_entry(out, path, sha or None)
 
 
 def _prepare(out: Path, tasks: list[ShardTask]
@@ -266,9 +273,11 @@ def _prepare(out: Path, tasks: list[ShardTask]
     except OSError as exc:
         raise GenerateError(f"output directory {out} is not writable: "
                             f"{exc.strerror or exc}") from None
+    known: dict[str, str] = {}  # file -> sha256 the last manifest listed
     if (out / MANIFEST_NAME).exists():  # the run rewrites it: never someone else's file
         try:
-            load_manifest(out, verify="none")
+            known = {e["file"]: e.get("sha256", "")
+                     for e in load_manifest(out, verify="none")["shards"]}
         except ManifestError:
             raise GenerateError(f"{out / MANIFEST_NAME}: not a dstenv manifest, and this run "
                                 "would replace it; use another --out") from None
@@ -279,7 +288,7 @@ def _prepare(out: Path, tasks: list[ShardTask]
                             f"({strays[0].relative_to(out)}...); use another --out")
     done, todo = {}, []
     for task in tasks:
-        entry = _existing(out, task)
+        entry = _existing(out, task, known.get(task.file, ""))
         if entry is None:
             todo.append(task)
         else:

@@ -83,7 +83,7 @@ def _split_name(text: str) -> str:
 def _same_conversion(path: Path, attrs: dict[str, Any], masses: bool) -> None:
     """Refuse to replace a converted shard made with other settings (the same command
     again rewrites the same bytes)."""
-    from dstenv.config import CLIError
+    from dstenv.config import CLIError, leaf_diffs
     from dstenv.data.shards import ShardError, ShardReader
 
     if not path.exists():
@@ -94,21 +94,12 @@ def _same_conversion(path: Path, attrs: dict[str, Any], masses: bool) -> None:
     except ShardError:
         return  # a damaged shard of ours: converted again
     new = json.loads(json.dumps({**attrs, "masses": bool(masses)}))  # as stored
-    diff = _leaf_diffs(old, new)
+    diff = leaf_diffs(old, new)
     if diff:
         said = "; ".join(f"{k}: {a!r}, now {b!r}" for k, a, b in diff[:3])
         raise CLIError(f"{path} was converted with other settings ({said}"
                        + (f"; {len(diff) - 3} more" if len(diff) > 3 else "")
                        + "); use another --out or remove it")
-
-
-def _leaf_diffs(old: Any, new: Any, at: str = "") -> list[tuple[str, Any, Any]]:
-    """``(dotted key, old, new)`` of every setting that differs (tables compared key by
-    key, so the message names ``config.stride``, not two whole configurations)."""
-    if isinstance(old, dict) and isinstance(new, dict):
-        return [d for k in sorted(set(old) | set(new))
-                for d in _leaf_diffs(old.get(k), new.get(k), f"{at}.{k}" if at else str(k))]
-    return [] if old == new else [(at, old, new)]
 
 
 def _convert(args: argparse.Namespace) -> int:

@@ -267,3 +267,22 @@ def test_generate_refuses_before_simulating_what_would_fail_in_a_shard(tmp_path,
         _spec(config=osm)
     (tmp_path / "town.osm").write_text("<osm/>")
     assert _spec(config=osm).frames == 20  # found in the current folder
+
+
+def test_a_shard_changed_since_its_manifest_is_made_again(tmp_path, fake_pipeline, capsys):
+    """A flip that every chunk checksum misses (e.g. in HDF5's own index) still changes
+    the file's hash: a rerun sets it aside instead of listing its corrupt bytes."""
+    m = gen.generate(_spec(frames=8, split="train"), tmp_path, progress=False)
+    shard = tmp_path / "train" / "shard-00001.h5"
+    good = shard.read_bytes()
+    with open(shard, "ab") as fh:  # bytes HDF5 never reads: only the hash sees them
+        fh.write(b"\0")
+    again = gen.generate(_spec(frames=8, split="train"), tmp_path, progress=False)
+    assert "its bytes changed since the manifest listed them" in capsys.readouterr().err
+    assert (tmp_path / "train" / "shard-00001.h5.corrupt").exists()
+    assert shard.read_bytes() == good and again["shards"] == m["shards"]
+    # another configuration is refused, naming the setting
+    with pytest.raises(gen.GenerateError, match=r"another configuration \(grid\.height: "):
+        gen.generate(_spec(frames=8, split="train", config={"grid": {"height": 4, "width": 4,
+                                                                     "cell_size": 0.5}}),
+                     tmp_path, progress=False)

@@ -17,7 +17,7 @@ import numpy as np
 
 from dstenv.dst.frame import CLASSES
 from dstenv.dst.params import DSTParams
-from dstenv.io import atomic_write_bytes
+from dstenv.io import atomic_write_bytes, atomic_write_text
 from dstenv.segment.figures import (
     plot_confusions,
     plot_curves,
@@ -315,7 +315,7 @@ def write_report(
     """
     figs = out / "figures"
     write_json(out / "results.json", results)
-    (out / "results.md").write_text(markdown_table(results))
+    atomic_write_text(out / "results.md", markdown_table(results))
     for scope in ("observed", "visible", "all"):
         plot_confusions(results, figs / f"confusion_{scope}.png", scope)
     if results["histories"]:

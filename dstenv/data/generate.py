@@ -165,11 +165,21 @@ class ShardTask:
 
 
 def split_frames(frames: int, split: str) -> dict[str, int]:
-    """Frames per split: all in ``split``, or by the seed-space shares for ``"auto"``."""
+    """Frames per split: all in ``split``, or by the seed-space shares for ``"auto"``.
+
+    ``"auto"`` deals the frames out in blocks of 10 in the buckets' shares (8 train,
+    1 val, 1 test), the splits in their bucket order within a block, so one more frame
+    adds one frame to one split: a dataset grown with a larger ``--frames`` keeps every
+    shard it has (rounding each share would take a frame from train now and then).
+    Multiples of 10 split as the shares say.
+    """
     if split != "auto":
         return {split: frames}
-    counts = {s: round(frames * (hi - lo) / 100) for s, (lo, hi) in SPLIT_BUCKETS.items()}
-    counts["train"] = frames - counts["val"] - counts["test"]
+    block, rest = divmod(frames, 10)
+    counts = {}
+    for s, (lo, hi) in sorted(SPLIT_BUCKETS.items(), key=lambda kv: kv[1][0]):
+        lo, hi = lo // 10, hi // 10  # the buckets are whole tenths of the seed space
+        counts[s] = block * (hi - lo) + min(max(rest - lo, 0), hi - lo)
     return {s: n for s, n in counts.items() if n > 0}
 
 

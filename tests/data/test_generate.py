@@ -38,6 +38,15 @@ def test_plan_auto_splits():
         ("train/shard-00003.h5", 4), ("val/shard-00000.h5", 2), ("test/shard-00000.h5", 2)]
     assert gen.split_frames(3, "auto") == {"train": 3}
     assert gen.split_frames(9, "test") == {"test": 9}
+    # multiples of 10 split 80/10/10; one more frame adds one to one split, never takes
+    # one from train (rounding gave 105 -> train 85, 106 -> train 84: growth refused)
+    assert gen.split_frames(2500, "auto") == {"train": 2000, "val": 250, "test": 250}
+    assert gen.split_frames(106, "auto") == {"train": 86, "val": 10, "test": 10}
+    prev: dict[str, int] = {}
+    for n in range(1, 300):
+        now = gen.split_frames(n, "auto")
+        assert sum(now.values()) == n and all(now.get(k, 0) >= v for k, v in prev.items())
+        prev = now
 
 
 def test_generate_is_deterministic_and_splits_are_disjoint(tmp_path):

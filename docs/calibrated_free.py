@@ -26,17 +26,17 @@ DST, ``dstenv.segment.results.MARGIN_REAL``), with ``dst-free`` beside them::
 
 from __future__ import annotations
 
-import argparse
 import copy
 import json
-import re
 import sys
 import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import torch
+
+sys.path.insert(0, str(Path(__file__).parent))  # docs/: the work folders' helpers
+from seed_choice import nets_args, seed_networks  # noqa: E402
 
 RULES = ("argmax", "free", "calibrated", "calibrated + free")
 
@@ -65,28 +65,16 @@ def kitti_ious(kdata: Path, segs: list[Any], from_step: int) -> dict[str, dict[s
 def main() -> None:
     from dstenv.data import ShardDataset
     from dstenv.segment.decide import OFFSETS, calibrate_offset
-    from dstenv.segment.evaluate import load_checkpoints
     from dstenv.segment.results import MARGIN_REAL
 
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--nets", type=Path, nargs="+", required=True,
-                    help="real_net work folders (data/ and models/seedN/best.pt)")
-    ap.add_argument("--kitti-data", type=Path, required=True)
-    ap.add_argument("--from-step", type=int, default=20)
-    ap.add_argument("--out", type=Path)
-    args = ap.parse_args()
-    torch.set_num_threads(1)
+    args = nets_args(__doc__)
     rows: list[dict[str, Any]] = []
     segs: list[Any] = []
     for folder in args.nets:
-        ckpts = sorted(folder.glob("models/seed*/best.pt"),
-                       key=lambda p: int(re.sub(r"\D", "", p.parent.name)))
-        if not ckpts:
-            raise SystemExit(f"--nets {folder}: no models/seedN/best.pt")
-        nets = load_checkpoints(ckpts, 10)
+        nets = seed_networks(folder)
         val = ShardDataset(folder / "data", split="val", inputs=nets[0].inputs, labels="kitti")
-        for net, path in zip(nets, ckpts):
-            name = f"{folder.name}/{path.parent.name}"
+        for net in nets:
+            name = net.label
             off, conf = calibrate_offset(net, val)
             rows.append({"network": name, "folder": folder.name, "moving_offset": off,
                          "sim_val_confusion": {"argmax": round(float(conf[OFFSETS.index(0.0)]), 4),

@@ -102,11 +102,10 @@ def spearman(a: list[float], b: list[float]) -> float:
     return round(float(np.corrcoef(ra, rb)[0, 1]), 3)
 
 
-def main() -> None:
-    from dstenv.segment.evaluate import load_checkpoints
-    from dstenv.segment.results import MARGIN_REAL
-
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def nets_args(doc: str) -> argparse.Namespace:
+    """The options of the scripts that read ``real_net`` work folders (this one's and
+    ``calibrated_free.py``'s)."""
+    ap = argparse.ArgumentParser(description=doc.splitlines()[0])
     ap.add_argument("--nets", type=Path, nargs="+", required=True,
                     help="real_net work folders (data/ and models/seedN/best.pt)")
     ap.add_argument("--kitti-data", type=Path, required=True)
@@ -114,16 +113,32 @@ def main() -> None:
     ap.add_argument("--out", type=Path)
     args = ap.parse_args()
     torch.set_num_threads(1)
+    return args
+
+
+def seed_networks(folder: Path) -> list[Any]:
+    """The ``models/seedN/best.pt`` networks of a work folder in seed order, each
+    labelled ``FOLDER/seedN``."""
+    from dstenv.segment.evaluate import load_checkpoints
+
+    ckpts = sorted(folder.glob("models/seed*/best.pt"),
+                   key=lambda p: int(re.sub(r"\D", "", p.parent.name)))
+    if not ckpts:
+        raise SystemExit(f"--nets {folder}: no models/seedN/best.pt")
+    nets = load_checkpoints(ckpts, 10)
+    for net, path in zip(nets, ckpts):
+        net.label = f"{folder.name}/{path.parent.name}"
+    return nets
+
+
+def main() -> None:
+    from dstenv.segment.results import MARGIN_REAL
+
+    args = nets_args(__doc__)
     rows: list[dict[str, Any]] = []
     dst: dict[str, float] = {}
     for folder in args.nets:
-        ckpts = sorted(folder.glob("models/seed*/best.pt"),
-                       key=lambda p: int(re.sub(r"\D", "", p.parent.name)))
-        if not ckpts:
-            raise SystemExit(f"--nets {folder}: no models/seedN/best.pt")
-        nets = load_checkpoints(ckpts, 10)
-        for net, path in zip(nets, ckpts):
-            net.label = f"{folder.name}/{path.parent.name}"
+        nets = seed_networks(folder)
         sim = sim_confusion(folder / "data", nets, nets[0].inputs)
         dst, real = kitti_scores(args.kitti_data, nets, args.from_step)
         for net, s, r in zip(nets, sim, real):

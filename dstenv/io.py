@@ -9,6 +9,7 @@ removed and the previous ``NAME``, if any, is left untouched.
 
 from __future__ import annotations
 
+import hashlib
 import os
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -77,6 +78,15 @@ def atomic_path(path: str | Path, fsync: bool = True) -> Iterator[Path]:
         raise
     if fsync:
         fsync_dir(path.parent)
+
+
+def file_sha256(path: str | Path) -> str:
+    """Hex SHA-256 of a file's bytes (read in 1 MiB blocks)."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
 
 
 def atomic_write_bytes(path: str | Path, data: bytes) -> Path:

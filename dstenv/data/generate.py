@@ -26,11 +26,11 @@ from typing import Any
 from dstenv.data.codec import DEFLATE_ENGINES
 from dstenv.data.lifeline import sigterm_as_interrupt
 from dstenv.config import CLIError, leaf_diffs
+from dstenv.io import file_sha256
 from dstenv.data.lock import DatasetLocked, dataset_lock
 from dstenv.data.manifest import (
     MANIFEST_NAME,
     ManifestError,
-    file_sha256,
     load_manifest,
     scan_shards,
     shard_entry,

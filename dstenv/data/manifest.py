@@ -28,7 +28,7 @@ import numpy as np
 
 from dstenv import __version__
 from dstenv.data.shards import ShardReader, class_names
-from dstenv.io import atomic_write_text
+from dstenv.io import atomic_write_text, file_sha256
 
 __all__ = [
     "MANIFEST_NAME",
@@ -54,15 +54,6 @@ class ManifestError(ValueError):
 def scan_shards(root: str | Path) -> list[Path]:
     """Final shard files (``*.h5``) under ``root``, sorted; ``.partial`` files excluded."""
     return sorted(p for p in Path(root).rglob("*.h5") if p.is_file())
-
-
-def file_sha256(path: str | Path) -> str:
-    """Hex SHA-256 of a file's bytes."""
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 def attrs_sha256(attrs: Mapping[str, Any]) -> str:

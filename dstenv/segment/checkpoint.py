@@ -24,7 +24,7 @@ from dstenv.io import atomic_path
 from dstenv.segment.segmenters import TorchSegmenter
 
 __all__ = ["FORMAT", "save_checkpoint", "load_checkpoint", "load_segmenter", "training_data",
-           "json_ready", "read_weights", "file_digest"]
+           "json_ready", "read_weights"]
 
 FORMAT = "dstenv-segmenter"
 _VERSION = 1
@@ -130,15 +130,6 @@ def load_segmenter(path: str | Path, device: str | torch.device = "cpu") -> Torc
     data = ckpt.get("data")  # what it was trained on (dstenv train since 2026-12-07)
     seg.trained_cell_size = data.get("cell_size") if isinstance(data, dict) else None
     return seg
-
-
-def file_digest(path: str | Path) -> str:
-    """SHA-256 of a file's bytes (a checkpoint's identity wherever it is moved)."""
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 def json_ready(value: Any) -> Any:

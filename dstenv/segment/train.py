@@ -25,7 +25,8 @@ from tqdm import tqdm
 from dstenv.config import ConfigError, merge_config
 from dstenv.data.datasets import INPUT_CHANNELS, LABELS
 from dstenv.dst.frame import CLASSES
-from dstenv.segment.checkpoint import file_digest, json_ready, load_checkpoint, save_checkpoint
+from dstenv.io import file_sha256
+from dstenv.segment.checkpoint import json_ready, load_checkpoint, save_checkpoint
 from dstenv.segment.losses import LOSSES, build_loss, class_statistics, median_frequency_weights
 from dstenv.segment.metrics import ConfusionMeter, iou_per_class, mean_iou
 from dstenv.segment.models import MODELS
@@ -207,7 +208,7 @@ def train(
             ckpt = load_checkpoint(last)
         except ValueError as exc:  # a damaged last.pt: say how to start over
             raise ValueError(f"{exc}; start over with --no-resume (resume=False)") from None
-    init_digest = file_digest(cfg["init"]) if cfg["init"] else ""
+    init_digest = file_sha256(cfg["init"]) if cfg["init"] else ""
     if ckpt is not None:
         # options added since the checkpoint was written count as their defaults
         free = ("epochs", "class_weights", "num_workers")  # workers: the same batches
@@ -352,15 +353,14 @@ def train(
 
 
 def start_changed(out_dir: str | Path, init: str | Path) -> bool:
-    """Whether the training in ``out_dir`` (its ``last.pt``) started from other weights than
-    ``init`` holds now (by content; by path for checkpoints written before 2026-12-07).
-    ``False`` when there is nothing to resume."""
+    """Whether ``out_dir/last.pt`` started from other weights than ``init`` holds now (by
+    content; by path before 2026-12-07); ``False`` when there is nothing to resume."""
     last = Path(out_dir) / "last.pt"
     if not last.exists():
         return False
     ckpt = load_checkpoint(last)
     digest = ckpt.get("init_sha256")
-    return digest != file_digest(init) if digest else ckpt["config"].get("init") != str(init)
+    return digest != file_sha256(init) if digest else ckpt["config"].get("init") != str(init)
 
 
 def _init_weights(cfg: dict[str, Any], seg: TorchSegmenter) -> dict[str, Any]:

@@ -140,7 +140,7 @@ def _convert(args: argparse.Namespace) -> int:
             entries = [_write_sequence(seq, cfg, gis_fn, note, path, attrs, args.masses, out)
                        for seq, (gis_fn, note), (path, attrs) in zip(seqs, maps, plans,
                                                                      strict=True)]
-            meta = {"command": "kitti convert", "root": str(args.root),
+            meta = {"command": "kitti convert", "root": str(Path(args.root).resolve()),
                     "sequences": args.sequences, "osm": args.osm or None, "config": cfg}
             write_manifest(out, entries, meta)
     except DatasetLocked as exc:

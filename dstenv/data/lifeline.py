@@ -59,16 +59,26 @@ def die_with_parent(parent: int, poll: float = 0.2) -> None:
 
 @contextlib.contextmanager
 def sigterm_as_interrupt() -> Iterator[None]:
-    """Within the block, SIGTERM raises :class:`Terminated` (main thread only)."""
+    """Within the block, SIGTERM raises :class:`Terminated` (main thread only); one that
+    landed where Python cannot raise it (numba code, a finaliser) is raised on leaving."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
 
+    hit: list[int] = []
+
     def handler(signum: int, frame: object) -> None:
+        hit.append(signum)
         raise Terminated(f"terminated by signal {signum}")
 
     previous = signal.signal(signal.SIGTERM, handler)
     try:
         yield
+    except SystemError:  # raised inside a compiled (numba) call: numba's wrapping of it
+        if hit:
+            raise Terminated(f"terminated by signal {hit[0]}") from None
+        raise
     finally:
         signal.signal(signal.SIGTERM, previous)
+    if hit:  # raised where Python only prints it (a __del__, a weakref callback)
+        raise Terminated(f"terminated by signal {hit[0]}")

@@ -213,3 +213,22 @@ def _hold_briefly(d, held, most, start) -> None:
                 held.value -= 1
     except DatasetLocked:
         pass
+
+
+@pytest.mark.filterwarnings("ignore::pytest.PytestUnraisableExceptionWarning")  # the point
+def test_a_sigterm_python_swallows_is_raised_on_leaving_the_block():
+    import weakref
+
+    from dstenv.data.lifeline import Terminated, sigterm_as_interrupt
+
+    class Obj:
+        pass
+
+    with pytest.raises(Terminated, match="signal 15"):
+        with sigterm_as_interrupt():
+            o = Obj()
+            # the signal lands in a weakref callback: Python prints it and goes on
+            weakref.finalize(o, lambda: os.kill(os.getpid(), signal.SIGTERM) or time.sleep(0.05))
+            del o
+            done = True
+    assert done

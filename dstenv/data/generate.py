@@ -266,11 +266,23 @@ def _existing(out: Path, task: ShardTask, listed: str = "") -> dict[str, Any] | 
             raise GenerateError(f"{path} holds {old_task['frames']} frames, this run makes "
                                 f"{new_task['frames']} there: it would drop frames; give "
                                 "--frames at least the dataset's, or use another --out")
-        k = diff[0]
+        k = next((d for d in diff if d != "frames"), diff[0])  # the cause, not its effect
         raise GenerateError(f"{path} was made with other settings ({k}: "
                             f"{(old_task or {}).get(k)!r}, now {new_task.get(k)!r}); use another "
                             "--out or remove the old shards")
     return shard_entry(out, path, sha or None)
+
+
+def _made_with(path: Path, tasks: list[ShardTask]) -> str:
+    """``"; made with KEY: old, now new"`` for a shard of another run's settings, or ``""``."""
+    try:
+        with ShardReader(path) as r:
+            old = r.attrs.get("task") or {}
+    except ShardError:
+        return ""
+    new = tasks[0].describe() if tasks else {}
+    diff = [d for d in leaf_diffs(old, new) if d[0] not in ("split", "index", "frames")]
+    return f"; made with {diff[0][0]}: {diff[0][1]!r}, now {diff[0][2]!r}" if diff else ""
 
 
 def _prepare(out: Path, tasks: list[ShardTask]
@@ -295,7 +307,8 @@ def _prepare(out: Path, tasks: list[ShardTask]
     strays = [p for p in scan_shards(out) if p.resolve() not in planned]
     if strays:
         raise GenerateError(f"{out} holds shards that are not part of this run "
-                            f"({strays[0].relative_to(out)}...); use another --out")
+                            f"({strays[0].relative_to(out)}...{_made_with(strays[0], tasks)}); "
+                            "use another --out")
     done, todo = {}, []
     for task in tasks:
         entry = _existing(out, task, known.get(task.file, ""))

@@ -290,6 +290,15 @@ def test_a_shard_changed_since_its_manifest_is_made_again(tmp_path, fake_pipelin
     assert "its bytes changed since the manifest listed them" in capsys.readouterr().err
     assert (tmp_path / "train" / "shard-00001.h5.corrupt").exists()
     assert shard.read_bytes() == good and again["shards"] == m["shards"]
+    # shards of another --frames-per-shard are named by that setting
+    with pytest.raises(gen.GenerateError, match=r"shard-00000\.h5 was made with other "
+                                                r"settings \(frames_per_shard: 4, now 3\)"):
+        gen.generate(_spec(frames=8, split="train", frames_per_shard=3), tmp_path,
+                     progress=False)
+    with pytest.raises(gen.GenerateError, match=r"not part of this run \(train/shard-00001\.h5"
+                                                r"\.\.\.; made with frames_per_shard: 4, now 8\)"):
+        gen.generate(_spec(frames=8, split="train", frames_per_shard=8), tmp_path,
+                     progress=False)
     # another configuration is refused, naming the setting
     with pytest.raises(gen.GenerateError, match=r"another configuration \(grid\.height: "):
         gen.generate(_spec(frames=8, split="train", config={"grid": {"height": 4, "width": 4,

@@ -23,10 +23,9 @@ from itertools import islice
 from pathlib import Path
 from typing import Any
 
+from dstenv.config import CLIError, leaf_diffs
 from dstenv.data.codec import DEFLATE_ENGINES
 from dstenv.data.lifeline import sigterm_as_interrupt
-from dstenv.config import CLIError, leaf_diffs
-from dstenv.io import file_sha256
 from dstenv.data.lock import DatasetLocked, dataset_lock
 from dstenv.data.manifest import (
     MANIFEST_NAME,
@@ -40,6 +39,7 @@ from dstenv.data.sampling import SPLIT_BUCKETS, SPLITS, episode_seeds, frame_ste
 from dstenv.data.shards import (
     FORMAT_VERSION, ShardError, ShardReader, ShardWriter,
 )
+from dstenv.io import file_sha256
 
 __all__ = ["GenerateError", "GenerateSpec", "ShardTask", "plan", "write_shard", "generate"]
 

@@ -253,11 +253,10 @@ _MAX_DISTANCE = 500.0
 def _check_boxes(path: Path, vals: np.ndarray, types: list[int], lines: list[int]) -> None:
     """Reject non-finite or absurd boxes (DontCare rows carry the -1/-1000/-10 fillers);
     ``lines``: each row's line in the file."""
-    dontcare = OBJECT_TYPES.index("DontCare")
     for i, row in enumerate(vals):
         if not np.isfinite(row).all():
             raise KittiError(f"{path}:{lines[i]}: non-finite value; a corrupt label file")
-        if types[i] == dontcare:
+        if types[i] == DONTCARE:
             continue
         hwl, loc = row[7:10], row[10:13]
         if (hwl <= 0).any() or (hwl > _MAX_HWL).any():

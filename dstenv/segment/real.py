@@ -79,12 +79,12 @@ def _same_drives(root: str, sequences: Sequence[str], osm: str | None, data: Pat
     """Refuse a conversion in ``data`` of other drives (another root, sequences or map)."""
     from dstenv.config import CLIError
     from dstenv.data.manifest import load_manifest
+    from dstenv.kitti.cli import _sequences  # one rule for sequence names: 3 -> 0003
 
     meta = load_manifest(data, verify="none").get("meta", {})
     here = (str(Path(meta.get("root") or "").resolve()), list(meta.get("sequences") or []),
             str(Path(meta["osm"]).resolve()) if meta.get("osm") else None)
-    want = (str(Path(root).resolve()), [f"{int(s):04d}" if str(s).isdigit() else str(s)
-                                        for s in sequences],
+    want = (str(Path(root).resolve()), _sequences(",".join(map(str, sequences))),
             str(Path(osm).resolve()) if osm else None)
     if here != want:
         said = (f"{here[0]} sequences {','.join(here[1])}, map {here[2] or 'none'}")

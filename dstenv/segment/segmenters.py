@@ -179,15 +179,9 @@ class TorchSegmenter(Segmenter):
             self.model.train(was_training)
 
     def predict(self, x: torch.Tensor) -> torch.Tensor:
-        if self.decision is not None:
-            from dstenv.segment.decide import apply_decision
+        from dstenv.segment.decide import apply_decision  # argmax when decision is None
 
-            return apply_decision(self.logits(x), x, self.decision)
-        if x.dim() != 4 or x.shape[1] != self.in_channels:
-            raise ValueError(
-                f"{self.name} needs (B, {self.in_channels}, H, W) input, got {tuple(x.shape)}"
-            )
-        return self.model.predict(x.to(self.device)).cpu()
+        return apply_decision(self.logits(x), x, self.decision)
 
     def spec(self) -> dict[str, Any]:
         """JSON-compatible recipe to rebuild the network (stored in checkpoints)."""

@@ -28,6 +28,7 @@ from dstenv._lazy import lazy_attributes
 _WHERE = {
     "SEGMENTERS": "registry", "create_segmenter": "registry", "register_segmenter": "registry",
     "Segmenter": "segmenters", "DSTSegmenter": "segmenters", "TorchSegmenter": "segmenters",
+    "EnsembleSegmenter": "segmenters",
     "save_checkpoint": "checkpoint", "load_checkpoint": "checkpoint",
     "load_segmenter": "checkpoint",
     "ConfusionMeter": "metrics", "confusion_matrix": "metrics", "iou_per_class": "metrics",

@@ -8,6 +8,12 @@ classes), so loading never executes code from the file::
      "model": state_dict, "optimizer": state_dict | None, "epoch": int,
      "rng": {"torch": ByteTensor}, "config": {...}, "history": {...},
      "decision": {...} (optional: a decision rule, dstenv.segment.decide)}
+
+An ensemble (:class:`~dstenv.segment.segmenters.EnsembleSegmenter`, written by
+:func:`dstenv.segment.decide.decide_ensemble`) is one file too::
+
+    {"format": ..., "version": 1, "decision": {...} | None,
+     "ensemble": [{"spec", "model", "data", "source": path, "sha256": hex}, ...]}
 """
 
 from __future__ import annotations
@@ -21,9 +27,10 @@ from typing import Any
 import torch
 
 from dstenv.io import atomic_path
-from dstenv.segment.segmenters import TorchSegmenter
+from dstenv.segment.segmenters import EnsembleSegmenter, TorchSegmenter
 
-__all__ = ["FORMAT", "save_checkpoint", "load_checkpoint", "load_segmenter", "training_data",
+__all__ = ["FORMAT", "save_checkpoint", "load_checkpoint", "network_checkpoint",
+           "load_segmenter", "training_data",
            "json_ready", "read_weights"]
 
 FORMAT = "dstenv-segmenter"
@@ -96,39 +103,81 @@ def load_checkpoint(path: str | Path) -> dict[str, Any]:
     return ckpt
 
 
+def network_checkpoint(path: str | Path, what: str) -> dict[str, Any]:
+    """:func:`load_checkpoint` of one network's file (what ``what``, e.g. ``"--init"``,
+    needs); an ensemble's is refused with its members' files, the ones to use."""
+    ckpt = load_checkpoint(path)
+    if "ensemble" in ckpt:
+        raise ValueError(f"{what} {path}: an ensemble of {len(ckpt['ensemble'])} networks; "
+                         "use one of its members: "
+                         + ", ".join(str(m.get("source")) for m in ckpt["ensemble"]))
+    return ckpt
+
+
 _SPEC_KEYS = {"model": str, "model_kwargs": dict, "in_channels": int, "num_classes": int}
 
 
-def load_segmenter(path: str | Path, device: str | torch.device = "cpu") -> TorchSegmenter:
-    """Rebuild the network of a checkpoint and load its weights (eval mode).
+def load_segmenter(path: str | Path, device: str | torch.device = "cpu"
+                   ) -> TorchSegmenter | EnsembleSegmenter:
+    """Rebuild the network of a checkpoint (or the networks of an ensemble's) and load
+    its weights (eval mode), with the checkpoint's decision rule.
 
     Raises:
         ValueError: unreadable file, a missing or malformed ``spec``, or weights that
             do not fit the network the spec describes (naming the file).
     """
     ckpt = load_checkpoint(path)
-    spec = ckpt.get("spec")
-    if not isinstance(spec, dict) or not all(isinstance(spec.get(k), t)
-                                             for k, t in _SPEC_KEYS.items()):
-        raise ValueError(f"{path}: checkpoint has no valid 'spec' (needs "
-                         f"{', '.join(_SPEC_KEYS)}); was it written by dstenv train?")
-    if not isinstance(ckpt.get("model"), dict):
-        raise ValueError(f"{path}: checkpoint holds no model weights")
-    seg = TorchSegmenter(spec["model"], spec["model_kwargs"], spec["in_channels"],
-                         spec["num_classes"], device, str(spec.get("inputs", "fcn10")))
-    try:
-        seg.model.load_state_dict(ckpt["model"])
-    except RuntimeError as exc:
-        first = (str(exc).strip().splitlines() or ["mismatch"])[0]
-        raise ValueError(f"{path}: weights do not fit a {spec['model']} with "
-                         f"{spec['in_channels']} input channels: {first}") from None
-    seg.model.eval()
+    members = ckpt.get("ensemble")
+    seg: TorchSegmenter | EnsembleSegmenter
+    if members is not None:
+        if not isinstance(members, list) or len(members) < 2 or not all(
+                isinstance(m, dict) for m in members):
+            raise ValueError(f"{path}: 'ensemble' must list two or more networks")
+        nets = [_network(m, f"{path} (ensemble member {i})", device)
+                for i, m in enumerate(members)]
+        for net, m in zip(nets, members):
+            net.label = f"{net.name} ({m.get('source', 'member')})"
+        try:
+            seg = EnsembleSegmenter(nets)
+        except ValueError as exc:
+            raise ValueError(f"{path}: {exc}") from None
+        cells = {_cell_size(m) for m in members}
+        seg.trained_cell_size = cells.pop() if len(cells) == 1 else None
+    else:
+        seg = _network(ckpt, str(path), device)
+        seg.trained_cell_size = _cell_size(ckpt)
     if ckpt.get("decision") is not None:  # a decision rule (dstenv.segment.decide)
         from dstenv.segment.decide import check_decision
 
         seg.decision = check_decision(ckpt["decision"], seg.inputs, str(path))
-    data = ckpt.get("data")  # what it was trained on (dstenv train since 2026-12-07)
-    seg.trained_cell_size = data.get("cell_size") if isinstance(data, dict) else None
+    return seg
+
+
+def _cell_size(entry: dict[str, Any]) -> float | None:
+    """The cells [m] a network was trained on, when its checkpoint says (``dstenv train``
+    since 2026-12-07)."""
+    data = entry.get("data")
+    return data.get("cell_size") if isinstance(data, dict) else None
+
+
+def _network(entry: dict[str, Any], where: str, device: str | torch.device) -> TorchSegmenter:
+    """The network of one checkpoint entry (``spec`` and ``model``); ``where`` names it."""
+    spec = entry.get("spec")
+    if not isinstance(spec, dict) or not all(isinstance(spec.get(k), t)
+                                             for k, t in _SPEC_KEYS.items()):
+        raise ValueError(f"{where}: checkpoint has no valid 'spec' (needs "
+                         f"{', '.join(_SPEC_KEYS)}); was it written by dstenv train?")
+    if not isinstance(entry.get("model"), dict):
+        raise ValueError(f"{where}: checkpoint holds no model weights")
+    seg = TorchSegmenter(spec["model"], spec["model_kwargs"], spec["in_channels"],
+                         spec["num_classes"], device, str(spec.get("inputs", "fcn10")))
+    try:
+        seg.model.load_state_dict(entry["model"])
+    except RuntimeError as exc:
+        first = (str(exc).strip().splitlines() or ["mismatch"])[0]
+        raise ValueError(f"{where}: weights do not fit a {spec['model']} with "
+                         f"{spec['in_channels']} input channels: {first}") from None
+    seg.model.eval()
     return seg
 
 

@@ -63,9 +63,9 @@ def _train(args: argparse.Namespace) -> int:
         if getattr(args, key) is not None:
             cfg[key] = getattr(args, key)
     if args.init:
-        from dstenv.segment.checkpoint import load_checkpoint
+        from dstenv.segment.checkpoint import network_checkpoint
 
-        spec = load_checkpoint(args.init)["spec"]  # one-line errors for a bad file
+        spec = network_checkpoint(args.init, "--init")["spec"]  # one-line errors
         # fine-tuning continues the checkpoint's network: a flag that says otherwise is a
         # mistake, not something to drop in silence
         given = {"--model": (args.model, spec["model"]),

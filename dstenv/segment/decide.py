@@ -16,7 +16,8 @@ both chosen without a real frame, matter for the sim-only networks on KITTI
   ``fcn10+sensor`` and ``fcn10+sensor+past``).
 
 A decision is a small dict kept in the checkpoint (``"decision"``), so a decided network
-loads and scores anywhere a checkpoint does (:func:`decide_checkpoint`)::
+loads and scores anywhere a checkpoint does (:func:`decide_checkpoint`; an ensemble of
+networks with a decision chosen on its mean scores: :func:`decide_ensemble`)::
 
     {"moving_offset": float, "free_veto": bool, "chosen_on": str,
      "confusion": {"offsets": [...], "values": [...]}}
@@ -34,7 +35,7 @@ import torch
 from dstenv.dst.frame import CLASSES
 
 __all__ = ["OFFSETS", "SENSOR_INPUTS", "check_decision", "apply_decision", "offset_confusion",
-           "calibrate_offset", "decide_checkpoint"]
+           "calibrate_offset", "decide_checkpoint", "decide_ensemble"]
 
 #: candidate static/moving offsets [logits]
 OFFSETS: tuple[float, ...] = tuple(float(x) for x in np.round(np.arange(-4.0, 4.001, 0.25), 2))
@@ -126,6 +127,18 @@ def calibrate_offset(segmenter: Any, dataset: Any, offsets: tuple[float, ...] = 
     return float(offsets[int(np.argmin(conf))]), conf
 
 
+def _decide(seg: Any, dataset: Any, chosen_on: str, free_veto: bool, where: str
+            ) -> dict[str, Any]:
+    """The decision of ``seg`` (its plain scores) calibrated on ``dataset``."""
+    seg.decision = None  # calibrate the plain scores, whatever the file holds
+    off, conf = calibrate_offset(seg, dataset)
+    return check_decision({"moving_offset": off, "free_veto": bool(free_veto),
+                           "chosen_on": chosen_on,
+                           "confusion": {"offsets": list(OFFSETS),
+                                         "values": [round(float(c), 6) for c in conf]}},
+                          seg.inputs, where)
+
+
 def decide_checkpoint(src: str | Path, dst: str | Path, dataset: Any, chosen_on: str,
                       free_veto: bool = True) -> dict[str, Any]:
     """Copy the checkpoint ``src`` to ``dst`` with a decision: the offset calibrated on
@@ -134,16 +147,39 @@ def decide_checkpoint(src: str | Path, dst: str | Path, dataset: Any, chosen_on:
     atomically; ``src`` is left as it is."""
     from dstenv.segment.checkpoint import load_checkpoint, load_segmenter, save_checkpoint
 
-    seg = load_segmenter(src)
-    seg.decision = None  # calibrate the plain network, whatever src holds
-    off, conf = calibrate_offset(seg, dataset)
-    decision = check_decision({"moving_offset": off, "free_veto": bool(free_veto),
-                               "chosen_on": chosen_on,
-                               "confusion": {"offsets": list(OFFSETS),
-                                             "values": [round(float(c), 6) for c in conf]}},
-                              seg.inputs, str(src))
+    decision = _decide(load_segmenter(src), dataset, chosen_on, free_veto, str(src))
     ckpt = load_checkpoint(src)
     ckpt.pop("format", None)
     ckpt.pop("version", None)
     save_checkpoint(dst, {**ckpt, "decision": decision})
+    return decision
+
+
+def decide_ensemble(srcs: list[str | Path], dst: str | Path, dataset: Any, chosen_on: str,
+                    free_veto: bool = True) -> dict[str, Any]:
+    """Write to ``dst`` one checkpoint of the ensemble of the networks in ``srcs`` (the mean
+    of their logits, :class:`~dstenv.segment.segmenters.EnsembleSegmenter`) with a decision
+    calibrated on the ensemble's own scores, as :func:`decide_checkpoint` does for one
+    network. Each member keeps its ``spec``, weights, training data and source (path
+    and SHA-256). Returns the decision.
+
+    Raises:
+        ValueError: fewer than two networks, networks of different inputs or classes,
+            or nothing to calibrate on (:func:`offset_confusion`).
+    """
+    from dstenv.io import file_sha256
+    from dstenv.segment.checkpoint import load_checkpoint, load_segmenter, save_checkpoint
+    from dstenv.segment.segmenters import EnsembleSegmenter
+
+    nets = [load_segmenter(src) for src in srcs]
+    if any(isinstance(n, EnsembleSegmenter) for n in nets):
+        raise ValueError(f"{dst}: an ensemble's members must be single networks, not ensembles")
+    decision = _decide(EnsembleSegmenter(nets), dataset, chosen_on, free_veto, str(dst))
+    members = []
+    for src in srcs:
+        ckpt = load_checkpoint(src)
+        members.append({"spec": ckpt["spec"], "model": ckpt["model"],
+                        **({"data": ckpt["data"]} if "data" in ckpt else {}),
+                        "source": str(src), "sha256": file_sha256(src)})
+    save_checkpoint(dst, {"ensemble": members, "decision": decision})
     return decision

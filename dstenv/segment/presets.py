@@ -101,6 +101,10 @@ def default_benchmark_config() -> dict[str, Any]:
             # validation drives (dstenv.segment.decide: a static/moving offset and the
             # free-space rule), rows "... calibrated + free" (docs/benchmark.md)
             "decide": True,
+            # with decide and two or more seeds, also score the seeds' ensemble (the mean of
+            # their logits) with a decision chosen the same way on its own scores, row
+            # "... ensemble of N seeds, calibrated + free" (docs/preregistration-ensemble.md)
+            "ensemble": True,
         },
         "curve": {
             "frames": [],  # training-set sizes, e.g. [140, 1400, 14000]
@@ -369,8 +373,9 @@ def check_config(cfg: Mapping[str, Any]) -> None:
     if rn["inputs"] not in REAL_NET_INPUTS:
         raise ConfigError(f"real_net.inputs: unknown {rn['inputs']!r}; choose from "
                           + ", ".join(REAL_NET_INPUTS))
-    if not isinstance(rn["decide"], bool):
-        raise ConfigError(f"real_net.decide: true or false, got {rn['decide']!r}")
+    for key in ("decide", "ensemble"):
+        if not isinstance(rn[key], bool):
+            raise ConfigError(f"real_net.{key}: true or false, got {rn[key]!r}")
     if rn["model"] not in MODELS:
         raise ConfigError(f"real_net.model: unknown model {rn['model']!r}; choose from "
                           + ", ".join(MODELS))

@@ -24,6 +24,8 @@ for real drives"):
   moving; with ``real_net.decide`` each network is also scored with a static/moving
   offset chosen on its own simulated validation drives and the free-space rule
   (:mod:`dstenv.segment.decide`), rows ``... calibrated + free``.
+  With ``real_net.ensemble`` the seeds' ensemble (the mean of their logits) is scored
+  too, its offset chosen the same way on its own scores (:func:`_ensemble`).
 * **What moves.** KITTI's labels call an object moving above 10 cm a 0.1 s frame
   (1 m/s, :func:`dstenv.kitti.objects.moving_flags`); the simulator's above 0.1 m/s, so
   a car creeping in a queue is moving there and static in KITTI. With
@@ -166,6 +168,8 @@ def train_real_networks(
                               "moving_offset": rule["moving_offset"]}
             log(f"real_net: {label}: static/moving offset {rule['moving_offset']:+g} "
                 "(least confusion on the simulated validation drives), free-space rule")
+        if rn.get("ensemble", False) and len(ckpts) >= 2:  # runs older: none
+            decided.update(_ensemble(ckpts, out, data["val"], log))
     facts = {"data": str(out / "data"), "grid": list(grid), "cell_size": cell_size,
              "frames": {s: len(d) for s, d in data.items()}, "seeds": seeds,
              "inputs": inputs, "labels": "kitti", "no_map": no_map,
@@ -173,3 +177,25 @@ def train_real_networks(
              "checkpoints": {k: str(v) for k, v in ckpts.items()}, "decided": decided,
              "histories": histories, "timings_s": timings}
     return ckpts, facts
+
+
+def _ensemble(ckpts: Mapping[str, Path], out: Path, val: Any, log: Callable[[str], None]
+              ) -> dict[str, dict[str, Any]]:
+    """``{label: facts}`` of the ensemble of the networks ``ckpts`` (``out/models/
+    ensemble.pt``, :func:`dstenv.segment.decide.decide_ensemble`) calibrated on ``val``;
+    ``{"unchosen": why}`` when nothing there can choose its offset."""
+    from dstenv.segment.decide import decide_ensemble
+
+    first = next(iter(ckpts))
+    label = f"{first.split(' (seed')[0]} ensemble of {len(ckpts)} seeds"
+    path = out / "models" / "ensemble.pt"
+    try:
+        rule = decide_ensemble(list(ckpts.values()), path, val,
+                               f"the simulated validation drives in {out / 'data'}")
+    except ValueError as exc:
+        log(f"real_net: {label}: no decision rule ({exc})")
+        return {label: {"unchosen": str(exc)}}
+    log(f"real_net: {label}: static/moving offset {rule['moving_offset']:+g} on the mean of "
+        "the seeds' scores, free-space rule")
+    return {label: {"checkpoint": str(path), "moving_offset": rule["moving_offset"],
+                    "members": list(ckpts)}}

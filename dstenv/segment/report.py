@@ -185,6 +185,13 @@ def _real_lines(results: dict[str, Any]) -> list[str]:
                   "), "
                   "labelled as KITTI labels (objects, seen-free cells navigable, the rest "
                   "ignored), reading the sensor grid besides BetP t / t-1; no real frame.", ""]
+        made = {k: v for k, v in net.get("decided", {}).items() if "checkpoint" in v}
+        if made:
+            lines[-2] += (" Rows `..., calibrated + free` decide with a static/moving offset "
+                          "chosen on the simulated validation drives (offsets: "
+                          + ", ".join(f"{k} {v['moving_offset']:+g}" for k, v in made.items())
+                          + "), then the free-space rule; an ensemble averages its seeds' "
+                          "logits before deciding.")
     if not real.get("finetune_frames") or not start:
         return lines
     n = real["finetune_frames"]

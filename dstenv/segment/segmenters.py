@@ -12,6 +12,7 @@ Two kinds:
   object where the sweep saw free space (:func:`free_space_veto`).
 * :class:`TorchSegmenter` -- a network from :mod:`dstenv.segment.models` reading
   the stored input as is (the paper's 10 channels: BetP at t and t-1).
+  :class:`EnsembleSegmenter` averages the class scores of several such networks.
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ from dstenv.dst.params import DSTParams
 from dstenv.segment.models import SegmentationModel, build_model
 
 __all__ = ["Segmenter", "DSTSegmenter", "DSTFreeSegmenter", "TorchSegmenter",
-           "free_space_veto"]
+           "EnsembleSegmenter", "free_space_veto"]
 
 _NAV, _NONNAV = CLASSES.index("navigable"), CLASSES.index("non_navigable")
 #: the first class index that is an obstacle (building, static, moving)
@@ -196,6 +197,50 @@ class TorchSegmenter(Segmenter):
     def describe(self) -> dict[str, Any]:
         n = sum(p.numel() for p in self.model.parameters())
         out = {**super().describe(), **self.spec(), "parameters": n}
+        if self.decision is not None:
+            out["decision"] = {k: v for k, v in self.decision.items() if k != "confusion"}
+        return out
+
+
+class EnsembleSegmenter(Segmenter):
+    """The mean of the class scores (logits) of ``members``, networks reading the same
+    input; :attr:`decision` as :class:`TorchSegmenter`'s (``None``: argmax).
+
+    Raises:
+        ValueError: fewer than two members, or members that read different inputs or
+            give different classes.
+    """
+
+    def __init__(self, members: list[TorchSegmenter], label: str | None = None) -> None:
+        if len(members) < 2:
+            raise ValueError(f"an ensemble needs at least two networks, got {len(members)}")
+        first = members[0]
+        for m in members[1:]:
+            if (m.inputs, m.in_channels, m.num_classes) != (first.inputs, first.in_channels,
+                                                            first.num_classes):
+                raise ValueError(f"ensemble members differ: {m.label} reads {m.inputs!r} "
+                                 f"({m.in_channels} channels, {m.num_classes} classes), "
+                                 f"{first.label} {first.inputs!r} ({first.in_channels}, "
+                                 f"{first.num_classes}); use networks of one recipe")
+        self.members = list(members)
+        self.name = f"ensemble-{first.name}"
+        self.label = label or f"{first.name} ensemble of {len(members)}"
+        self.inputs, self.in_channels = first.inputs, first.in_channels
+        self.num_classes = first.num_classes
+        self.decision: dict[str, Any] | None = None
+
+    def logits(self, x: torch.Tensor) -> torch.Tensor:
+        """Mean class scores of the members, ``(B, num_classes, H, W)``."""
+        return torch.stack([m.logits(x) for m in self.members]).mean(0)
+
+    def predict(self, x: torch.Tensor) -> torch.Tensor:
+        from dstenv.segment.decide import apply_decision
+
+        return apply_decision(self.logits(x), x, self.decision)
+
+    def describe(self) -> dict[str, Any]:
+        out = {**super().describe(), "inputs": self.inputs,
+               "members": [m.label for m in self.members]}
         if self.decision is not None:
             out["decision"] = {k: v for k, v in self.decision.items() if k != "confusion"}
         return out

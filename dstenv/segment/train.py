@@ -26,7 +26,8 @@ from dstenv.config import ConfigError, merge_config
 from dstenv.data.datasets import INPUT_CHANNELS, LABELS
 from dstenv.dst.frame import CLASSES
 from dstenv.io import file_sha256
-from dstenv.segment.checkpoint import json_ready, load_checkpoint, save_checkpoint
+from dstenv.segment.checkpoint import (json_ready, load_checkpoint, network_checkpoint,
+                                       save_checkpoint)
 from dstenv.segment.losses import LOSSES, build_loss, class_statistics, median_frequency_weights
 from dstenv.segment.metrics import ConfusionMeter, iou_per_class, mean_iou
 from dstenv.segment.models import MODELS
@@ -365,14 +366,13 @@ def start_changed(out_dir: str | Path, init: str | Path) -> bool:
 
 def _init_weights(cfg: dict[str, Any], seg: TorchSegmenter) -> dict[str, Any]:
     """The state dict of ``cfg["init"]``, checked against the network being trained."""
-    init = load_checkpoint(cfg["init"])
+    init = network_checkpoint(cfg["init"], "train.init")  # ValueError: one line
     spec = {"inputs": "fcn10", **init["spec"]}  # written before inputs were recorded
     if spec != seg.spec():
         diff = sorted(k for k in seg.spec() if spec.get(k) != seg.spec()[k])
-        raise ConfigError(
-            f"train.init: {cfg['init']} holds another network ({', '.join(diff)} differ: "
-            f"{ {k: spec.get(k) for k in diff} }); train the same model and inputs"
-        )
+        raise ConfigError(f"train.init: {cfg['init']} holds another network ({', '.join(diff)} "
+                          f"differ: { {k: spec.get(k) for k in diff} }); train the same model "
+                          "and inputs")
     return init["model"]
 
 

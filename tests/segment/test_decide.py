@@ -7,8 +7,8 @@ import torch
 from dstenv.dst.frame import CLASSES
 from dstenv.segment.checkpoint import load_segmenter, save_checkpoint
 from dstenv.segment.decide import (OFFSETS, apply_decision, calibrate_offset, check_decision,
-                                   decide_checkpoint, offset_confusion)
-from dstenv.segment.segmenters import TorchSegmenter
+                                   decide_checkpoint, decide_ensemble, offset_confusion)
+from dstenv.segment.segmenters import EnsembleSegmenter, TorchSegmenter
 
 NAV, NON, BLD, STA, MOV = (CLASSES.index(c) for c in
                            ("navigable", "non_navigable", "building", "static", "moving"))
@@ -96,20 +96,31 @@ def test_offset_confusion_counts_rates_over_visible_object_cells():
         offset_confusion(_Fixed(), [_sample([[0, 0, 0, 1, 0]], [STA], [True])])
 
 
-def test_decide_checkpoint_round_trip(tmp_path):
-    torch.manual_seed(0)
-    seg = TorchSegmenter("unet-light", in_channels=12, inputs="fcn10+sensor")
-    src = save_checkpoint(tmp_path / "best.pt", {"spec": seg.spec(),
-                                                "model": seg.model.state_dict()})
-    before = src.read_bytes()
+def _net(tmp_path, seed, name="best.pt", inputs="fcn10+sensor", channels=12):
+    """A random network's checkpoint, saved as dstenv train writes one."""
+    torch.manual_seed(seed)
+    seg = TorchSegmenter("unet-light", in_channels=channels, inputs=inputs)
+    return save_checkpoint(tmp_path / name, {"spec": seg.spec(), "model": seg.model.state_dict(),
+                                             "data": {"cell_size": 0.33}})
+
+
+def _frames(n=3):
+    """``n`` (12, 16, 16) samples with visible static and moving cells."""
     rng = torch.Generator().manual_seed(1)
     data = []
-    for _ in range(3):
+    for _ in range(n):
         x = torch.rand(12, 16, 16, generator=rng)
         x[10] = (x[10] > 0.7).float()
         y = torch.randint(0, 5, (16, 16), generator=rng)
         y[0, :4], y[1, :4] = STA, MOV  # both classes present
         data.append({"x": x, "labels": y, "visible": torch.ones(16, 16, dtype=torch.bool)})
+    return data
+
+
+def test_decide_checkpoint_round_trip(tmp_path):
+    src = _net(tmp_path, 0)
+    before = src.read_bytes()
+    data = _frames()
     decision = decide_checkpoint(src, tmp_path / "decided.pt", data, "three frames")
     assert src.read_bytes() == before  # the plain checkpoint is left alone
     assert decision["moving_offset"] in OFFSETS and decision["free_veto"] is True
@@ -132,3 +143,58 @@ def test_decide_checkpoint_round_trip(tmp_path):
                                                               "free_veto": True}})
     with pytest.raises(ValueError, match="odd.pt: decision.moving_offset"):
         load_segmenter(tmp_path / "odd.pt")
+
+
+def test_ensemble_averages_logits_and_decides_on_them(tmp_path):
+    srcs = [_net(tmp_path, k, f"seed{k}.pt") for k in range(3)]
+    data = _frames()
+    x = torch.stack([d["x"] for d in data])
+    nets = [load_segmenter(p) for p in srcs]
+    mean = torch.stack([n.logits(x) for n in nets]).mean(0)
+    ens = EnsembleSegmenter(nets)
+    assert torch.allclose(ens.logits(x), mean) and torch.equal(ens.predict(x), mean.argmax(1))
+    decision = decide_ensemble(srcs, tmp_path / "ensemble.pt", data, "three frames")
+    # the offset is the ensemble's own, chosen on its mean scores
+    assert decision["moving_offset"] == calibrate_offset(ens, data)[0]
+    loaded = load_segmenter(tmp_path / "ensemble.pt")
+    assert isinstance(loaded, EnsembleSegmenter) and len(loaded.members) == 3
+    assert loaded.trained_cell_size == 0.33 and loaded.inputs == "fcn10+sensor"
+    assert torch.allclose(loaded.logits(x), mean)
+    assert torch.equal(loaded.predict(x), apply_decision(mean, x, decision))
+    assert loaded.describe()["decision"]["moving_offset"] == decision["moving_offset"]
+    ckpt = torch.load(tmp_path / "ensemble.pt", weights_only=True)
+    assert [m["source"] for m in ckpt["ensemble"]] == [str(p) for p in srcs]
+    # an ensemble's members share inputs; a single network is needed to fine-tune one
+    _net(tmp_path, 5, "other.pt", inputs="fcn10", channels=10)
+    with pytest.raises(ValueError, match="ensemble members differ"):
+        decide_ensemble([srcs[0], tmp_path / "other.pt"], tmp_path / "bad.pt", data, "x")
+    with pytest.raises(ValueError, match="at least two"):
+        EnsembleSegmenter(nets[:1])
+    from dstenv.segment.checkpoint import network_checkpoint
+
+    with pytest.raises(ValueError, match="ensemble.pt: an ensemble of 3 networks; use one of"):
+        network_checkpoint(tmp_path / "ensemble.pt", "--init")
+    ckpt.pop("format"), ckpt.pop("version")
+    save_checkpoint(tmp_path / "one.pt", {**ckpt, "ensemble": ckpt["ensemble"][:1]})
+    with pytest.raises(ValueError, match="one.pt: 'ensemble' must list two or more"):
+        load_segmenter(tmp_path / "one.pt")
+
+
+def test_real_net_ensemble_row(tmp_path):
+    """``real_net.ensemble``: one row for the seeds' ensemble, its offset chosen on its own
+    scores; the reason instead when the validation drives cannot choose one."""
+    from dstenv.segment.realnet import _ensemble
+
+    ckpts = {f"unet-light kitti-labels (seed {k})": _net(tmp_path, k, f"seed{k}.pt")
+             for k in range(2)}
+    (tmp_path / "models").mkdir()
+    said = []
+    facts = _ensemble(ckpts, tmp_path, _frames(), said.append)
+    label = "unet-light kitti-labels ensemble of 2 seeds"
+    assert list(facts) == [label] and facts[label]["members"] == list(ckpts)
+    assert facts[label]["checkpoint"] == str(tmp_path / "models" / "ensemble.pt")
+    assert load_segmenter(facts[label]["checkpoint"]).decision["moving_offset"] == facts[
+        label]["moving_offset"] and "offset" in said[0]
+    still = [{**f, "labels": torch.full((16, 16), STA)} for f in _frames()]
+    facts = _ensemble(ckpts, tmp_path, still, said.append)
+    assert "no visible moving cell" in facts[label]["unchosen"]

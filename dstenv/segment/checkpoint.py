@@ -105,13 +105,31 @@ def load_checkpoint(path: str | Path) -> dict[str, Any]:
 
 def network_checkpoint(path: str | Path, what: str) -> dict[str, Any]:
     """:func:`load_checkpoint` of one network's file (what ``what``, e.g. ``"--init"``,
-    needs); an ensemble's is refused with its members' files, the ones to use."""
+    needs: its ``spec`` and weights); an ensemble's is refused, naming its members' files.
+
+    Raises:
+        ValueError: one line naming ``what`` and ``path``.
+    """
     ckpt = load_checkpoint(path)
-    if "ensemble" in ckpt:
-        raise ValueError(f"{what} {path}: an ensemble of {len(ckpt['ensemble'])} networks; "
-                         "use one of its members: "
-                         + ", ".join(str(m.get("source")) for m in ckpt["ensemble"]))
+    if ckpt.get("ensemble") is not None:
+        members = _members(ckpt["ensemble"], path)
+        sources = [str(m["source"]) for m in members if isinstance(m.get("source"), str)]
+        raise ValueError(f"{what} {path}: an ensemble of {len(members)} networks, not one; "
+                         + (f"use one of its members: {', '.join(sources)}" if sources else
+                            "use one of the networks it was made of"))
+    if not isinstance(ckpt.get("spec"), dict) or not isinstance(ckpt.get("model"), dict):
+        raise ValueError(f"{what} {path}: checkpoint has no valid 'spec' and weights; was it "
+                         "written by dstenv train?")
     return ckpt
+
+
+def _members(value: Any, path: str | Path) -> list[dict[str, Any]]:
+    """An ensemble checkpoint's ``"ensemble"`` entry, checked: two or more dicts."""
+    if not isinstance(value, list) or len(value) < 2 or not all(isinstance(m, dict)
+                                                                for m in value):
+        raise ValueError(f"{path}: 'ensemble' must list two or more networks; write it with "
+                         "dstenv.segment.decide.decide_ensemble")
+    return value
 
 
 _SPEC_KEYS = {"model": str, "model_kwargs": dict, "in_channels": int, "num_classes": int}
@@ -130,26 +148,25 @@ def load_segmenter(path: str | Path, device: str | torch.device = "cpu"
     members = ckpt.get("ensemble")
     seg: TorchSegmenter | EnsembleSegmenter
     if members is not None:
-        if not isinstance(members, list) or len(members) < 2 or not all(
-                isinstance(m, dict) for m in members):
-            raise ValueError(f"{path}: 'ensemble' must list two or more networks")
+        members = _members(members, path)
         nets = [_network(m, f"{path} (ensemble member {i})", device)
                 for i, m in enumerate(members)]
-        for net, m in zip(nets, members):
-            net.label = f"{net.name} ({m.get('source', 'member')})"
+        for i, (net, m) in enumerate(zip(nets, members)):
+            net.label = str(m.get("source", f"member {i}"))
+            net.trained_cell_size = _cell_size(m)
         try:
             seg = EnsembleSegmenter(nets)
         except ValueError as exc:
             raise ValueError(f"{path}: {exc}") from None
-        cells = {_cell_size(m) for m in members}
-        seg.trained_cell_size = cells.pop() if len(cells) == 1 else None
+        seg.sources = [{"source": m.get("source"), "sha256": m.get("sha256")} for m in members]
     else:
         seg = _network(ckpt, str(path), device)
         seg.trained_cell_size = _cell_size(ckpt)
     if ckpt.get("decision") is not None:  # a decision rule (dstenv.segment.decide)
-        from dstenv.segment.decide import check_decision
+        from dstenv.segment.decide import check_decision, decision_name
 
         seg.decision = check_decision(ckpt["decision"], seg.inputs, str(path))
+        seg.label = f"{seg.label}, {decision_name(seg.decision)}"
     return seg
 
 

@@ -35,7 +35,7 @@ import torch
 from dstenv.dst.frame import CLASSES
 
 __all__ = ["OFFSETS", "SENSOR_INPUTS", "check_decision", "apply_decision", "offset_confusion",
-           "calibrate_offset", "decide_checkpoint", "decide_ensemble"]
+           "calibrate_offset", "decide_checkpoint", "decide_ensemble", "decision_name"]
 
 #: candidate static/moving offsets [logits]
 OFFSETS: tuple[float, ...] = tuple(float(x) for x in np.round(np.arange(-4.0, 4.001, 0.25), 2))
@@ -62,6 +62,14 @@ def check_decision(decision: Any, inputs: str, where: str) -> dict[str, Any]:
         raise ValueError(f"{where}: decision.free_veto needs the current sweep in the input "
                          f"({' or '.join(SENSOR_INPUTS)}), this network reads {inputs!r}")
     return {**decision, "moving_offset": float(off)}
+
+
+def decision_name(decision: Mapping[str, Any]) -> str:
+    """A checked decision in a row label: ``"calibrated + free"`` for the benchmark's
+    (an offset chosen on drives, the free-space rule), else what it does."""
+    parts = (["calibrated"] if "chosen_on" in decision
+             else [f"moving offset {float(decision['moving_offset']):+g}"])
+    return " + ".join(parts + (["free"] if decision["free_veto"] else []))
 
 
 def apply_decision(logits: torch.Tensor, x: torch.Tensor,
@@ -131,7 +139,12 @@ def _decide(seg: Any, dataset: Any, chosen_on: str, free_veto: bool, where: str
             ) -> dict[str, Any]:
     """The decision of ``seg`` (its plain scores) calibrated on ``dataset``."""
     seg.decision = None  # calibrate the plain scores, whatever the file holds
-    off, conf = calibrate_offset(seg, dataset)
+    check_decision({"moving_offset": 0.0, "free_veto": bool(free_veto)}, seg.inputs, where)
+    try:
+        off, conf = calibrate_offset(seg, dataset)
+    except ValueError as exc:
+        raise ValueError(f"{where}: {exc} in {chosen_on}; calibrate on drives with both "
+                         "(e.g. a larger validation split)") from None
     return check_decision({"moving_offset": off, "free_veto": bool(free_veto),
                            "chosen_on": chosen_on,
                            "confusion": {"offsets": list(OFFSETS),
@@ -164,22 +177,38 @@ def decide_ensemble(srcs: list[str | Path], dst: str | Path, dataset: Any, chose
     and SHA-256). Returns the decision.
 
     Raises:
-        ValueError: fewer than two networks, networks of different inputs or classes,
-            or nothing to calibrate on (:func:`offset_confusion`).
+        ValueError: one line naming ``dst`` (or the member): fewer than two networks, a
+            network twice, ``dst`` among them, an ensemble among them, networks of
+            different inputs, classes or cells, or nothing to calibrate on
+            (:func:`offset_confusion`). Nothing is written then.
     """
     from dstenv.io import file_sha256
-    from dstenv.segment.checkpoint import load_checkpoint, load_segmenter, save_checkpoint
+    from dstenv.segment.checkpoint import load_segmenter, network_checkpoint, save_checkpoint
     from dstenv.segment.segmenters import EnsembleSegmenter
 
+    if isinstance(srcs, (str, Path)) or len(srcs) < 2:
+        raise ValueError(f"{dst}: an ensemble needs a list of two or more checkpoints, got "
+                         f"{srcs!r}")
+    if Path(dst).resolve() in {Path(src).resolve() for src in srcs}:
+        raise ValueError(f"{dst}: is one of the ensemble's members; write the ensemble to "
+                         "another file")
+    ckpts = [network_checkpoint(src, f"{dst}: member") for src in srcs]  # one network each
+    digests = [file_sha256(src) for src in srcs]
+    twice = [str(src) for src, d in zip(srcs, digests) if digests.count(d) > 1]
+    if twice:
+        raise ValueError(f"{dst}: the same network twice among the members "
+                         f"({', '.join(twice)}); list each network once")
     nets = [load_segmenter(src) for src in srcs]
-    if any(isinstance(n, EnsembleSegmenter) for n in nets):
-        raise ValueError(f"{dst}: an ensemble's members must be single networks, not ensembles")
-    decision = _decide(EnsembleSegmenter(nets), dataset, chosen_on, free_veto, str(dst))
-    members = []
-    for src in srcs:
-        ckpt = load_checkpoint(src)
-        members.append({"spec": ckpt["spec"], "model": ckpt["model"],
-                        **({"data": ckpt["data"]} if "data" in ckpt else {}),
-                        "source": str(src), "sha256": file_sha256(src)})
+    for net, src in zip(nets, srcs):
+        net.label = str(src)
+    try:
+        ens = EnsembleSegmenter(nets)
+    except ValueError as exc:
+        raise ValueError(f"{dst}: {exc}") from None
+    decision = _decide(ens, dataset, chosen_on, free_veto, str(dst))
+    members = [{"spec": ckpt["spec"], "model": ckpt["model"],
+                **({"data": ckpt["data"]} if "data" in ckpt else {}),
+                "source": str(src), "sha256": digest}
+               for ckpt, src, digest in zip(ckpts, srcs, digests)]
     save_checkpoint(dst, {"ensemble": members, "decision": decision})
     return decision

@@ -96,7 +96,8 @@ def start_scores(ckpts: Mapping[str, Path], ds: Any, picked: Sequence[int]
                  ) -> dict[str, float]:
     """Each simulated network's mIoU over the labelled cells of the fine-tuning frames
     ``picked`` of ``ds`` (classes present in their labels): how the fine-tuning's
-    starting point is chosen, on those frames alone."""
+    starting point is chosen, on those frames alone. Ensembles are left out: one
+    network is fine-tuned."""
     import numpy as np
     import torch
 
@@ -111,6 +112,8 @@ def start_scores(ckpts: Mapping[str, Path], ds: Any, picked: Sequence[int]
     out = {}
     for label, path in ckpts.items():
         (seg,) = load_checkpoints([path], int(x10.shape[1]))
+        if hasattr(seg, "members"):  # an EnsembleSegmenter
+            continue
         x = x10 if seg.inputs == ds.inputs else torch.stack(
             [s["x"] for s in (ShardDataset(ds.files, inputs=seg.inputs)[k] for k in picked)])
         with torch.no_grad():
@@ -152,6 +155,9 @@ def _finetune(ckpts: Mapping[str, Path], data: Path, frames: int, epochs: Sequen
         raise ValueError(f"finetune_epochs {cands}: choosing a length needs real frames between "
                          "the fine-tuning and the scored ones (a gap > 0 holding frames)")
     scores = start_scores(ckpts, ds, picked)  # fcn10: it adds a network's other inputs
+    if not scores:
+        raise ValueError("finetune_frames: no single network to fine-tune among "
+                         f"{', '.join(ckpts)} (an ensemble is not one); give one's checkpoint")
     best = max(scores, key=scores.__getitem__)  # ties: the first (the simulated run's order)
     log(f"fine-tuning start: {best} (mIoU on the {len(picked)} fine-tuning frames: "
         + ", ".join(f"{k} {v:.3f}" for k, v in scores.items()) + ")")

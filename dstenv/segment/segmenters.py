@@ -207,8 +207,9 @@ class EnsembleSegmenter(Segmenter):
     input; :attr:`decision` as :class:`TorchSegmenter`'s (``None``: argmax).
 
     Raises:
-        ValueError: fewer than two members, or members that read different inputs or
-            give different classes.
+        ValueError: fewer than two members, members that read different inputs or give
+            different classes, or members trained on different cell sizes (each named
+            by its label).
     """
 
     def __init__(self, members: list[TorchSegmenter], label: str | None = None) -> None:
@@ -221,13 +222,22 @@ class EnsembleSegmenter(Segmenter):
                 raise ValueError(f"ensemble members differ: {m.label} reads {m.inputs!r} "
                                  f"({m.in_channels} channels, {m.num_classes} classes), "
                                  f"{first.label} {first.inputs!r} ({first.in_channels}, "
-                                 f"{first.num_classes}); use networks of one recipe")
+                                 f"{first.num_classes}); use networks that read the same input")
+        cells = {m.trained_cell_size for m in members} - {None}
+        if len(cells) > 1:
+            raise ValueError("ensemble members were trained on different cells ("
+                             + ", ".join(f"{m.label}: {m.trained_cell_size} m" for m in members)
+                             + "); use networks trained at one cell size")
         self.members = list(members)
-        self.name = f"ensemble-{first.name}"
-        self.label = label or f"{first.name} ensemble of {len(members)}"
+        names = list(dict.fromkeys(m.name for m in members))
+        self.name = f"ensemble-{'+'.join(names)}"
+        self.label = label or f"{'+'.join(names)} ensemble of {len(members)}"
         self.inputs, self.in_channels = first.inputs, first.in_channels
         self.num_classes = first.num_classes
+        self.trained_cell_size: float | None = cells.pop() if cells else None
         self.decision: dict[str, Any] | None = None
+        #: where the members came from (``[{"source", "sha256"}]``), when loaded from a file
+        self.sources: list[dict[str, Any]] | None = None
 
     def logits(self, x: torch.Tensor) -> torch.Tensor:
         """Mean class scores of the members, ``(B, num_classes, H, W)``."""
@@ -239,8 +249,10 @@ class EnsembleSegmenter(Segmenter):
         return apply_decision(self.logits(x), x, self.decision)
 
     def describe(self) -> dict[str, Any]:
-        out = {**super().describe(), "inputs": self.inputs,
-               "members": [m.label for m in self.members]}
+        out = {**super().describe(), "inputs": self.inputs, "in_channels": self.in_channels,
+               "num_classes": self.num_classes,
+               "parameters": sum(p.numel() for m in self.members for p in m.model.parameters()),
+               "members": self.sources or [m.label for m in self.members]}
         if self.decision is not None:
             out["decision"] = {k: v for k, v in self.decision.items() if k != "confusion"}
         return out

@@ -223,6 +223,13 @@ def test_fine_tuning_starts_from_the_network_that_reads_its_frames_best(kitti_ro
     cm = confusion_matrix(pred, np.stack([s["labels"].numpy() for s in samples]), 5)
     assert scores == {"a": pytest.approx(mean_iou(cm)), "b": pytest.approx(mean_iou(cm))}
     assert 0.0 <= scores["a"] <= 1.0
+    # an ensemble scores anywhere a checkpoint does, but is no start for a fine-tuning
+    from dstenv.segment.checkpoint import load_checkpoint, save_checkpoint
+
+    one = load_checkpoint(sim_checkpoint)
+    member = {"spec": one["spec"], "model": one["model"], "source": str(sim_checkpoint)}
+    save_checkpoint(tmp_path / "ens.pt", {"ensemble": [member, member]})
+    assert set(start_scores({"a": sim_checkpoint, "e": tmp_path / "ens.pt"}, ds, [0])) == {"a"}
 
 
 @pytest.mark.parametrize("inputs", ["fcn10+sensor", "fcn10+sensor+past"])

@@ -164,20 +164,71 @@ def test_ensemble_averages_logits_and_decides_on_them(tmp_path):
     assert loaded.describe()["decision"]["moving_offset"] == decision["moving_offset"]
     ckpt = torch.load(tmp_path / "ensemble.pt", weights_only=True)
     assert [m["source"] for m in ckpt["ensemble"]] == [str(p) for p in srcs]
-    # an ensemble's members share inputs; a single network is needed to fine-tune one
+    # loaded by --checkpoint, its label says how it decides; describe names its sources
+    assert loaded.label == "unet-light ensemble of 3, calibrated + free"
+    d = loaded.describe()
+    assert [m["sha256"] for m in d["members"]] == [m["sha256"] for m in ckpt["ensemble"]]
+    assert d["parameters"] == 3 * sum(p.numel() for p in nets[0].model.parameters())
+
+
+def test_decide_ensemble_refuses_bad_members_and_writes_nothing(tmp_path):
+    srcs = [_net(tmp_path, k, f"seed{k}.pt") for k in range(2)]
+    data, out = _frames(), tmp_path / "ens.pt"
+    before = srcs[1].read_bytes()
+
+    def refused(members, match, dst=out, frames=data):
+        with pytest.raises((ValueError, FileNotFoundError), match=match):
+            decide_ensemble(members, dst, frames, "x")
+        assert dst == srcs[1] or not dst.exists()
+
+    # the destination is a member: refused before anything is written (it was overwritten)
+    refused(srcs, r"seed1.pt: is one of the ensemble's members", dst=srcs[1])
+    assert srcs[1].read_bytes() == before
+    (tmp_path / "copy.pt").write_bytes(before)
+    refused([srcs[0], srcs[0]], "the same network twice")
+    refused([srcs[1], tmp_path / "copy.pt"], "the same network twice")  # same bytes
+    refused(str(srcs[0]), "a list of two or more checkpoints")
+    refused(srcs[:1], "a list of two or more checkpoints")
+    refused([srcs[0], tmp_path / "nope.pt"], "checkpoint not found")
     _net(tmp_path, 5, "other.pt", inputs="fcn10", channels=10)
-    with pytest.raises(ValueError, match="ensemble members differ"):
-        decide_ensemble([srcs[0], tmp_path / "other.pt"], tmp_path / "bad.pt", data, "x")
+    refused([srcs[0], tmp_path / "other.pt"], r"ens.pt: ensemble members differ: .*other.pt")
+    torch.manual_seed(6)
+    odd = TorchSegmenter("unet-light", in_channels=12, inputs="fcn10+sensor")
+    save_checkpoint(tmp_path / "coarse.pt", {"spec": odd.spec(), "model": odd.model.state_dict(),
+                                             "data": {"cell_size": 0.5}})
+    refused([srcs[0], tmp_path / "coarse.pt"], "trained on different cells")
+    still = [{**f, "labels": torch.full((16, 16), STA)} for f in data]
+    refused(srcs, "ens.pt: no visible moving cell .* in x; calibrate on drives with both",
+            frames=still)
+    decide_ensemble(srcs, out, data, "x")
+    refused([srcs[0], out], "member .*ens.pt: an ensemble of 2 networks", dst=tmp_path / "n.pt")
+    # the free-space rule needs the sweep: refused before calibrating on any frame
+    _net(tmp_path, 7, "plain.pt", inputs="fcn10", channels=10)
+    with pytest.raises(ValueError, match="free_veto needs the current sweep"):
+        decide_ensemble([tmp_path / "other.pt", tmp_path / "plain.pt"], tmp_path / "p.pt",
+                        [{"x": None}], "x")
     with pytest.raises(ValueError, match="at least two"):
-        EnsembleSegmenter(nets[:1])
+        EnsembleSegmenter([load_segmenter(srcs[0])])
+
+
+@pytest.mark.parametrize("value", [3, "a,b", {"a": 1}, [{"spec": {}}], [{}, "seed1.pt"], []])
+def test_malformed_ensemble_entries_are_one_line_errors(tmp_path, value):
     from dstenv.segment.checkpoint import network_checkpoint
 
-    with pytest.raises(ValueError, match="ensemble.pt: an ensemble of 3 networks; use one of"):
-        network_checkpoint(tmp_path / "ensemble.pt", "--init")
+    ckpt = torch.load(_net(tmp_path, 0), weights_only=True)
     ckpt.pop("format"), ckpt.pop("version")
-    save_checkpoint(tmp_path / "one.pt", {**ckpt, "ensemble": ckpt["ensemble"][:1]})
-    with pytest.raises(ValueError, match="one.pt: 'ensemble' must list two or more"):
-        load_segmenter(tmp_path / "one.pt")
+    save_checkpoint(tmp_path / "odd.pt", {**ckpt, "ensemble": value})
+    for load in (load_segmenter, lambda p: network_checkpoint(p, "--init")):
+        with pytest.raises(ValueError, match="odd.pt: 'ensemble' must list two or more"):
+            load(tmp_path / "odd.pt")
+    save_checkpoint(tmp_path / "nospec.pt", {"model": ckpt["model"]})
+    with pytest.raises(ValueError, match="--init .*nospec.pt: checkpoint has no valid 'spec'"):
+        network_checkpoint(tmp_path / "nospec.pt", "--init")
+    # an ensemble file whose members name no source still says what to do
+    save_checkpoint(tmp_path / "anon.pt", {"ensemble": [{"spec": ckpt["spec"],
+                                                         "model": ckpt["model"]}] * 2})
+    with pytest.raises(ValueError, match="use one of the networks it was made of"):
+        network_checkpoint(tmp_path / "anon.pt", "--init")
 
 
 def test_real_net_ensemble_row(tmp_path):

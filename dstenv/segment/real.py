@@ -103,6 +103,7 @@ def start_scores(ckpts: Mapping[str, Path], ds: Any, picked: Sequence[int]
 
     from dstenv.segment.evaluate import load_checkpoints
     from dstenv.segment.metrics import confusion_matrix, mean_iou
+    from dstenv.segment.segmenters import EnsembleSegmenter
 
     from dstenv.data import ShardDataset
 
@@ -112,7 +113,7 @@ def start_scores(ckpts: Mapping[str, Path], ds: Any, picked: Sequence[int]
     out = {}
     for label, path in ckpts.items():
         (seg,) = load_checkpoints([path], int(x10.shape[1]))
-        if hasattr(seg, "members"):  # an EnsembleSegmenter
+        if isinstance(seg, EnsembleSegmenter):
             continue
         x = x10 if seg.inputs == ds.inputs else torch.stack(
             [s["x"] for s in (ShardDataset(ds.files, inputs=seg.inputs)[k] for k in picked)])

@@ -169,7 +169,8 @@ def train_real_networks(
             log(f"real_net: {label}: static/moving offset {rule['moving_offset']:+g} "
                 "(least confusion on the simulated validation drives), free-space rule")
         if rn.get("ensemble", False) and len(ckpts) >= 2:  # runs older: none
-            decided.update(_ensemble(ckpts, out, data["val"], log))
+            decided.update(_ensemble(f"{rn['model']} {REAL_NET} ensemble of {len(ckpts)} "
+                                     "seeds", ckpts, out, data["val"], log))
     facts = {"data": str(out / "data"), "grid": list(grid), "cell_size": cell_size,
              "frames": {s: len(d) for s, d in data.items()}, "seeds": seeds,
              "inputs": inputs, "labels": "kitti", "no_map": no_map,
@@ -179,15 +180,13 @@ def train_real_networks(
     return ckpts, facts
 
 
-def _ensemble(ckpts: Mapping[str, Path], out: Path, val: Any, log: Callable[[str], None]
-              ) -> dict[str, dict[str, Any]]:
+def _ensemble(label: str, ckpts: Mapping[str, Path], out: Path, val: Any,
+              log: Callable[[str], None]) -> dict[str, dict[str, Any]]:
     """``{label: facts}`` of the ensemble of the networks ``ckpts`` (``out/models/
     ensemble.pt``, :func:`dstenv.segment.decide.decide_ensemble`) calibrated on ``val``;
     ``{"unchosen": why}`` when nothing there can choose its offset."""
     from dstenv.segment.decide import decide_ensemble
 
-    first = next(iter(ckpts))
-    label = f"{first.split(' (seed')[0]} ensemble of {len(ckpts)} seeds"
     path = out / "models" / "ensemble.pt"
     try:
         rule = decide_ensemble(list(ckpts.values()), path, val,

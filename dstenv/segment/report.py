@@ -190,8 +190,9 @@ def _real_lines(results: dict[str, Any]) -> list[str]:
             lines[-2] += (" Rows `..., calibrated + free` decide with a static/moving offset "
                           "chosen on the simulated validation drives (offsets: "
                           + ", ".join(f"{k} {v['moving_offset']:+g}" for k, v in made.items())
-                          + "), then the free-space rule; an ensemble averages its seeds' "
-                          "logits before deciding.")
+                          + "), then the free-space rule"
+                          + ("; an ensemble averages its seeds' logits before deciding."
+                             if any("members" in v for v in made.values()) else "."))
     if not real.get("finetune_frames") or not start:
         return lines
     n = real["finetune_frames"]

@@ -240,12 +240,12 @@ def test_real_net_ensemble_row(tmp_path):
              for k in range(2)}
     (tmp_path / "models").mkdir()
     said = []
-    facts = _ensemble(ckpts, tmp_path, _frames(), said.append)
     label = "unet-light kitti-labels ensemble of 2 seeds"
+    facts = _ensemble(label, ckpts, tmp_path, _frames(), said.append)
     assert list(facts) == [label] and facts[label]["members"] == list(ckpts)
     assert facts[label]["checkpoint"] == str(tmp_path / "models" / "ensemble.pt")
     assert load_segmenter(facts[label]["checkpoint"]).decision["moving_offset"] == facts[
         label]["moving_offset"] and "offset" in said[0]
     still = [{**f, "labels": torch.full((16, 16), STA)} for f in _frames()]
-    facts = _ensemble(ckpts, tmp_path, still, said.append)
+    facts = _ensemble(label, ckpts, tmp_path, still, said.append)
     assert "no visible moving cell" in facts[label]["unchosen"]

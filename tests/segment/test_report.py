@@ -186,3 +186,21 @@ def test_kitti_section_says_which_frames_trained_what(tmp_path) -> None:
     assert "Frames 0-" not in report.markdown_table(plain)
     # the committed results.md is what the code writes for this section
     assert line in (committed / "results.md").read_text()
+
+
+def test_real_report_names_the_decision_rules():
+    """The KITTI report says how the ``calibrated + free`` rows decide, with each offset,
+    and that an ensemble averages before deciding (only when there is one)."""
+    from dstenv.segment.report import _real_lines
+
+    net = {"frames": {"train": 8, "val": 2}, "grid": [4, 4], "cell_size": 0.33,
+           "no_map": True, "checkpoints": {"n (seed 0)": "a", "n (seed 1)": "b"},
+           "decided": {"n (seed 0)": {"checkpoint": "x", "moving_offset": -1.5},
+                       "n (seed 1)": {"unchosen": "no visible moving cell"}}}
+    text = " ".join(_real_lines({"real": {"real_net": net}}))
+    assert "offsets: n (seed 0) -1.5), then the free-space rule." in text
+    assert "seed 1) -" not in text and "ensemble" not in text
+    net["decided"]["n ensemble of 2 seeds"] = {"checkpoint": "e", "moving_offset": -0.25,
+                                               "members": ["n (seed 0)", "n (seed 1)"]}
+    text = " ".join(_real_lines({"real": {"real_net": net}}))
+    assert "n ensemble of 2 seeds -0.25), then the free-space rule; an ensemble averages" in text

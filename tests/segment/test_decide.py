@@ -249,3 +249,18 @@ def test_real_net_ensemble_row(tmp_path):
     still = [{**f, "labels": torch.full((16, 16), STA)} for f in _frames()]
     facts = _ensemble(label, ckpts, tmp_path, still, said.append)
     assert "no visible moving cell" in facts[label]["unchosen"]
+
+
+def test_an_ensemble_loads_where_checkpoints_are_scored(tmp_path):
+    """``dstenv benchmark --checkpoint`` / ``kitti evaluate`` load through
+    ``load_checkpoints``: an ensemble of sensor-reading networks is checked against the
+    data's 10 BetP channels like one network, and labelled apart from its members."""
+    from dstenv.segment.evaluate import load_checkpoints
+
+    srcs = [_net(tmp_path, k, f"seed{k}.pt") for k in range(2)]
+    decide_ensemble(srcs, tmp_path / "ens.pt", _frames(), "three frames")
+    one, ens = load_checkpoints([srcs[0], tmp_path / "ens.pt"], 10)
+    assert isinstance(ens, EnsembleSegmenter) and ens.checkpoint == str(tmp_path / "ens.pt")
+    assert one.label == "unet-light" and ens.label == "unet-light ensemble of 2, calibrated + free"
+    with pytest.raises(ValueError, match="ens.pt: checkpoint takes 12 input channels"):
+        load_checkpoints([tmp_path / "ens.pt"], 12)

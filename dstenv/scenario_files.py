@@ -52,7 +52,8 @@ def scenario_path(name_or_path: str | Path) -> Path:
     candidate = Path(name_or_path)
     if candidate.suffix == ".toml" or "/" in text or (os.sep != "/" and os.sep in text):
         if not candidate.is_file():
-            raise ConfigError(f"scenario file not found: {candidate}; give an existing "
+            what = "is a folder, not a" if candidate.is_dir() else "not found: no such"
+            raise ConfigError(f"scenario {candidate}: {what} file; give an existing "
                               f".toml file or a shipped name ({', '.join(list_scenarios())})")
         return candidate
     path = _scenario_dir() / f"{text}.toml"

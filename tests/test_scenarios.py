@@ -72,3 +72,12 @@ def test_a_scenario_that_is_not_utf8_is_one_line(tmp_path):
     bad.write_bytes(b'description = "caf\xe9"\n')
     with pytest.raises(ConfigError, match=r"latin\.toml: not UTF-8 text at byte 18"):
         load_scenario(bad, _defaults())
+
+
+def test_a_folder_given_as_scenario_file_is_named_as_one(tmp_path):
+    from dstenv.config import ConfigError
+
+    with pytest.raises(ConfigError, match=r"is a folder, not a file; give an existing \.toml"):
+        scenario_path(str(tmp_path) + "/")
+    with pytest.raises(ConfigError, match=r"not found: no such file"):
+        scenario_path(tmp_path / "nope.toml")

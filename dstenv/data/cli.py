@@ -157,17 +157,25 @@ def summarize(root: Path, manifest: dict[str, Any] | None = None, verify: str = 
             source = "scanned shards (no manifest.json), every chunk read (checksums)"
     else:
         source = str(root / MANIFEST_NAME)
-    size = sum(int(e["bytes"]) for e in manifest["shards"])
-    frames = int(manifest["frames"])
-    return {
-        "path": str(root), "source": source, "frames": frames,
-        "shards": len(manifest["shards"]), "bytes": size,
-        "bytes_per_frame": size / max(frames, 1),
-        "grid_shape": manifest["grid_shape"], "cell_size": manifest["cell_size"],
-        "splits": {k: {"frames": v["frames"], "shards": v["shards"]}
-                   for k, v in manifest["splits"].items()},
-        "class_frequencies": manifest["class_frequencies"],
-    }
+    try:  # --verify none reads the manifest as it stands
+        size = sum(int(e["bytes"]) for e in manifest["shards"])
+        frames = int(manifest["frames"])
+        return {
+            "path": str(root), "source": source, "frames": frames,
+            "shards": len(manifest["shards"]), "bytes": size,
+            "bytes_per_frame": size / max(frames, 1),
+            "grid_shape": manifest["grid_shape"], "cell_size": float(manifest["cell_size"]),
+            "splits": {k: {"frames": int(v["frames"]), "shards": int(v["shards"])}
+                       for k, v in manifest["splits"].items()},
+            "class_frequencies": {str(k): float(v)
+                                  for k, v in manifest["class_frequencies"].items()},
+        }
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:
+        from dstenv.data.manifest import ManifestError
+
+        raise ManifestError(f"{source}: a missing or malformed entry ({type(exc).__name__}: "
+                            f"{exc}); check it with --verify attrs, or delete the manifest and "
+                            "rerun the command that made the dataset") from None
 
 
 def _read_whole(paths: list[Path]) -> None:
@@ -213,6 +221,8 @@ def _info(args: argparse.Namespace) -> int:
     root = Path(args.path)
     if not root.exists():
         raise CLIError(f"{root}: no such file or directory")
+    if root.is_file() and root.name == "manifest.json":  # the dataset it describes
+        root = root.parent
     try:
         s = summarize(root, verify=args.verify)
     except (ManifestError, ShardError) as exc:
@@ -283,8 +293,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     q.add_argument("path", metavar="DIR|FILE")
     q.add_argument("--verify", default="attrs", choices=["none", "size", "attrs", "frames", "hash"],
                    help="how far to check: size (files and sizes), attrs (default: also each "
-                        "shard's frames and settings), frames (also every chunk's checksum), "
-                        "hash (also each file's SHA-256 against the manifest)")
+                        "shard's frames, class counts and settings), frames (also every "
+                        "chunk's checksum), hash (also each file's SHA-256 against the manifest)")
     q.add_argument("--json", action="store_true", help="print JSON")
     q.set_defaults(func=_info)
 

@@ -211,10 +211,27 @@ def _check_entries(manifest: dict[str, Any], path: Path) -> None:
         derived = build_manifest(shards)
     except ManifestError as exc:
         raise ManifestError(f"{path}: {exc} ({fix})") from None
-    for key in ("frames", "grid_shape", "cell_size", "class_counts", "splits"):
+    from dstenv.config import leaf_diffs
+
+    for key in ("frames", "grid_shape", "cell_size", "classes", "class_counts",
+                "class_frequencies", "splits"):
         if manifest.get(key) != derived[key]:
-            raise ManifestError(f"{path}: {key!r} ({manifest.get(key)!r:.60}) is not what its "
-                                f"shard entries add up to ({derived[key]!r:.60}) ({fix})")
+            at, mine, theirs = (leaf_diffs(manifest.get(key), derived[key], key)
+                                or [(key, manifest.get(key), derived[key])])[0]
+            raise ManifestError(f"{path}: {at!r} is {mine!r:.60} but its shard entries add up "
+                                f"to {theirs!r:.60} ({fix})")
+
+
+class _DuplicateKey(Exception):
+    """A JSON object that names one key twice (the last would win in silence)."""
+
+
+def _unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    keys = [k for k, _ in pairs]
+    for k in keys:
+        if keys.count(k) > 1:
+            raise _DuplicateKey(repr(k))
+    return dict(pairs)
 
 
 def load_manifest(root: str | Path, verify: str = "attrs") -> dict[str, Any]:
@@ -224,8 +241,9 @@ def load_manifest(root: str | Path, verify: str = "attrs") -> dict[str, Any]:
         root: the dataset directory.
         verify: ``"none"`` (parse only), ``"size"`` (every listed file exists inside
             ``root`` with the listed byte size, no unlisted shard), ``"attrs"`` (the
-            default: also open each shard and compare its frame count and the hash of
-            its attributes, which names its seeds, task and configuration; cheap),
+            default: also open each shard and compare its frame count, its class counts
+            and the hash of its attributes, which names its seeds, task and
+            configuration; cheap),
             ``"frames"`` (also read every chunk: its checksum) or ``"hash"`` (instead,
             the SHA-256 of every byte).
 
@@ -238,11 +256,15 @@ def load_manifest(root: str | Path, verify: str = "attrs") -> dict[str, Any]:
     if verify not in levels:
         raise ValueError(f"verify must be one of {', '.join(levels)}, got {verify!r}")
     try:
-        manifest = json.loads(path.read_text(encoding="utf-8"))
+        manifest = json.loads(path.read_text(encoding="utf-8"), object_pairs_hook=_unique_keys)
     except FileNotFoundError:
         raise ManifestError(f"{path}: no manifest (not a dataset directory?)") from None
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise ManifestError(f"{path}: unreadable manifest: {exc}") from None
+    except _DuplicateKey as exc:
+        raise ManifestError(f"{path}: key {exc} appears twice in one object; the manifest was "
+                            "edited: delete it and rerun the command that made the dataset"
+                            ) from None
     if not isinstance(manifest, dict) or manifest.get("format") != MANIFEST_FORMAT:
         raise ManifestError(f"{path}: not a dstenv manifest")
     if manifest.get("format_version") != MANIFEST_VERSION:
@@ -277,6 +299,10 @@ def load_manifest(root: str | Path, verify: str = "attrs") -> dict[str, Any]:
                 if "attrs_sha256" in e and attrs_sha256(r.attrs) != e["attrs_sha256"]:
                     raise ManifestError(f"{path}: {e['file']} was made with other settings or "
                                         f"seeds than the manifest lists ({hint})")
+                counts = [int(c) for c in r.class_counts()]
+                if counts != e["class_counts"]:
+                    raise ManifestError(f"{path}: {e['file']} holds class counts {counts}, the "
+                                        f"manifest says {e['class_counts']} ({hint})")
                 if verify == "frames":  # every chunk read: a corrupt one raises ShardError
                     r.verify()
         if verify == "hash" and file_sha256(f) != e["sha256"]:

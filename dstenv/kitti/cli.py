@@ -274,6 +274,11 @@ def _export(args: argparse.Namespace) -> int:
 
     if args.frames < 1:
         raise CLIError(f"--frames must be >= 1, got {args.frames}")
+    if not 0 <= args.seed < 2**63:  # as render and generate (a larger one wrapped around)
+        raise CLIError(f"--seed must be in [0, 2**63), got {args.seed}")
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise CLIError(f"--out {out}: is a file; give a folder (a KITTI root to write into)")
     try:
         split = export_drive(scenario_config(args.scenario), args.seed, args.frames, args.out,
                              args.sequence)

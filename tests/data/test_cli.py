@@ -52,6 +52,18 @@ def test_info_prints_paper_reference(tmp_path, capsys, fake_pipeline):
     assert main(["info", str(tmp_path), "--json", "--verify", "hash"]) == 0
     s = json.loads(capsys.readouterr().out)
     assert s["frames"] == 10 and s["shards"] == 4
+    # the manifest's own path names its dataset
+    assert main(["info", str(tmp_path / "manifest.json"), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["frames"] == 10
+    # --verify none reads the manifest as it stands: a missing entry is one line
+    m = json.loads((tmp_path / "manifest.json").read_text())
+    m.pop("class_frequencies")
+    (tmp_path / "manifest.json").write_text(json.dumps(m))
+    assert main(["info", str(tmp_path), "--verify", "none"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "a missing or malformed entry" in err
+    assert main(["info", str(tmp_path)]) == 2
+    assert "'class_frequencies' is None" in capsys.readouterr().err
     assert sum(s["class_frequencies"].values()) == pytest.approx(1.0)
     assert s["bytes_per_frame"] == pytest.approx(s["bytes"] / 10)
     assert main(["info", str(tmp_path / "train" / "shard-00000.h5")]) == 0

@@ -175,9 +175,16 @@ def test_manifest_mismatch_is_reported(tmp_path):
     (lambda m: m.update(shards=None), r"'shards' must be a non-empty list"),
     (lambda m: m["shards"][0].update(grid_shape="abc"), r"'grid_shape' is missing"),
     (lambda m: m["shards"][0].update(cell_size=None), r"'cell_size' is missing or not a number"),
-    (lambda m: m.update(frames=999), r"'frames' \(999\) is not what its shard entries add up "
-                                     r"to \(8\)"),
-    (lambda m: m.pop("splits"), r"'splits' \(None\) is not what"),
+    (lambda m: m.update(frames=999), r"'frames' is 999 but its shard entries add up to 8"),
+    (lambda m: m.pop("splits"), r"'splits' is None but"),
+    # the shares printed by dstenv info are checked against the counts, leaf by leaf
+    (lambda m: m["class_frequencies"].update(moving=0.9),
+     r"'class_frequencies.moving' is 0.9 but its shard entries add up to 0\."),
+    (lambda m: m["class_frequencies"].update(moving="abc"), r"'class_frequencies.moving' is "
+                                                            r"'abc'"),
+    (lambda m: m.pop("class_frequencies"), r"'class_frequencies' is None"),
+    (lambda m: m["splits"]["val"]["class_counts"].__setitem__(0, 1),
+     r"'splits.val.class_counts' is \[1, "),
     (lambda m: m["shards"].append(dict(m["shards"][0])), r"val/shard-00000\.h5 is listed twice"),
 ])
 def test_an_edited_manifest_is_one_line(tmp_path, edit, message):
@@ -192,6 +199,29 @@ def test_an_edited_manifest_is_one_line(tmp_path, edit, message):
         load_manifest(tmp_path)
     assert "delete it and rerun the command" in str(info.value)
     assert "\n" not in str(info.value)
+
+
+def test_manifest_counts_are_checked_against_the_shards(tmp_path):
+    """Counts edited consistently (entry, total, split) agree with each other but not with
+    the shard's own; a key named twice is refused, not read as its last value."""
+    import json
+
+    gen.generate(_spec(frames=8, split="val"), tmp_path, progress=False)
+    path = tmp_path / "manifest.json"
+    text = path.read_text()
+    m = json.loads(text)
+    for counts in (m["shards"][0]["class_counts"], m["class_counts"],
+                   m["splits"]["val"]["class_counts"]):
+        counts[0] += 1000
+    n = sum(m["class_counts"])
+    m["class_frequencies"] = {k: c / n for k, c in zip(m["classes"], m["class_counts"])}
+    path.write_text(json.dumps(m))
+    load_manifest(tmp_path, verify="size")  # consistent with itself
+    with pytest.raises(ManifestError, match=r"val/shard-00000\.h5 holds class counts \[\d+"):
+        load_manifest(tmp_path)
+    path.write_text(text.replace('"frames": 8,', '"frames": 99, "frames": 8,', 1))
+    with pytest.raises(ManifestError, match="key 'frames' appears twice in one object"):
+        load_manifest(tmp_path)
 
 
 def _flip_a_data_byte(path):

@@ -130,3 +130,17 @@ def test_export_never_writes_over_or_beside_a_sequence(drive, tmp_path):
     assert not (tmp_path / "training" / ".export-0001.partial").exists()
     for d in ("oxts", "calib", "label_02"):
         assert (tmp_path / "training" / d / "0001.txt").is_file()
+
+
+def test_export_cli_refuses_a_seed_out_of_range_and_a_file_as_out(tmp_path, capsys):
+    from dstenv.cli import main
+
+    (tmp_path / "f.png").write_bytes(b"x")
+    for argv, message in ((["--seed", str(2**64)], "--seed must be in [0, 2**63)"),
+                          (["--seed", "-5"], "--seed must be in [0, 2**63), got -5"),
+                          (["--out", str(tmp_path / "f.png")], "is a file; give a folder")):
+        args = ["export-kitti", "--frames", "2", "--out", str(tmp_path / "k"), *argv]
+        assert main(args) == 2
+        err = capsys.readouterr().err
+        assert message in err and err.count("\n") == 1
+    assert not (tmp_path / "k").exists()

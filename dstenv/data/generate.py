@@ -27,14 +27,8 @@ from dstenv.config import CLIError, leaf_diffs
 from dstenv.data.codec import DEFLATE_ENGINES
 from dstenv.data.lifeline import sigterm_as_interrupt
 from dstenv.data.lock import DatasetLocked, dataset_lock
-from dstenv.data.manifest import (
-    MANIFEST_NAME,
-    ManifestError,
-    load_manifest,
-    scan_shards,
-    shard_entry,
-    write_manifest,
-)
+from dstenv.data.manifest import (MANIFEST_NAME, ManifestError, load_manifest, scan_shards,
+                                  shard_entry, write_manifest)
 from dstenv.data.sampling import SPLIT_BUCKETS, SPLITS, episode_seeds, frame_steps, iter_frames
 from dstenv.data.shards import (
     FORMAT_VERSION, ShardError, ShardReader, ShardWriter,
@@ -282,7 +276,10 @@ def _made_with(path: Path, tasks: list[ShardTask]) -> str:
         return ""
     new = tasks[0].describe() if tasks else {}
     diff = [d for d in leaf_diffs(old, new) if d[0] not in ("split", "index", "frames")]
-    return f"; made with {diff[0][0]}: {diff[0][1]!r}, now {diff[0][2]!r}" if diff else ""
+    splits = sorted({str(t.describe().get("split")) for t in tasks})
+    return (f"; made with {diff[0][0]}: {diff[0][1]!r}, now {diff[0][2]!r}" if diff else
+            f"; a {old['split']} shard, this run writes {', '.join(splits)} only (--split)"
+            if str(old.get("split")) not in splits else "")
 
 
 def _prepare(out: Path, tasks: list[ShardTask]

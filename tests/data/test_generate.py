@@ -114,6 +114,10 @@ def test_resume_refuses_other_settings(tmp_path, fake_pipeline):
                      tmp_path, progress=False)
     with pytest.raises(gen.GenerateError, match=r"not part of this run \(train/shard-00001"):
         gen.generate(_spec(frames=4, split="train"), tmp_path, progress=False)
+    # another --split: the refusal names it
+    with pytest.raises(gen.GenerateError, match=r"a train shard, this run writes val only "
+                                                r"\(--split\)"):
+        gen.generate(_spec(frames=8, split="val"), tmp_path, progress=False)
     # growing the dataset keeps the finished shards and regenerates only the short one
     fake.resets.clear()
     m = gen.generate(_spec(frames=10, split="train"), tmp_path, progress=False)

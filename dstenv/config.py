@@ -294,11 +294,27 @@ def build_config(scenario: str | Path | None = None, *overrides: Override,
         cfg = load_scenario(scenario, defaults)
     else:
         cfg = dict(defaults)
+    layers = []
     for i, item in enumerate(overrides):
         name, value = item if isinstance(item, tuple) else ("config" if i == 0 else
                                                              f"override {i + 1}", item)
         cfg = merge_config(cfg, value, name)
-    return validate_config(cfg, "")
+        layers.append((name, value))
+    try:
+        return validate_config(cfg, "")
+    except ConfigError as exc:  # a bad value: name where it was written, when not a default
+        key = str(exc).split(":", 1)[0].split(".")
+        if scenario is not None:
+            from dstenv.scenario_files import load_scenario, scenario_path
+
+            layers.insert(0, (str(scenario_path(scenario)), load_scenario(scenario)))
+        for name, value in reversed(layers):
+            node: Any = value
+            for part in key:
+                node = node.get(part) if isinstance(node, Mapping) else None
+            if node is not None:
+                raise ConfigError(f"{name}: {exc}") from None
+        raise
 
 
 def merge_config(

@@ -134,3 +134,16 @@ def test_free_form_table_rejects_a_scalar():
     assert merge_config({"o": {}}, {"o": {"x": {"y": 1}}}) == {"o": {"x": {"y": 1}}}
     with pytest.raises(ConfigError, match=r"^bench\.o: expected a table .*got '\{\"p\": 1\}'"):
         merge_config({"o": {}}, {"o": '{"p": 1}'}, "bench")
+
+
+def test_a_bad_value_names_where_it_was_written(tmp_path):
+    """Range errors (checked on the merged configuration) name the layer that set the
+    key last: the scenario file, or the override's label."""
+    f = tmp_path / "neg.toml"
+    f.write_text("[world]\ndt = -0.1\n")
+    with pytest.raises(ConfigError, match=r"neg\.toml: world\.dt: must be in \(0, 1\]"):
+        build_config(f)
+    with pytest.raises(ConfigError, match=r"^--set: world\.dt: must be in \(0, 1\] s, got -1"):
+        build_config(f, ("--set", {"world": {"dt": -1.0}}))  # the last layer to set it
+    with pytest.raises(ConfigError, match=r"^--set: world\.dt"):
+        build_config(None, ("--set", {"world": {"dt": 5.0}}))

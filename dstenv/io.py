@@ -112,7 +112,21 @@ def png_path(path: str | Path, option: str = "--out") -> Path:
         raise ValueError(f"{option} {out}: the picture is a PNG; give a name ending in .png")
     if out.is_dir():  # before any work, not when the picture is written
         raise ValueError(f"{option} {out}: is a directory; give a file name ending in .png")
+    _nearest_folder(out, option)
     return out
+
+
+def _nearest_folder(out: Path, option: str) -> Path:
+    """The nearest existing folder above ``out`` (where its folders would be made).
+
+    Raises:
+        ValueError: that path is a file, not a folder (naming ``option``)."""
+    parent = out.parent
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    if not parent.is_dir():
+        raise ValueError(f"{option} {out}: cannot create its folder ({parent} is a file)")
+    return parent
 
 
 def output_file(path: str | Path, option: str) -> Path:
@@ -127,11 +141,7 @@ def output_file(path: str | Path, option: str) -> Path:
     out = Path(path)
     if out.is_dir():
         raise ValueError(f"{option} {out}: is a directory; give a file name")
-    parent = out.parent
-    while not parent.exists() and parent != parent.parent:
-        parent = parent.parent
-    if not parent.is_dir():
-        raise ValueError(f"{option} {out}: cannot create its folder ({parent} is a file)")
+    parent = _nearest_folder(out, option)
     if not os.access(parent, os.W_OK | os.X_OK):
         raise ValueError(f"{option} {out}: {parent} is not writable; give a path you can "
                          "write to")

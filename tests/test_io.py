@@ -64,3 +64,13 @@ def test_output_file_never_replaces_a_datasets_file_or_a_binary(tmp_path):
         output_file(tmp_path / "victim.h5", "--json")
     (tmp_path / "old.json").write_text("{}")
     assert output_file(tmp_path / "old.json", "--json") == tmp_path / "old.json"  # a report
+
+
+def test_png_path_under_a_file_is_named(tmp_path):
+    from dstenv.io import png_path
+
+    (tmp_path / "r1.png").write_bytes(b"x")
+    with pytest.raises(ValueError, match=r"--out .*r1\.png/x\.png: cannot create its folder "
+                                         r"\(.*r1\.png is a file\)"):
+        png_path(tmp_path / "r1.png" / "x.png")
+    assert png_path(tmp_path / "new" / "x.png") == tmp_path / "new" / "x.png"

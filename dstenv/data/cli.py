@@ -96,7 +96,8 @@ def _generate(args: argparse.Namespace) -> int:
         if key in grid and grid[key] != value:  # one of the two would be dropped unseen
             raise CLIError(f"{flag} and --set grid.{key}={grid[key]} disagree: give one")
         grid[key] = value
-    config = scenario_config(args.scenario, overrides)
+    config = scenario_config(args.scenario, overrides,
+                             "/".join(["--set", *dict.fromkeys(f for f, _ in flags.values())]))
     if config.get("world", {}).get("map", {}).get("kind") == "osm" and not args.quiet:
         print("dstenv generate: note: this scenario has one fixed OSM map; its splits differ "
               "in traffic and route, not in map", file=sys.stderr)

@@ -124,3 +124,14 @@ def test_generate_refuses_an_empty_out(tmp_path, capsys, monkeypatch):
     assert main(["generate", "--frames", "2", "--out", ""]) == 2
     assert "--out: empty" in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_generate_names_set_in_config_errors(tmp_path, capsys):
+    """A bad ``--set`` value is named as render names it (the layer, then the key)."""
+    assert main(["generate", "--frames", "2", "--out", str(tmp_path / "g"), "--set",
+                 "world.dt=-1"]) == 2
+    assert "error: --set: world.dt: must be in (0, 1] s" in capsys.readouterr().err
+    assert main(["generate", "--frames", "2", "--out", str(tmp_path / "g"), "--set",
+                 "world.dtt=1"]) == 2
+    assert "error: --set.world.dtt: unknown key 'dtt'" in capsys.readouterr().err
+    assert not (tmp_path / "g").exists()

@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))  # docs/: the work folders' helpers
-from calibrated_free import kitti_ious  # noqa: E402
+from calibrated_free import goal_met, kitti_ious  # noqa: E402
 from seed_choice import nets_args, seed_networks  # noqa: E402
 
 SIZE = 3
@@ -80,7 +80,7 @@ def main() -> None:
 
     def scored(label: str) -> dict[str, Any]:
         r = ious[label]
-        return {**r, "goal_met": all(r[c] - dst[c] >= MARGIN_REAL for c in ("static", "moving"))}
+        return {**r, "goal_met": goal_met(dst, r)}
 
     for g in groups:
         g["kitti"] = scored(g["ensemble"])

@@ -274,12 +274,15 @@ def _made_with(path: Path, tasks: list[ShardTask]) -> str:
             old = r.attrs.get("task") or {}
     except ShardError:
         return ""
-    new = tasks[0].describe() if tasks else {}
-    diff = [d for d in leaf_diffs(old, new) if d[0] not in ("split", "index", "frames")]
-    splits = sorted({str(t.describe().get("split")) for t in tasks})
-    return (f"; made with {diff[0][0]}: {diff[0][1]!r}, now {diff[0][2]!r}" if diff else
-            f"; a {old['split']} shard, this run writes {', '.join(splits)} only (--split)"
-            if str(old.get("split")) not in splits else "")
+    runs = [t.describe() for t in tasks]
+    diff = [d for d in leaf_diffs(old, runs[0] if runs else {})
+            if d[0] not in ("split", "index", "frames")]
+    if diff:
+        return f"; made with {diff[0][0]}: {diff[0][1]!r}, now {diff[0][2]!r}"
+    splits = sorted({str(r.get("split")) for r in runs})
+    if str(old.get("split")) not in splits:
+        return f"; a {old['split']} shard, this run writes {', '.join(splits)} only (--split)"
+    return ""
 
 
 def _prepare(out: Path, tasks: list[ShardTask]

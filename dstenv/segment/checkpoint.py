@@ -30,7 +30,7 @@ from dstenv.io import atomic_path
 from dstenv.segment.segmenters import EnsembleSegmenter, TorchSegmenter
 
 __all__ = ["FORMAT", "save_checkpoint", "load_checkpoint", "network_checkpoint",
-           "load_segmenter", "training_data",
+           "load_segmenter", "segmenter_of", "training_data",
            "json_ready", "read_weights"]
 
 FORMAT = "dstenv-segmenter"
@@ -144,7 +144,13 @@ def load_segmenter(path: str | Path, device: str | torch.device = "cpu"
         ValueError: unreadable file, a missing or malformed ``spec``, or weights that
             do not fit the network the spec describes (naming the file).
     """
-    ckpt = load_checkpoint(path)
+    return segmenter_of(load_checkpoint(path), path, device)
+
+
+def segmenter_of(ckpt: dict[str, Any], path: str | Path, device: str | torch.device = "cpu"
+                 ) -> TorchSegmenter | EnsembleSegmenter:
+    """:func:`load_segmenter` of a checkpoint already read from ``path`` (named in errors);
+    ``ckpt`` is left as it is."""
     members = ckpt.get("ensemble")
     seg: TorchSegmenter | EnsembleSegmenter
     if members is not None:

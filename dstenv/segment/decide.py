@@ -158,10 +158,10 @@ def decide_checkpoint(src: str | Path, dst: str | Path, dataset: Any, chosen_on:
     ``dataset`` (:func:`calibrate_offset`; named ``chosen_on`` in the checkpoint) and the
     free-space rule if ``free_veto``. Returns the decision. ``dst`` is written
     atomically; ``src`` is left as it is."""
-    from dstenv.segment.checkpoint import load_checkpoint, load_segmenter, save_checkpoint
+    from dstenv.segment.checkpoint import load_checkpoint, save_checkpoint, segmenter_of
 
-    decision = _decide(load_segmenter(src), dataset, chosen_on, free_veto, str(src))
-    ckpt = load_checkpoint(src)
+    ckpt = load_checkpoint(src)  # read once: the network to calibrate, then the copy
+    decision = _decide(segmenter_of(ckpt, src), dataset, chosen_on, free_veto, str(src))
     ckpt.pop("format", None)
     ckpt.pop("version", None)
     save_checkpoint(dst, {**ckpt, "decision": decision})
@@ -183,7 +183,7 @@ def decide_ensemble(srcs: list[str | Path], dst: str | Path, dataset: Any, chose
             (:func:`offset_confusion`). Nothing is written then.
     """
     from dstenv.io import file_sha256
-    from dstenv.segment.checkpoint import load_segmenter, network_checkpoint, save_checkpoint
+    from dstenv.segment.checkpoint import network_checkpoint, save_checkpoint, segmenter_of
     from dstenv.segment.segmenters import EnsembleSegmenter
 
     if isinstance(srcs, (str, Path)) or len(srcs) < 2:
@@ -198,7 +198,7 @@ def decide_ensemble(srcs: list[str | Path], dst: str | Path, dataset: Any, chose
     if twice:
         raise ValueError(f"{dst}: the same network twice among the members "
                          f"({', '.join(twice)}); list each network once")
-    nets = [load_segmenter(src) for src in srcs]
+    nets = [segmenter_of(ckpt, src) for ckpt, src in zip(ckpts, srcs)]
     for net, src in zip(nets, srcs):
         net.label = str(src)
     try:

@@ -156,18 +156,12 @@ def train_real_networks(
     if rn.get("decide", False) and len(data["val"]):  # runs older than real_net.decide: off
         from dstenv.segment.decide import decide_checkpoint
 
+        on = f"the simulated validation drives in {out / 'data'}"
         for label, best in ckpts.items():
-            try:
-                rule = decide_checkpoint(best, best.parent / "decided.pt", data["val"],
-                                         f"the simulated validation drives in {out / 'data'}")
-            except ValueError as exc:  # e.g. no visible moving cell in a tiny val split
-                decided[label] = {"unchosen": str(exc)}
-                log(f"real_net: {label}: no decision rule ({exc})")
-                continue
-            decided[label] = {"checkpoint": str(best.parent / "decided.pt"),
-                              "moving_offset": rule["moving_offset"]}
-            log(f"real_net: {label}: static/moving offset {rule['moving_offset']:+g} "
-                "(least confusion on the simulated validation drives), free-space rule")
+            decided[label] = _decided(
+                label, best.parent / "decided.pt", log,
+                lambda b=best: decide_checkpoint(b, b.parent / "decided.pt", data["val"], on),
+                "(least confusion on the simulated validation drives)")
         if rn.get("ensemble", False) and len(ckpts) >= 2:  # runs older: none
             decided.update(_ensemble(f"{rn['model']} {REAL_NET} ensemble of {len(ckpts)} "
                                      "seeds", ckpts, out, data["val"], log))
@@ -180,6 +174,21 @@ def train_real_networks(
     return ckpts, facts
 
 
+def _decided(label: str, path: Path, log: Callable[[str], None],
+             decide: Callable[[], dict[str, Any]], how: str) -> dict[str, Any]:
+    """The facts of a decided row: ``decide()`` writes ``path`` and returns the decision
+    (``how`` its offset was chosen, for the log); ``{"unchosen": why}`` when it cannot
+    choose one (e.g. no visible moving cell in a tiny validation split)."""
+    try:
+        rule = decide()
+    except ValueError as exc:
+        log(f"real_net: {label}: no decision rule ({exc})")
+        return {"unchosen": str(exc)}
+    log(f"real_net: {label}: static/moving offset {rule['moving_offset']:+g} {how}, "
+        "free-space rule")
+    return {"checkpoint": str(path), "moving_offset": rule["moving_offset"]}
+
+
 def _ensemble(label: str, ckpts: Mapping[str, Path], out: Path, val: Any,
               log: Callable[[str], None]) -> dict[str, dict[str, Any]]:
     """``{label: facts}`` of the ensemble of the networks ``ckpts`` (``out/models/
@@ -188,13 +197,7 @@ def _ensemble(label: str, ckpts: Mapping[str, Path], out: Path, val: Any,
     from dstenv.segment.decide import decide_ensemble
 
     path = out / "models" / "ensemble.pt"
-    try:
-        rule = decide_ensemble(list(ckpts.values()), path, val,
-                               f"the simulated validation drives in {out / 'data'}")
-    except ValueError as exc:
-        log(f"real_net: {label}: no decision rule ({exc})")
-        return {label: {"unchosen": str(exc)}}
-    log(f"real_net: {label}: static/moving offset {rule['moving_offset']:+g} on the mean of "
-        "the seeds' scores, free-space rule")
-    return {label: {"checkpoint": str(path), "moving_offset": rule["moving_offset"],
-                    "members": list(ckpts)}}
+    row = _decided(label, path, log, lambda: decide_ensemble(
+        list(ckpts.values()), path, val, f"the simulated validation drives in {out / 'data'}"),
+        "on the mean of the seeds' scores")
+    return {label: {**row, "members": list(ckpts)} if "checkpoint" in row else row}

@@ -124,7 +124,28 @@ class DSTFreeSegmenter(DSTSegmenter):
         return free_space_veto(x[:, :5].argmax(1), x[:, :5], x[:, 10] > 0.5)
 
 
-class TorchSegmenter(Segmenter):
+class _ScoringSegmenter(Segmenter):
+    """A segmenter with class scores (:meth:`logits`) and a decision rule on them
+    (:attr:`decision`, :mod:`dstenv.segment.decide`; ``None``: argmax)."""
+
+    decision: dict[str, Any] | None = None
+
+    def logits(self, x: torch.Tensor) -> torch.Tensor:  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def predict(self, x: torch.Tensor) -> torch.Tensor:
+        from dstenv.segment.decide import apply_decision  # argmax when decision is None
+
+        return apply_decision(self.logits(x), x, self.decision)
+
+    def _with_decision(self, out: dict[str, Any]) -> dict[str, Any]:
+        """``out`` (a :meth:`describe`) with the decision, without its confusion table."""
+        if self.decision is not None:
+            out["decision"] = {k: v for k, v in self.decision.items() if k != "confusion"}
+        return out
+
+
+class TorchSegmenter(_ScoringSegmenter):
     """A network created by :func:`dstenv.segment.models.build_model`.
 
     ``trained_cell_size`` [m]: the cells of its training data when its checkpoint says
@@ -179,11 +200,6 @@ class TorchSegmenter(Segmenter):
         finally:
             self.model.train(was_training)
 
-    def predict(self, x: torch.Tensor) -> torch.Tensor:
-        from dstenv.segment.decide import apply_decision  # argmax when decision is None
-
-        return apply_decision(self.logits(x), x, self.decision)
-
     def spec(self) -> dict[str, Any]:
         """JSON-compatible recipe to rebuild the network (stored in checkpoints)."""
         return {
@@ -196,13 +212,10 @@ class TorchSegmenter(Segmenter):
 
     def describe(self) -> dict[str, Any]:
         n = sum(p.numel() for p in self.model.parameters())
-        out = {**super().describe(), **self.spec(), "parameters": n}
-        if self.decision is not None:
-            out["decision"] = {k: v for k, v in self.decision.items() if k != "confusion"}
-        return out
+        return self._with_decision({**super().describe(), **self.spec(), "parameters": n})
 
 
-class EnsembleSegmenter(Segmenter):
+class EnsembleSegmenter(_ScoringSegmenter):
     """The mean of the class scores (logits) of ``members``, networks reading the same
     input; :attr:`decision` as :class:`TorchSegmenter`'s (``None``: argmax).
 
@@ -243,16 +256,9 @@ class EnsembleSegmenter(Segmenter):
         """Mean class scores of the members, ``(B, num_classes, H, W)``."""
         return torch.stack([m.logits(x) for m in self.members]).mean(0)
 
-    def predict(self, x: torch.Tensor) -> torch.Tensor:
-        from dstenv.segment.decide import apply_decision
-
-        return apply_decision(self.logits(x), x, self.decision)
-
     def describe(self) -> dict[str, Any]:
-        out = {**super().describe(), "inputs": self.inputs, "in_channels": self.in_channels,
-               "num_classes": self.num_classes,
-               "parameters": sum(p.numel() for m in self.members for p in m.model.parameters()),
-               "members": self.sources or [m.label for m in self.members]}
-        if self.decision is not None:
-            out["decision"] = {k: v for k, v in self.decision.items() if k != "confusion"}
-        return out
+        return self._with_decision({
+            **super().describe(), "inputs": self.inputs, "in_channels": self.in_channels,
+            "num_classes": self.num_classes,
+            "parameters": sum(p.numel() for m in self.members for p in m.model.parameters()),
+            "members": self.sources or [m.label for m in self.members]})

@@ -59,7 +59,8 @@ class Timers:
         return lambda: setattr(owner, name, fn)
 
 
-def row_costs(config: dict[str, Any], frames: int, tmp: Path) -> dict[str, float]:
+def row_costs(config: dict[str, Any], frames: int, tmp: Path,
+              episodes_per_map: int = 1) -> dict[str, float]:
     """CPU ms per stored frame of each stage (:data:`STAGES`) and ``"total"``."""
     import dstenv.pipeline as pl
     from dstenv.data.bench_goals import timed_generate
@@ -80,7 +81,8 @@ def row_costs(config: dict[str, Any], frames: int, tmp: Path) -> dict[str, float
             timers.wrap(pl, "label_grid", STAGES[6]),
             timers.wrap(ShardWriter, "add", STAGES[7])]
     try:
-        _, cpu = timed_generate(config, frames, 1, tmp / "run")
+        _, cpu = timed_generate(config, frames, 1, tmp / "run",
+                                episodes_per_map=episodes_per_map)
     finally:
         for u in reversed(undo):
             u()
@@ -94,6 +96,9 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--frames", type=int, default=200, help="stored frames per row")
     ap.add_argument("--out", type=Path, help="also write the figures as JSON")
+    ap.add_argument("--episodes-per-map", type=int, default=1, metavar="E",
+                    help="episodes driven on each map (generate's option; default 1: a "
+                         "fresh map each)")
     args = ap.parse_args()
     if args.frames < 20:
         raise SystemExit("--frames: at least 20 (one episode holds 19)")
@@ -111,7 +116,7 @@ def main() -> None:
         for k, (label, cfg) in enumerate(rows.items()):
             if cfg is None:
                 continue
-            costs = row_costs(cfg, args.frames, Path(name) / str(k))
+            costs = row_costs(cfg, args.frames, Path(name) / str(k), args.episodes_per_map)
             res[label] = {s: round(v, 3) for s, v in costs.items()}
             res[label]["frames_per_h_2_workers"] = round(2 * 3.6e6 / costs["total"])
             print(f"{label}: {costs['total']:.2f} ms CPU per frame, "

@@ -16,18 +16,16 @@ One :class:`Pipeline` step is one LIDAR period (0.1 s):
 The ``protocol`` section holds the paper's evaluation protocol as options: the fusion
 rate (``update_every``: 10 fuses at 1 Hz, t-1 is the previous fused frame), labels
 restricted to a front camera's field of view (``camera_fov``, the rest
-:data:`~dstenv.frame.IGNORE_INDEX` as on KITTI) and KITTI's moving rule
-(``moving_rule = "displacement"``: moving when it moved more than
-10 cm between fused frames, i.e. a speed above
-``0.1 m / fused period``) and KITTI's labels at the rim of road users
-(``object_edges = "ignore"``: occupied cells just outside a box are ignored, not
-labelled by the ground under them).
+:data:`~dstenv.frame.IGNORE_INDEX` as on KITTI), KITTI's moving rule (``moving_rule =
+"displacement"``: moved more than 10 cm between fused frames) and KITTI's labels at
+the rim of road users (``object_edges = "ignore"``: occupied cells just outside a box
+are ignored, not labelled by the ground under them).
 
 The world source is pluggable (:data:`WORLD_SOURCES`): ``"city"`` is dstenv's own
 :class:`dstenv.sim.World`, ``"highway"`` a highway-env scene
 (:class:`dstenv.sim.highway.HighwayWorld`). Any object with the same interface
-(``reset(seed)``, ``step(ego_action)``, ``map``, ``agents``, ``ego_pose``,
-``ego_speed``, ``time``, ``collision``, ``off_road``) can be passed as ``world=``.
+(``reset(seed)``, ``step(ego_action)``, ``map``, ``agents``, ``ego_pose``, ``ego_speed``,
+``time``, ``collision``, ``off_road``) can be passed as ``world=``.
 
 No gymnasium here: the Gymnasium shell is :mod:`dstenv.envs`.
 """
@@ -252,17 +250,23 @@ class Pipeline:
             raise RuntimeError("Pipeline.world: call reset(seed) first")
         return self._world
 
-    def reset(self, seed: int = 0) -> Frame:
+    def reset(self, seed: int = 0, keep_map: bool = False) -> Frame:
         """Start an episode from ``seed`` and return its first frame.
 
         The filter starts from total ignorance, so the first frame holds one sweep;
         its ``pignistic_prev`` equals ``pignistic``. ``seed``: an integer >= 0.
+        ``keep_map``: drive the current map again, all else drawn from ``seed``
+        (``World.reset(seed, keep_map=True)``: the city world, after a first reset).
         """
         if int(seed) < 0:  # (numpy's own error came from deep inside the world's reset)
             raise ValueError(f"Pipeline.reset: seed must be an integer >= 0, got {seed}")
         self.seed = int(seed)
         if self._world is None:
+            if keep_map:
+                raise RuntimeError("Pipeline.reset(keep_map=True): reset once without it first")
             self._world = WORLD_SOURCES[self.config["source"]](self.config, self.seed)
+        elif keep_map:
+            self._world.reset(self.seed, keep_map=True)  # type: ignore[call-arg]
         else:
             self._world.reset(self.seed)
         self._rng = np.random.default_rng([self.seed, 0x5E45])
@@ -303,9 +307,7 @@ class Pipeline:
         self.world.step(action)
         self.step_index += 1
         if self.fuse and not self.fused_step:
-            # not a fused step and no frame: nothing but the world (one sweep and one
-            # DST update per fused step; the LIDAR stream is keyed by the step, so the
-            # next sweep is the one step() would give)
+            # (the LIDAR stream is keyed by the step: the next sweep is the one step() gives)
             w = self.world
             self._last = (np.array(w.ego_pose, dtype=np.float64), float(w.time))
             return
@@ -367,14 +369,12 @@ class Pipeline:
             if self.camera is not None:
                 labels[~self.camera] = IGNORE_INDEX
         extras: dict[str, np.ndarray] = {}
-        if cfg["frame"]["lidar_points"]:
-            # fixed shape, NaN rows for beams without return: stacks across envs
-            # ((B, 2) ego frame for the 2-D model, (B, 4) Velodyne rows for hdl64)
+        if cfg["frame"]["lidar_points"]:  # fixed shape, NaN rows: stacks across envs
             extras["lidar_points"] = (self.sweep.points.astype(np.float32)
                                       if not self._3d else self.sweep.dense())
         # the last fused BetP and its t-1 (step 0 is always fused)
         betp, betp_prev = self.tracker.latest() if self.fuse else (None, None)
-        frame = Frame(
+        return Frame(
             pignistic=betp,
             pignistic_prev=betp_prev,
             labels=labels,
@@ -388,7 +388,6 @@ class Pipeline:
             masses=masses if want_masses else None,
             extras=extras,
         )
-        return frame
 
     @property
     def moving_threshold(self) -> float:

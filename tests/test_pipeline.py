@@ -60,6 +60,22 @@ def test_same_seed_same_frames(cfg):
     assert np.array_equal(fa.ego_pose, fb.ego_pose)
 
 
+def test_reset_keep_map_drives_the_same_map_with_the_new_seeds_traffic():
+    p = Pipeline(CITY)
+    with pytest.raises(RuntimeError, match="reset once without it first"):
+        p.reset(5, keep_map=True)
+    p.reset(5)
+    city = p.world.map
+    kept = p.reset(9, keep_map=True)
+    assert p.world.map is city and p.seed == 9
+    fresh = Pipeline(CITY).reset(9)  # seed 9's own map: another city, another start
+    assert not np.array_equal(kept.ego_pose, fresh.ego_pose)
+    again = Pipeline(CITY)
+    again.reset(5)
+    same = again.reset(9, keep_map=True)  # the same two calls give the same episode
+    assert np.array_equal(kept.sensor, same.sensor) and np.array_equal(kept.gis, same.gis)
+
+
 def test_observed_building_gets_building_belief():
     # after a few sweeps, cells the map calls building and the LIDAR saw occupied
     # carry most of their belief on "building"

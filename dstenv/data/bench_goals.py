@@ -4,11 +4,14 @@ Each row is the median of ``repeat`` runs (>= 3 unless ``--quick``), measured in
 this process (generation rows use ``workers`` worker processes):
 
 * generation at stride 10 with 10 Hz fusion, 2-D LIDAR (``dstenv generate``, episodes
-  of 200 steps, a fresh map each): the steady rate of a long run (the extra frames of
-  a run three times as long over the extra time, so worker start-up cancels), with the
-  rate of the short run, start-up included, as a note;
+  of 200 steps, a fresh map each, shards of generate's default size): the steady rate
+  of a long run (the extra frames of a run three times as long over the extra time, so
+  worker start-up cancels), with the rate of the short run, start-up included, as a
+  note;
 * the paper's protocol (1 Hz fusion: ``protocol.update_every = 10``) with the 2-D
   and the 3-D LIDAR, when this build has them (else the row says so);
+* the same three with each map driven for :data:`MAP_REUSE` episodes
+  (``--episodes-per-map``), not with ``--quick``;
 * a reset of ``DSTGrid-v0`` with a fresh map;
 * the write path per 256 x 256 frame on one core: labels (label grid and visible
   mask) + :class:`~dstenv.data.ShardWriter` (quantisation, compression, checksums,
@@ -30,7 +33,10 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["goal_rows", "print_goals", "timed_generate", "cpu_seconds"]
+__all__ = ["goal_rows", "print_goals", "timed_generate", "cpu_seconds", "MAP_REUSE"]
+
+#: episodes per map of the goal table's map-reuse rows (``--episodes-per-map``)
+MAP_REUSE = 10
 
 
 def _median(fn: Callable[[], float], repeat: int) -> tuple[float, list[float]]:
@@ -56,8 +62,12 @@ def timed_generate(config: dict[str, Any], frames: int, workers: int, out: Path,
     """One ``dstenv generate`` run as every data benchmark times it.
 
     ``frames`` frames of seed 1 into split ``train``, episodes of 200 steps, one frame
-    every ``stride`` steps from step ``stride``, shards of ``frames // (2 workers)``;
-    ``spec_kw``: other :class:`~dstenv.data.generate.GenerateSpec` fields.
+    every ``stride`` steps from step ``stride``, shards of generate's default size
+    (:class:`~dstenv.data.generate.GenerateSpec`); ``spec_kw``: other ``GenerateSpec``
+    fields.
+
+    (Before 2026-12-07 the shards held ``frames // (2 workers)`` frames: 20 in the goal
+    rows, so every shard paid a fresh map for one frame of a second episode.)
 
     Returns:
         ``(wall [s], CPU [s])``; CPU of this process and its finished workers
@@ -65,26 +75,27 @@ def timed_generate(config: dict[str, Any], frames: int, workers: int, out: Path,
     """
     from dstenv.data.generate import GenerateSpec, generate
 
-    spec = GenerateSpec(config=config, frames=frames, seed=1, split="train",
-                        frames_per_shard=max(1, frames // (2 * workers)), episode_length=200,
+    spec = GenerateSpec(config=config, frames=frames, seed=1, split="train", episode_length=200,
                         stride=stride, warmup=stride, **spec_kw)
     c0, t0 = cpu_seconds(), time.perf_counter()
     generate(spec, out, workers=workers, progress=False)
     return time.perf_counter() - t0, cpu_seconds() - c0
 
 
-def _generate_seconds(config: dict[str, Any], frames: int, workers: int, tmp: Path) -> float:
-    return timed_generate(config, frames, workers, tmp / f"gen-{len(list(tmp.iterdir()))}")[0]
+def _generate_seconds(config: dict[str, Any], frames: int, workers: int, tmp: Path,
+                      **spec_kw: Any) -> float:
+    out = tmp / f"gen-{len(list(tmp.iterdir()))}"
+    return timed_generate(config, frames, workers, out, **spec_kw)[0]
 
 
-def _generate_rates(config: dict[str, Any], frames: int, workers: int, tmp: Path
-                    ) -> dict[str, float]:
+def _generate_rates(config: dict[str, Any], frames: int, workers: int, tmp: Path,
+                    **spec_kw: Any) -> dict[str, float]:
     """frames/h of a short run of ``frames`` (worker start-up included) and the steady
     rate of a long run: the extra ``2 * frames`` of a run three times as long, over the
     extra time (start-up, imports and numba cache loads cancel). NaN when the long run
     was not slower (too few frames for the noise, e.g. ``--quick``)."""
-    short = _generate_seconds(config, frames, workers, tmp)
-    long = _generate_seconds(config, 3 * frames, workers, tmp)
+    short = _generate_seconds(config, frames, workers, tmp, **spec_kw)
+    long = _generate_seconds(config, 3 * frames, workers, tmp, **spec_kw)
     return {"short_run": 3600 * frames / short,
             "steady": 3600 * 2 * frames / (long - short) if long > short else float("nan"),
             "short_s": short, "long_s": long}
@@ -240,19 +251,23 @@ def goal_rows(config: dict[str, Any], repeat: int, quick: bool, workers: int = 2
               ) -> dict[str, Any]:
     """Measure every goal row; ``{row: {"value", "runs", "unit", "goal"}}``."""
     rows: dict[str, Any] = {}
-    frames = 8 if quick else 40
+    frames = 8 if quick else 256  # per worker: one shard of the default size each
     with tempfile.TemporaryDirectory(prefix="dstenv-goals-") as name:
         tmp = Path(name)
         gen = [("stride 10, 10 Hz fusion, 2-D LIDAR", config, ">= 500,000"),
                ("stride 10, paper protocol, 2-D LIDAR", _protocol(config, False), ">= 1,500,000"),
                ("stride 10, paper protocol, 3-D LIDAR", _protocol(config, True), ">= 500,000")]
-        for label, cfg, goal in gen:
-            if cfg is None:
-                rows[label] = {"value": None, "unit": "frames/h", "goal": goal,
-                               "note": "not in this build (protocol.update_every / lidar.model)"}
-                continue
-            runs = [_generate_rates(cfg, frames * workers, workers, tmp) for _ in range(repeat)]
-            rows[label] = _generation_row(runs, frames * workers, workers, goal)
+        for eps in (1,) if quick else (1, MAP_REUSE):
+            for label, cfg, goal in gen:
+                if eps > 1:
+                    label = f"{label}, {eps} episodes per map"
+                if cfg is None:
+                    rows[label] = {"value": None, "unit": "frames/h", "goal": goal, "note":
+                                   "not in this build (protocol.update_every / lidar.model)"}
+                    continue
+                runs = [_generate_rates(cfg, frames * workers, workers, tmp,
+                                        episodes_per_map=eps) for _ in range(repeat)]
+                rows[label] = _generation_row(runs, frames * workers, workers, goal)
         value, runs = _median(_reset_ms, repeat)
         rows["reset of DSTGrid-v0 with a fresh map"] = {"value": value, "runs": runs,
                                                          "unit": "ms", "goal": "<= 150"}

@@ -167,11 +167,9 @@ def iter_frames(
     for seed in seeds:
         frame = pipeline.reset(seed)
         yield from _episode(pipeline, frame, seed, keep, last)
-        if episodes_per_map > 1:
-            reuse = _same_map_pipeline(pipeline, traffic_seed(seed, 1))
-            for k in range(1, episodes_per_map):
-                frame = reuse.reset(traffic_seed(seed, k))
-                yield from _episode(reuse, frame, seed, keep, last)
+        for k in range(1, episodes_per_map):  # the same map, new traffic
+            frame = pipeline.reset(traffic_seed(seed, k), keep_map=True)
+            yield from _episode(pipeline, frame, seed, keep, last)
 
 
 def _episode(pipeline: Any, frame: Frame, seed: int, keep: set[int], last: int
@@ -194,15 +192,6 @@ def _check_map_reuse(config: Mapping[str, Any]) -> None:
         raise ValueError("episodes per map > 1 needs source 'city' with a procedural map "
                          f"(got source {config.get('source')!r}, map kind "
                          f"{config['world']['map']['kind']!r})")
-
-
-def _same_map_pipeline(pipeline: Any, seed: int) -> Any:
-    """A pipeline of the same configuration driving ``pipeline``'s current map."""
-    from dstenv.pipeline import Pipeline
-    from dstenv.sim.world import World
-
-    world = World(pipeline.config["world"], seed, world_map=pipeline.world.map)
-    return Pipeline(pipeline.config, world=world)
 
 
 def scenario_config(scenario: str | Path | Mapping[str, Any] | None = None,

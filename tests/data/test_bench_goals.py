@@ -37,12 +37,12 @@ def test_steady_rate_cancels_start_up(monkeypatch, tmp_path):
 
     # a run costs 5 s of start-up plus 0.1 s per frame
     monkeypatch.setattr(bench_goals, "_generate_seconds",
-                        lambda config, frames, workers, tmp: 5.0 + 0.1 * frames)
+                        lambda config, frames, workers, tmp, **kw: 5.0 + 0.1 * frames)
     r = bench_goals._generate_rates({}, 40, 2, tmp_path)
     assert r["steady"] == 36_000.0  # 10 frames/s, start-up gone
     assert r["short_run"] == 3600 * 40 / 9.0  # start-up included
     # a long run no slower than the short one (noise, tiny --quick counts): no rate
-    monkeypatch.setattr(bench_goals, "_generate_seconds", lambda *a: 5.0)
+    monkeypatch.setattr(bench_goals, "_generate_seconds", lambda *a, **kw: 5.0)
     assert math.isnan(bench_goals._generate_rates({}, 40, 2, tmp_path)["steady"])
 
 
@@ -63,7 +63,7 @@ def test_generation_row_skips_runs_without_a_steady_rate(capsys):
 
 def test_timed_generate_runs_the_documented_spec(tmp_path):
     """The one generate run every data benchmark times: seed 1, split train, a frame
-    every ``stride`` steps from step ``stride``, two shards per worker."""
+    every ``stride`` steps from step ``stride``, shards of generate's default size."""
     import h5py
 
     from dstenv.data.bench_goals import timed_generate
@@ -72,7 +72,32 @@ def test_timed_generate_runs_the_documented_spec(tmp_path):
     wall, cpu = timed_generate(config, 4, 1, tmp_path / "out", stride=5)
     assert wall > 0 and cpu > 0
     shards = sorted((tmp_path / "out" / "train").glob("*.h5"))
-    assert len(shards) == 2
-    for path in shards:  # each shard is a task of its own episodes
-        with h5py.File(path) as f:
-            assert f["step"][:].tolist() == [5, 10]
+    assert len(shards) == 1  # not one shard a frame or two: a fresh map a shard
+    with h5py.File(shards[0]) as f:
+        assert f["step"][:].tolist() == [5, 10, 15, 20]
+
+
+def test_goal_rows_time_map_reuse_rows_with_episodes_per_map(monkeypatch):
+    from dstenv.data import bench_goals
+
+    calls = []
+
+    def rates(cfg, frames, workers, tmp, **kw):
+        calls.append((frames, kw))
+        return {"short_run": 1.0, "steady": 2.0, "short_s": 1.0, "long_s": 2.0}
+
+    monkeypatch.setattr(bench_goals, "_generate_rates", rates)
+    monkeypatch.setattr(bench_goals, "_reset_ms", lambda: 50.0)
+    monkeypatch.setattr(bench_goals, "_write_path_ms", lambda *a: {"cpu_ms": 0.8})
+    monkeypatch.setattr(bench_goals, "_env_ratio", lambda steps: {"ratio": 6.0})
+    monkeypatch.setattr(bench_goals, "_dst_ms", lambda: 0.5)
+    rows = bench_goals.goal_rows(scenario_config(None, {}), 1, False)
+    reuse = [k for k in rows if k.endswith(f"{bench_goals.MAP_REUSE} episodes per map")]
+    assert len(reuse) == 3 and rows[reuse[0]]["goal"] == ">= 500,000"
+    eps = [kw["episodes_per_map"] for _, kw in calls]
+    assert eps.count(1) == eps.count(bench_goals.MAP_REUSE) > 0
+    assert {f for f, _ in calls} == {2 * 256}  # a default shard per worker
+    calls.clear()
+    quick = bench_goals.goal_rows(scenario_config(None, {}), 1, True)
+    assert not any("episodes per map" in k for k in quick)
+    assert {kw["episodes_per_map"] for _, kw in calls} == {1}

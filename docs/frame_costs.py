@@ -10,6 +10,7 @@ grid and the shard writer; "other" is what is left of the run's CPU time (the fr
 and sample bookkeeping, the HDF5 file's open and commit, the wrappers themselves)::
 
     python docs/frame_costs.py --frames 200 --out benchmarks/results/bench/frame-costs.json
+    python docs/frame_costs.py --frames 400 --episodes-per-map 10   # maps reused
 
 Printed and written per row: CPU ms per stored frame of each stage and the total, and
 the frames per hour of two such workers on two idle cores (3600 s * 2 / total).
@@ -125,7 +126,9 @@ def main() -> None:
                 print(f"    {s:20s} {costs[s]:6.2f} ms")
     if args.out:
         args.out.write_text(json.dumps({
-            "command": "python docs/frame_costs.py --frames " + str(args.frames),
+            "command": f"python docs/frame_costs.py --frames {args.frames}"
+                       + (f" --episodes-per-map {args.episodes_per_map}"
+                          if args.episodes_per_map != 1 else ""),
             "date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
             "machine": f"{platform.processor() or platform.machine()}, "
                        f"dstenv {dstenv.__version__}",

@@ -9,6 +9,10 @@ after a warm-up run (numba caches compiled), ``--repeat`` pairs per row; it prin
 median rate and every pair::
 
     python docs/generation_rates.py --frames 160 --repeat 3 --out rates.json
+    python docs/generation_rates.py --frames 160 --frames-per-shard 20   # the old shards
+
+``--frames-per-shard`` (default: generate's, 256) and ``--episodes-per-map`` pass through
+to every run; before 2026-12-07 the runs wrote shards of ``frames // (2 workers)``.
 
 Run it from two checkouts one after the other (``PYTHONPATH=TREE``) for an A/B of two
 versions on the same machine at the same time. Rows: stride 10 with 10 Hz fusion, and
@@ -30,8 +34,15 @@ def main() -> None:
     ap.add_argument("--frames", type=int, default=160, help="frames of the short run (N)")
     ap.add_argument("--repeat", type=int, default=3, help="timed pairs (N, 4 N frames) a row")
     ap.add_argument("--workers", type=int, default=2, help="generation processes")
+    ap.add_argument("--frames-per-shard", type=int, default=0, metavar="N",
+                    help="shard size of every run (default 0: generate's own)")
+    ap.add_argument("--episodes-per-map", type=int, default=1, metavar="E",
+                    help="episodes driven on each map (default 1: a fresh map each)")
     ap.add_argument("--out", type=Path, help="also write the figures as JSON")
     args = ap.parse_args()
+    kw = {"episodes_per_map": args.episodes_per_map}
+    if args.frames_per_shard:
+        kw["frames_per_shard"] = args.frames_per_shard
 
     import dstenv
     from dstenv.data.bench_goals import _protocol, timed_generate
@@ -42,7 +53,8 @@ def main() -> None:
             "stride 10, paper protocol, 2-D LIDAR": _protocol(base, False),
             "stride 10, paper protocol, 3-D LIDAR": _protocol(base, True)}
     out: dict = {"dstenv": str(Path(dstenv.__file__).parent), "frames": args.frames,
-                 "workers": args.workers, "rows": {}}
+                 "workers": args.workers, "frames_per_shard": args.frames_per_shard or None,
+                 "episodes_per_map": args.episodes_per_map, "rows": {}}
     with tempfile.TemporaryDirectory(prefix="dstenv-rates-") as name:
         tmp = Path(name)
         for k, (label, cfg) in enumerate(rows.items()):
@@ -50,8 +62,8 @@ def main() -> None:
             runs = []
             n = args.frames
             for r in range(args.repeat):
-                short, c_short = timed_generate(cfg, n, args.workers, tmp / f"{k}-{r}-s")
-                long, c_long = timed_generate(cfg, 4 * n, args.workers, tmp / f"{k}-{r}-l")
+                short, c_short = timed_generate(cfg, n, args.workers, tmp / f"{k}-{r}-s", **kw)
+                long, c_long = timed_generate(cfg, 4 * n, args.workers, tmp / f"{k}-{r}-l", **kw)
                 runs.append({"short_s": short, "long_s": long,
                              "frames_per_h": 3600 * 3 * n / (long - short),
                              "cpu_ms_per_frame": 1e3 * (c_long - c_short) / (3 * n)})

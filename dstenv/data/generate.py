@@ -30,9 +30,7 @@ from dstenv.data.lock import DatasetLocked, dataset_lock
 from dstenv.data.manifest import (MANIFEST_NAME, ManifestError, load_manifest, scan_shards,
                                   shard_entry, write_manifest)
 from dstenv.data.sampling import SPLIT_BUCKETS, SPLITS, episode_seeds, frame_steps, iter_frames
-from dstenv.data.shards import (
-    FORMAT_VERSION, ShardError, ShardReader, ShardWriter,
-)
+from dstenv.data.shards import FORMAT_VERSION, ShardError, ShardReader, ShardWriter
 from dstenv.io import file_sha256
 
 __all__ = ["GenerateError", "GenerateSpec", "ShardTask", "plan", "write_shard", "generate"]
@@ -179,11 +177,10 @@ def split_frames(frames: int, split: str) -> dict[str, int]:
 
 def plan(spec: GenerateSpec) -> list[ShardTask]:
     """All shard tasks of a generation, in a fixed order."""
-    tasks = []
-    for split, n in split_frames(spec.frames, spec.split).items():
-        for k, start in enumerate(range(0, n, spec.frames_per_shard)):
-            tasks.append(ShardTask(spec, split, k, min(spec.frames_per_shard, n - start)))
-    return tasks
+    size = spec.frames_per_shard
+    return [ShardTask(spec, split, k, min(size, n - start))
+            for split, n in split_frames(spec.frames, spec.split).items()
+            for k, start in enumerate(range(0, n, size))]
 
 
 def _pipeline_config(spec: GenerateSpec) -> dict[str, Any]:
@@ -261,10 +258,14 @@ def _existing(out: Path, task: ShardTask, listed: str = "") -> dict[str, Any] | 
                                 f"{new_task['frames']} there: it would drop frames; give "
                                 "--frames at least the dataset's, or use another --out")
         k = next((d for d in diff if d != "frames"), diff[0])  # the cause, not its effect
-        raise GenerateError(f"{path} was made with other settings ({k}: "
-                            f"{(old_task or {}).get(k)!r}, now {new_task.get(k)!r}); use another "
-                            "--out or remove the old shards")
+        was, now = _shown(k, (old_task or {}).get(k)), _shown(k, new_task.get(k))
+        raise GenerateError(f"{path} was made with other settings ({k}: {was}, now {now}); "
+                            "use another --out or remove the old shards")
     return shard_entry(out, path, sha or None)
+
+
+def _shown(key: str, value: Any) -> str:  # a setting as the CLI spells it (none, not None)
+    return "'none'" if key == "compression" and value is None else repr(value)
 
 
 def _made_with(path: Path, tasks: list[ShardTask]) -> str:
@@ -278,7 +279,8 @@ def _made_with(path: Path, tasks: list[ShardTask]) -> str:
     diff = [d for d in leaf_diffs(old, runs[0] if runs else {})
             if d[0] not in ("split", "index", "frames")]
     if diff:
-        return f"; made with {diff[0][0]}: {diff[0][1]!r}, now {diff[0][2]!r}"
+        k, was, now = diff[0]
+        return f"; made with {k}: {_shown(k, was)}, now {_shown(k, now)}"
     splits = sorted({str(r.get("split")) for r in runs})
     if str(old.get("split")) not in splits:
         return f"; a {old['split']} shard, this run writes {', '.join(splits)} only (--split)"
@@ -377,8 +379,6 @@ def _generate(spec: GenerateSpec, out: Path, workers: int, ray_address: str | No
                 from dstenv.data.pool_backend import run_pool
 
                 results = run_pool(todo, out, workers, bar.update)
-    except GenerateError:
-        raise
     except BrokenProcessPool:
         n = len(scan_shards(out))
         raise GenerateError(f"a worker process died (killed by the system: out of memory?); "

@@ -108,6 +108,9 @@ def test_resume_refuses_other_settings(tmp_path, fake_pipeline):
     with pytest.raises(gen.GenerateError, match=r"shard-00000\.h5 was made with other settings "
                                                 r"\(stride: 3, now 2\)"):
         gen.generate(_spec(frames=8, split="train", stride=2), tmp_path, progress=False)
+    # spelled as on the command line: --compression none, not None
+    with pytest.raises(gen.GenerateError, match=r"\(compression: 'gzip', now 'none'\)"):
+        gen.generate(_spec(frames=8, split="train", compression=None), tmp_path, progress=False)
     with pytest.raises(gen.GenerateError, match="another configuration"):
         gen.generate(_spec(frames=8, split="train", config={"grid": {"height": 4, "width": 4,
                                                                      "cell_size": 0.5}}),

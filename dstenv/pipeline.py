@@ -32,6 +32,7 @@ No gymnasium here: the Gymnasium shell is :mod:`dstenv.envs`.
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Callable, Mapping
 from typing import Any, Protocol
 
@@ -255,20 +256,20 @@ class Pipeline:
 
         The filter starts from total ignorance, so the first frame holds one sweep;
         its ``pignistic_prev`` equals ``pignistic``. ``seed``: an integer >= 0.
-        ``keep_map``: drive the current map again, all else drawn from ``seed``
-        (``World.reset(seed, keep_map=True)``: the city world, after a first reset).
+        ``keep_map``: drive the current map again, all else from ``seed`` (city world).
         """
         if int(seed) < 0:  # (numpy's own error came from deep inside the world's reset)
             raise ValueError(f"Pipeline.reset: seed must be an integer >= 0, got {seed}")
+        if keep_map and self._world is None:
+            raise RuntimeError("Pipeline.reset(keep_map=True): reset once without it first")
+        if keep_map and "keep_map" not in inspect.signature(self._world.reset).parameters:
+            raise ValueError(f"Pipeline.reset(keep_map=True): a {type(self._world).__name__} "
+                             "cannot keep its map (the city World can)")
         self.seed = int(seed)
         if self._world is None:
-            if keep_map:
-                raise RuntimeError("Pipeline.reset(keep_map=True): reset once without it first")
             self._world = WORLD_SOURCES[self.config["source"]](self.config, self.seed)
-        elif keep_map:
-            self._world.reset(self.seed, keep_map=True)  # type: ignore[call-arg]
         else:
-            self._world.reset(self.seed)
+            self._world.reset(self.seed, **({"keep_map": True} if keep_map else {}))
         self._rng = np.random.default_rng([self.seed, 0x5E45])
         gis = self.config["gis"]
         # one map / localisation error per episode: a persistently wrong map
@@ -321,8 +322,7 @@ class Pipeline:
         return self.fuse and self.step_index % self.config["protocol"]["update_every"] == 0
 
     def _sweep_rng(self) -> np.random.Generator:
-        """The LIDAR noise of this step: keyed by (episode seed, step), so a sweep does not
-        depend on which earlier steps were swept (skipped steps, see :meth:`advance`)."""
+        """This step's LIDAR noise, keyed by (seed, step): the same whatever was swept before."""
         return np.random.default_rng([self.seed, 0x5E45, 0x5EE9, self.step_index])
 
     def _sense(self, want_masses: bool, frame: bool = True

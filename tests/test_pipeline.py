@@ -76,6 +76,15 @@ def test_reset_keep_map_drives_the_same_map_with_the_new_seeds_traffic():
     assert np.array_equal(kept.sensor, same.sensor) and np.array_equal(kept.gis, same.gis)
 
 
+def test_reset_keep_map_refuses_a_world_without_a_map_to_keep():
+    pytest.importorskip("highway_env")
+    p = Pipeline(HIGHWAY)
+    p.reset(3)
+    with pytest.raises(ValueError, match="a HighwayWorld cannot keep its map"):
+        p.reset(4, keep_map=True)
+    assert p.seed == 3  # refused before anything changed
+
+
 def test_observed_building_gets_building_belief():
     # after a few sweeps, cells the map calls building and the LIDAR saw occupied
     # carry most of their belief on "building"

@@ -41,13 +41,19 @@ class DatasetLocked(CLIError, RuntimeError):
 _UNOWNED_STALE_S = 30.0
 
 
+def _stat(pid: int) -> list[str]:
+    """Fields of ``/proc/PID/stat`` after the command name (state first); [] where unknown."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except (OSError, IndexError):
+        return []
+
+
 def _started(pid: int) -> str | None:
     """When process ``pid`` started (Linux: /proc's start time in clock ticks), so a pid
     reused by another process is not taken for the lock's owner; None where unknown."""
-    try:
-        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[19]
-    except (OSError, IndexError):
-        return None
+    stat = _stat(pid)
+    return stat[19] if len(stat) > 19 else None
 
 
 def _alive(owner: dict) -> bool:
@@ -59,6 +65,8 @@ def _alive(owner: dict) -> bool:
         return False
     except (PermissionError, OverflowError, ValueError):
         return pid > 0
+    if _stat(pid)[:1] in (["Z"], ["X"]):  # killed, not yet reaped by its parent: gone
+        return False
     start = owner.get("started")
     return start is None or _started(pid) in (None, start)
 

@@ -158,6 +158,32 @@ def test_an_unowned_lock_blocks_only_while_young_and_a_failed_start_leaves_none(
     assert not (d / LOCK_NAME).exists()
 
 
+def test_a_killed_owner_not_yet_reaped_does_not_hold_the_lock(tmp_path):
+    import socket
+
+    from dstenv.data.lock import LOCK_NAME, _started, dataset_lock, writer_of
+
+    d = tmp_path / "d"
+    d.mkdir()
+    child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        started = _started(child.pid)
+        (d / LOCK_NAME).write_text(json.dumps({"host": socket.gethostname(), "pid": child.pid,
+                                               "started": started}))
+        assert writer_of(d) is not None  # running: it holds the lock
+        os.kill(child.pid, signal.SIGKILL)
+        for _ in range(200):  # a zombie until we wait for it (as under a parent that never does)
+            if Path(f"/proc/{child.pid}/stat").read_text().rsplit(")", 1)[1].split()[0] == "Z":
+                break
+            time.sleep(0.01)
+        assert writer_of(d) is None
+        with dataset_lock(d):
+            pass
+    finally:
+        child.kill()
+        child.wait()
+
+
 def test_a_pid_reused_by_another_process_does_not_hold_the_lock(tmp_path):
     import os
     import socket

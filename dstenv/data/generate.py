@@ -29,7 +29,8 @@ from dstenv.data.lifeline import sigterm_as_interrupt
 from dstenv.data.lock import DatasetLocked, dataset_lock
 from dstenv.data.manifest import (MANIFEST_NAME, ManifestError, load_manifest, scan_shards,
                                   shard_entry, write_manifest)
-from dstenv.data.sampling import SPLIT_BUCKETS, SPLITS, episode_seeds, frame_steps, iter_frames
+from dstenv.data.sampling import (SPLIT_BUCKETS, SPLITS, check_map_reuse, episode_seeds,
+                                  frame_steps, iter_frames)
 from dstenv.data.shards import FORMAT_VERSION, ShardError, ShardReader, ShardWriter
 from dstenv.io import file_sha256
 
@@ -83,18 +84,18 @@ class GenerateSpec:
     def __post_init__(self) -> None:
         # checked before any work: a bad value must not surface after a whole shard
         if not 0 <= self.seed < 2**63:
-            raise ValueError(f"seed must be in [0, 2**63), got {self.seed}")
+            raise ValueError(f"--seed must be in [0, 2**63), got {self.seed}")
         if not 1 <= self.frames <= 10**10:
-            raise ValueError(f"frames must be in [1, 1e10], got {self.frames}")
-        if not 1 <= self.frames_per_shard <= 100_000:
-            raise ValueError(f"frames per shard must be in [1, 100000], got "
-                             f"{self.frames_per_shard}")
+            raise ValueError(f"--frames must be in [1, 1e10], got {self.frames}")
+        if not 1 <= (n := self.frames_per_shard) <= 100_000:
+            raise ValueError(f"--frames-per-shard must be in [1, 100000], got {n}")
         if self.split != "auto" and self.split not in SPLITS:
             raise ValueError(f"unknown split {self.split!r}; choose auto, {', '.join(SPLITS)}")
         frame_steps(self.episode_length, self.stride, self.warmup)  # validates
-        if not 1 <= self.episodes_per_map <= 10_000:
-            raise ValueError(f"episodes per map must be in [1, 10000], got "
-                             f"{self.episodes_per_map}")
+        if not 1 <= (n := self.episodes_per_map) <= 10_000:
+            raise ValueError(f"--episodes-per-map must be in [1, 10000], got {n}")
+        if self.episodes_per_map > 1:  # before any folder or map is made
+            check_map_reuse(self.config)
         _check_generation_config(self.config)
         if self.compression not in ("gzip", None):
             raise ValueError(
@@ -109,9 +110,7 @@ class GenerateSpec:
 
     def meta(self) -> dict[str, Any]:
         """The settings as plain JSON data (without the config)."""
-        d = dataclasses.asdict(self)
-        d.pop("config")
-        return d
+        return {k: v for k, v in dataclasses.asdict(self).items() if k != "config"}
 
 
 def _check_generation_config(config: Mapping[str, Any]) -> None:

@@ -46,6 +46,7 @@ __all__ = [
     "frame_steps",
     "iter_frames",
     "traffic_seed",
+    "check_map_reuse",
     "scenario_config",
 ]
 
@@ -103,9 +104,8 @@ def frame_steps(episode_length: int, stride: int, warmup: int) -> list[int]:
         raise ValueError(f"warmup must be >= 0 steps, got {warmup}")
     steps = list(range(warmup, episode_length, stride))
     if not steps:
-        raise ValueError(
-            f"episode length {episode_length} keeps no frame after a warmup of {warmup} steps"
-        )
+        raise ValueError(f"episode length {episode_length} keeps no frame after a warmup of "
+                         f"{warmup} steps: make the episode longer than the warmup")
     return steps
 
 
@@ -163,7 +163,7 @@ def iter_frames(
     last = max(keep)
     pipeline = make_pipeline()
     if episodes_per_map > 1:
-        _check_map_reuse(pipeline.config)
+        check_map_reuse(pipeline.config)
     for seed in seeds:
         frame = pipeline.reset(seed)
         yield from _episode(pipeline, frame, seed, keep, last)
@@ -187,11 +187,13 @@ def _episode(pipeline: Any, frame: Frame, seed: int, keep: set[int], last: int
             yield frame
 
 
-def _check_map_reuse(config: Mapping[str, Any]) -> None:
-    if config.get("source") != "city" or config["world"]["map"]["kind"] != "procedural":
-        raise ValueError("episodes per map > 1 needs source 'city' with a procedural map "
-                         f"(got source {config.get('source')!r}, map kind "
-                         f"{config['world']['map']['kind']!r})")
+def check_map_reuse(config: Mapping[str, Any]) -> None:
+    """ValueError unless ``config`` drives a procedural city (several episodes per map)."""
+    kind = config.get("world", {}).get("map", {}).get("kind")
+    if config.get("source") != "city" or kind != "procedural":
+        raise ValueError("episodes per map > 1 (--episodes-per-map) needs source 'city' with "
+                         f"a procedural map (got source {config.get('source')!r}, map kind "
+                         f"{kind!r}): give 1, or a procedural-city scenario")
 
 
 def scenario_config(scenario: str | Path | Mapping[str, Any] | None = None,

@@ -341,3 +341,18 @@ def test_a_shard_changed_since_its_manifest_is_made_again(tmp_path, fake_pipelin
         gen.generate(_spec(frames=8, split="train", config={"grid": {"height": 4, "width": 4,
                                                                      "cell_size": 0.5}}),
                      tmp_path, progress=False)
+
+
+@pytest.mark.parametrize("scenario, over", [("osm", {}), (None, {"source": "highway"})])
+def test_map_reuse_on_a_fixed_map_is_refused_before_any_folder(tmp_path, capsys, scenario, over):
+    from dstenv.cli import main
+
+    argv = ["generate", "--frames", "4", "--grid", "32", "--episodes-per-map", "2", "--quiet",
+            "--out", str(tmp_path / "d")]
+    argv += ["--scenario", scenario] if scenario else []
+    argv += [f"--set=source={over['source']}"] if over else []
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "--episodes-per-map) needs source 'city' with a procedural map" in err, err
+    assert "give 1" in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "d").exists()  # refused before any folder or map is made

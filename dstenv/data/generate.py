@@ -7,7 +7,8 @@ depends only on its own task and the result is the same with 1 worker, K worker
 processes or a Ray cluster. Each task writes ``DIR/<split>/shard-<k>.h5`` atomically
 (:class:`~dstenv.data.shards.ShardWriter`); a rerun of the same command skips
 shards that already exist with the same settings (resume), and refuses to mix in
-shards made with other settings. ``DIR/manifest.json`` is written last.
+shards made with other settings (:mod:`dstenv.data.resume`). ``DIR/manifest.json`` is
+written last.
 """
 
 from __future__ import annotations
@@ -15,7 +16,6 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import json
-import sys
 from collections.abc import Callable, Mapping
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
@@ -23,18 +23,17 @@ from itertools import islice
 from pathlib import Path
 from typing import Any
 
-from dstenv.config import CLIError, leaf_diffs
+from dstenv.config import CLIError
 from dstenv.data.codec import DEFLATE_ENGINES
 from dstenv.data.lifeline import sigterm_as_interrupt
 from dstenv.data.lock import DatasetLocked, dataset_lock
-from dstenv.data.manifest import (MANIFEST_NAME, ManifestError, load_manifest, scan_shards,
-                                  shard_entry, write_manifest)
+from dstenv.data.manifest import scan_shards, shard_entry, write_manifest
 from dstenv.data.sampling import (SPLIT_BUCKETS, SPLITS, check_map_reuse, episode_seeds,
                                   frame_steps, iter_frames)
-from dstenv.data.shards import FORMAT_VERSION, ShardError, ShardReader, ShardWriter
-from dstenv.io import file_sha256
+from dstenv.data.shards import FORMAT_VERSION, ShardError, ShardWriter
 
-__all__ = ["GenerateError", "GenerateSpec", "ShardTask", "plan", "write_shard", "generate"]
+__all__ = ["GenerateError", "GenerateSpec", "ShardTask", "plan", "pipeline_config", "write_shard",
+           "generate"]
 
 
 class GenerateError(CLIError, RuntimeError):  # one line wherever it surfaces
@@ -182,7 +181,8 @@ def plan(spec: GenerateSpec) -> list[ShardTask]:
             for k, start in enumerate(range(0, n, size))]
 
 
-def _pipeline_config(spec: GenerateSpec) -> dict[str, Any]:
+def pipeline_config(spec: GenerateSpec) -> dict[str, Any]:
+    """The configuration a shard of ``spec`` is simulated with (and records)."""
     config = json.loads(json.dumps(spec.config))
     if spec.masses:
         config.setdefault("frame", {})["masses"] = True
@@ -199,7 +199,7 @@ def write_shard(task: ShardTask, out: str | Path,
     from dstenv.pipeline import Pipeline
 
     spec, out = task.spec, Path(out)
-    config = _pipeline_config(spec)
+    config = pipeline_config(spec)
     attrs = {"config": config, "seed": spec.seed, "split": task.split, "shard_index": task.index,
              "scenario": spec.scenario, "task": task.describe()}
     frames = iter_frames(lambda: Pipeline(config), episode_seeds(spec.seed, task.split,
@@ -214,110 +214,6 @@ def write_shard(task: ShardTask, out: str | Path,
             if progress is not None:
                 progress(1)
     return shard_entry(out, out / task.file)
-
-
-def _existing(out: Path, task: ShardTask, listed: str = "") -> dict[str, Any] | None:
-    """Manifest entry of a finished shard for ``task``, or None if it must be (re)made.
-
-    A kept shard is read in full first (every chunk's checksum) and, when the last
-    manifest listed it (``listed``: its SHA-256), its bytes must still hash to that: a
-    shard with a corrupt chunk, or changed since, is set aside as ``NAME.corrupt`` and
-    made again, never listed in the manifest with the hash of its corrupt bytes.
-    """
-    path = out / task.file
-    if not path.exists():
-        return None
-    try:
-        with ShardReader(path) as r:
-            old_task, old_config = r.attrs.get("task"), r.attrs.get("config")
-            same = old_config == _pipeline_config(task.spec) and old_task == task.describe()
-            if same:
-                r.verify()
-        sha = file_sha256(path) if same and listed else ""
-        if sha and sha != listed:
-            raise ShardError(f"{path}: its bytes changed since the manifest listed them")
-    except ShardError as exc:
-        keep = path.with_name(path.name + ".corrupt")
-        path.replace(keep)
-        print(f"dstenv generate: {exc}; kept as {keep.name}, regenerating", file=sys.stderr)
-        return None
-    new_task = task.describe()
-    if old_config != _pipeline_config(task.spec):
-        diff = leaf_diffs(old_config, json.loads(json.dumps(_pipeline_config(task.spec))))
-        said = "; ".join(f"{k}: {a!r}, now {b!r}" for k, a, b in diff[:3]) or "?"
-        raise GenerateError(f"{path} was made with another configuration ({said}); use "
-                            "another --out or remove the old shards")
-    if old_task != new_task:
-        diff = sorted(k for k in set(new_task) | set(old_task or {})
-                      if (old_task or {}).get(k) != new_task.get(k))
-        if diff == ["frames"] and new_task["frames"] > (old_task or {}).get("frames", 0):
-            return None  # same episode stream, longer: regenerate this shard (a superset)
-        if diff == ["frames"]:  # shorter: that would drop frames already made
-            raise GenerateError(f"{path} holds {old_task['frames']} frames, this run makes "
-                                f"{new_task['frames']} there: it would drop frames; give "
-                                "--frames at least the dataset's, or use another --out")
-        k = next((d for d in diff if d != "frames"), diff[0])  # the cause, not its effect
-        was, now = _shown(k, (old_task or {}).get(k)), _shown(k, new_task.get(k))
-        raise GenerateError(f"{path} was made with other settings ({k}: {was}, now {now}); "
-                            "use another --out or remove the old shards")
-    return shard_entry(out, path, sha or None)
-
-
-def _shown(key: str, value: Any) -> str:  # a setting as the CLI spells it (none, not None)
-    return "'none'" if key == "compression" and value is None else repr(value)
-
-
-def _made_with(path: Path, tasks: list[ShardTask]) -> str:
-    """``"; made with KEY: old, now new"`` for a shard of another run's settings, or ``""``."""
-    try:
-        with ShardReader(path) as r:
-            old = r.attrs.get("task") or {}
-    except ShardError:
-        return ""
-    runs = [t.describe() for t in tasks]
-    diff = [d for d in leaf_diffs(old, runs[0] if runs else {})
-            if d[0] not in ("split", "index", "frames")]
-    if diff:
-        k, was, now = diff[0]
-        return f"; made with {k}: {_shown(k, was)}, now {_shown(k, now)}"
-    splits = sorted({str(r.get("split")) for r in runs})
-    if str(old.get("split")) not in splits:
-        return f"; a {old['split']} shard, this run writes {', '.join(splits)} only (--split)"
-    return ""
-
-
-def _prepare(out: Path, tasks: list[ShardTask]
-             ) -> tuple[dict[str, dict[str, Any]], list[ShardTask]]:
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-        probe = out / ".dstenv-write-test.partial"
-        probe.write_bytes(b"ok")
-        probe.unlink()
-    except OSError as exc:
-        raise GenerateError(f"output directory {out} is not writable: "
-                            f"{exc.strerror or exc}") from None
-    known: dict[str, str] = {}  # file -> sha256 the last manifest listed
-    if (out / MANIFEST_NAME).exists():  # the run rewrites it: never someone else's file
-        try:
-            known = {e["file"]: e.get("sha256", "")
-                     for e in load_manifest(out, verify="none")["shards"]}
-        except ManifestError:
-            raise GenerateError(f"{out / MANIFEST_NAME}: not a dstenv manifest, and this run "
-                                "would replace it; use another --out") from None
-    planned = {(out / t.file).resolve() for t in tasks}
-    strays = [p for p in scan_shards(out) if p.resolve() not in planned]
-    if strays:
-        raise GenerateError(f"{out} holds shards that are not part of this run "
-                            f"({strays[0].relative_to(out)}...{_made_with(strays[0], tasks)}); "
-                            "use another --out")
-    done, todo = {}, []
-    for task in tasks:
-        entry = _existing(out, task, known.get(task.file, ""))
-        if entry is None:
-            todo.append(task)
-        else:
-            done[task.file] = entry
-    return done, todo
 
 
 def generate(spec: GenerateSpec, out: str | Path, workers: int = 1, ray_address: str | None = None,
@@ -361,8 +257,10 @@ def _generate(spec: GenerateSpec, out: Path, workers: int, ray_address: str | No
               progress: bool) -> dict[str, Any]:
     from tqdm import tqdm
 
+    from dstenv.data.resume import prepare
+
     tasks = plan(spec)
-    done, todo = _prepare(out, tasks)
+    done, todo = prepare(out, tasks)
     # resumed frames count as initial, so frames/s is the rate of this run only
     bar = tqdm(total=spec.frames, initial=sum(e["frames"] for e in done.values()), unit="frame",
                disable=not progress, dynamic_ncols=True, desc="generate", smoothing=0.1)

@@ -106,11 +106,16 @@ def test_resume_refuses_other_settings(tmp_path, fake_pipeline):
     fake = fake_pipeline
     gen.generate(_spec(frames=8, split="train"), tmp_path, progress=False)
     with pytest.raises(gen.GenerateError, match=r"shard-00000\.h5 was made with other settings "
-                                                r"\(stride: 3, now 2\)"):
+                                                r"\(--stride: 3, now 2\)"):
         gen.generate(_spec(frames=8, split="train", stride=2), tmp_path, progress=False)
     # spelled as on the command line: --compression none, not None
-    with pytest.raises(gen.GenerateError, match=r"\(compression: 'gzip', now 'none'\)"):
+    with pytest.raises(gen.GenerateError, match=r"\(--compression: 'gzip', now 'none'\)"):
         gen.generate(_spec(frames=8, split="train", compression=None), tmp_path, progress=False)
+    with pytest.raises(gen.GenerateError, match=r"\(--float32: off, now on\)"):
+        gen.generate(_spec(frames=8, split="train", quantize=False), tmp_path, progress=False)
+    with pytest.raises(gen.GenerateError, match=r"\(--gzip-level: 1, now 5\)"):
+        gen.generate(_spec(frames=8, split="train", compression_level=5), tmp_path,
+                     progress=False)
     with pytest.raises(gen.GenerateError, match="another configuration"):
         gen.generate(_spec(frames=8, split="train", config={"grid": {"height": 4, "width": 4,
                                                                      "cell_size": 0.5}}),
@@ -329,11 +334,12 @@ def test_a_shard_changed_since_its_manifest_is_made_again(tmp_path, fake_pipelin
     assert shard.read_bytes() == good and again["shards"] == m["shards"]
     # shards of another --frames-per-shard are named by that setting
     with pytest.raises(gen.GenerateError, match=r"shard-00000\.h5 was made with other "
-                                                r"settings \(frames_per_shard: 4, now 3\)"):
+                                                r"settings \(--frames-per-shard: 4, now 3\)"):
         gen.generate(_spec(frames=8, split="train", frames_per_shard=3), tmp_path,
                      progress=False)
-    with pytest.raises(gen.GenerateError, match=r"not part of this run \(train/shard-00001\.h5"
-                                                r"\.\.\.; made with frames_per_shard: 4, now 8\)"):
+    with pytest.raises(gen.GenerateError, match=r"not part of this run \(train/shard-00001"
+                                                r"\.h5\.\.\.; made with --frames-per-shard: 4, "
+                                                r"now 8\)"):
         gen.generate(_spec(frames=8, split="train", frames_per_shard=8), tmp_path,
                      progress=False)
     # another configuration is refused, naming the setting
@@ -356,3 +362,11 @@ def test_map_reuse_on_a_fixed_map_is_refused_before_any_folder(tmp_path, capsys,
     assert "--episodes-per-map) needs source 'city' with a procedural map" in err, err
     assert "give 1" in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "d").exists()  # refused before any folder or map is made
+
+
+def test_a_masses_clash_names_the_flag(tmp_path):
+    framed = {**CONFIG, "frame": {"masses": False}}  # as every full configuration has
+    gen.generate(_spec(frames=4, split="train", config=framed), tmp_path, progress=False)
+    with pytest.raises(gen.GenerateError, match=r"another configuration \(--masses: off, now on"):
+        gen.generate(_spec(frames=4, split="train", config=framed, masses=True), tmp_path,
+                     progress=False)

@@ -84,6 +84,9 @@ def _generate(args: argparse.Namespace) -> int:
 
     if not str(args.out).strip():
         raise CLIError("--out: empty; give the dataset folder (. for the current one)")
+    if args.compression == "none" and (args.gzip_level is not None or args.deflate):
+        raise CLIError("--gzip-level and --deflate set the gzip compression; with "
+                       "--compression none they would do nothing: leave them out")
     overrides = parse_set(args.set or [])
     grid = overrides.setdefault("grid", {})
     flags = {}
@@ -111,7 +114,8 @@ def _generate(args: argparse.Namespace) -> int:
             episodes_per_map=args.episodes_per_map,
             quantize=not args.float32,
             compression=None if args.compression == "none" else args.compression,
-            compression_level=args.gzip_level, deflate=args.deflate,
+            compression_level=1 if args.gzip_level is None else args.gzip_level,
+            deflate=args.deflate or "isal",
         )
         if not args.quiet:  # once the options are known to be good
             from dstenv._jitcache import kernels_cached
@@ -272,11 +276,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--compression", default="gzip", choices=["gzip", "none"],
                    help="shard compression (default gzip; lzf is not offered: h5py's LZF "
                         "filter does not write the same bytes twice)")
-    p.add_argument("--gzip-level", type=int, default=1, choices=range(10), metavar="0-9",
+    p.add_argument("--gzip-level", type=int, default=None, choices=range(10), metavar="0-9",
                    help="gzip level (default 1: ~46 KiB per 256x256 frame of the default "
                         "scenario with isal; higher levels shrink it a little at several "
                         "times the write time)")
-    p.add_argument("--deflate", default="isal", choices=["isal", "zlib"],
+    p.add_argument("--deflate", default=None, choices=["isal", "zlib"],
                    help="gzip engine: isal (default; its deflate ~5x faster than zlib's, the "
                         "whole write path ~2.6x less CPU) or zlib (h5py's own bytes); "
                         "both read back with plain h5py")

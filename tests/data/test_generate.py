@@ -370,3 +370,14 @@ def test_a_masses_clash_names_the_flag(tmp_path):
     with pytest.raises(gen.GenerateError, match=r"another configuration \(--masses: off, now on"):
         gen.generate(_spec(frames=4, split="train", config=framed, masses=True), tmp_path,
                      progress=False)
+
+
+@pytest.mark.parametrize("extra", [["--gzip-level", "5"], ["--deflate", "zlib"]])
+def test_gzip_settings_with_compression_none_are_refused(tmp_path, capsys, extra):
+    from dstenv.cli import main
+
+    argv = ["generate", "--frames", "2", "--grid", "32", "--quiet", "--compression", "none",
+            "--out", str(tmp_path / "d"), *extra]
+    assert main(argv) == 2
+    assert "with --compression none they would do nothing" in capsys.readouterr().err
+    assert not (tmp_path / "d").exists()

@@ -11,11 +11,15 @@ from __future__ import annotations
 import argparse
 import importlib
 import json
+import os
+import tempfile
 import time
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
+
+from dstenv.config import CLIError
 
 __all__ = ["BENCHMARKS", "median_ms", "register", "run_benchmark"]
 
@@ -80,7 +84,15 @@ def _cmd(args: argparse.Namespace) -> int:
         print(f"== bench {name}: {BENCHMARKS[name][1]}")
         results[name] = run_benchmark(name, args)
     if args.json:
-        atomic_write_text(args.json, json.dumps(results, indent=2, default=float))
+        text = json.dumps(results, indent=2, default=float)
+        try:
+            atomic_write_text(args.json, text)
+        except OSError as exc:  # after minutes of timing: keep the results somewhere
+            fd, kept = tempfile.mkstemp(prefix="dstenv-bench-", suffix=".json")
+            with os.fdopen(fd, "w") as fh:
+                fh.write(text)
+            raise CLIError(f"--json {args.json}: cannot write it ({exc.strerror or exc}); the "
+                           f"results are in {kept} instead") from None
         print(f"wrote {args.json}")
     return 0
 

@@ -71,6 +71,9 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     return parser
 
 
+#: commands that write nothing until they finish (an interrupted one has nothing to resume)
+UNRESUMABLE = frozenset({"info", "render", "bench"})
+
 #: errors a command reports as one line (``ConfigError`` is a ``ValueError``; missing
 #: files, permissions and a full disk are ``OSError``s); anything else is a bug
 EXPECTED_ERRORS: tuple[type[BaseException], ...] = (CLIError, ValueError, OSError, MemoryError)
@@ -88,8 +91,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return int(args.func(args) or 0)
     except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM where a command turned it into one
         terminated = type(exc).__name__ == "Terminated"
-        print(f"dstenv: {'terminated' if terminated else 'interrupted'}; finished work is kept, "
-              "rerun the same command to resume", file=sys.stderr)
+        kept = ("; finished work is kept, rerun the same command to resume"
+                if args.command not in UNRESUMABLE else "; nothing was written")
+        print(f"dstenv: {'terminated' if terminated else 'interrupted'}{kept}", file=sys.stderr)
         return 143 if terminated else 130
     except BrokenPipeError:  # the reader of stdout went away (dstenv info ... | head)
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no error at exit

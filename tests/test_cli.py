@@ -1,5 +1,6 @@
 """The dstenv command: version, help, bench, errors."""
 
+import os
 import subprocess
 import sys
 
@@ -47,6 +48,41 @@ def test_bench_json_path_is_checked_before_timing(capsys, tmp_path):
     assert main(["bench", "fusion", "--quick", "--json", str(tmp_path / "file" / "b.json")]) == 2
     out_, err = capsys.readouterr()
     assert "cannot create its folder" in err and "== bench" not in out_
+
+
+def test_bench_keeps_its_results_when_the_json_cannot_be_written(capsys, tmp_path,
+                                                                 monkeypatch):
+    import json
+
+    import dstenv.bench
+    import dstenv.io
+
+    monkeypatch.setattr(dstenv.bench, "run_benchmark", lambda name, args: {"rate": 7.5})
+
+    def refuse(path, text):
+        raise PermissionError(1, "Operation not permitted", str(path))
+
+    monkeypatch.setattr(dstenv.io, "atomic_write_text", refuse)
+    assert main(["bench", "fusion", "--json", str(tmp_path / "b.json")]) == 2
+    err = capsys.readouterr().err
+    assert "cannot write it (Operation not permitted); the results are in" in err
+    kept = err.rsplit("the results are in ", 1)[1].split()[0]
+    try:
+        assert json.loads(open(kept).read()) == {"fusion": {"rate": 7.5}}
+    finally:
+        os.unlink(kept)
+
+
+def test_an_interrupted_bench_does_not_promise_a_resume(capsys, monkeypatch):
+    import dstenv.bench
+
+    def interrupted(name, args):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(dstenv.bench, "run_benchmark", interrupted)
+    assert main(["bench", "fusion"]) == 130
+    err = capsys.readouterr().err
+    assert "interrupted; nothing was written" in err and "resume" not in err
 
 
 def test_bench_refuses_negative_repeats(capsys):

@@ -148,8 +148,10 @@ def summarize(root: Path, manifest: dict[str, Any] | None = None, verify: str = 
         manifest = load_manifest(root, verify=verify)
         source = str(root / MANIFEST_NAME)
     elif manifest is None:
-        from dstenv.data.manifest import scan_shards
+        from dstenv.data.manifest import one_dataset, scan_shards
 
+        if root.is_dir():
+            one_dataset(root)
         shards = scan_shards(root)
         if not root.is_dir() or not shards:
             from dstenv.config import CLIError

@@ -39,7 +39,7 @@ import torch
 from torch.utils.data import Dataset, IterableDataset, get_worker_info
 
 from dstenv.data.lock import LOCK_NAME, writer_of
-from dstenv.data.manifest import MANIFEST_NAME, UNSPLIT, load_manifest, scan_shards
+from dstenv.data.manifest import MANIFEST_NAME, UNSPLIT, load_manifest, one_dataset, scan_shards
 from dstenv.data.sampling import (SPLITS, episode_seeds, frame_steps, iter_frames,
                                    scenario_config)
 from dstenv.data.shards import N_CLASSES, ShardError, ShardReader
@@ -159,7 +159,8 @@ class ShardDataset(Dataset):
         folder = isinstance(root_or_files, (str, Path)) and Path(root_or_files).is_dir()
         first: tuple[Path, Any, Any] | None = None  # path, geometry, config
         # generate and kitti convert write manifest.json last: without it, their run died
-        unfinished = folder and not (Path(root_or_files) / MANIFEST_NAME).is_file()
+        if unfinished := folder and not (Path(root_or_files) / MANIFEST_NAME).is_file():
+            one_dataset(root_or_files)  # (unless it holds finished datasets: not one)
         for path, _ in _resolve_files(root_or_files, split):
             try:
                 with ShardReader(path) as r:
@@ -190,8 +191,7 @@ class ShardDataset(Dataset):
         self.grid_shape, self.cell_size = first[1] if first else (None, None)
         if not self.files and split is not None and split not in (*SPLITS, UNSPLIT):
             # a known split may be absent (no val split); an unknown one is a typo
-            there = sorted({p.parent.name for p in scan_shards(Path(root_or_files))}) if \
-                folder else []
+            there = sorted({p.parent.name for p in scan_shards(root_or_files)} if folder else [])
             raise ValueError(f"no shard of split {split!r} in {root_or_files} (its splits: "
                              f"{', '.join(there) or 'none'})")
         self._ends = np.cumsum(lengths).tolist()

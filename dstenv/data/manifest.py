@@ -34,6 +34,7 @@ __all__ = [
     "MANIFEST_NAME",
     "ManifestError",
     "scan_shards",
+    "one_dataset",
     "shard_entry",
     "build_manifest",
     "write_manifest",
@@ -54,6 +55,17 @@ class ManifestError(ValueError):
 def scan_shards(root: str | Path) -> list[Path]:
     """Final shard files (``*.h5``) under ``root``, sorted; ``.partial`` files excluded."""
     return sorted(p for p in Path(root).rglob("*.h5") if p.is_file())
+
+
+def one_dataset(root: str | Path) -> None:
+    """ValueError if ``root``, a folder without a manifest, holds finished datasets (folders
+    with a manifest) below it: their shards are not one dataset to read together."""
+    found = sorted(p.parent.relative_to(root).as_posix()
+                   for p in Path(root).rglob(MANIFEST_NAME) if p.is_file())
+    if found:
+        shown = ", ".join(found[:3]) + (f" and {len(found) - 3} more" if len(found) > 3 else "")
+        raise ValueError(f"{root}: no {MANIFEST_NAME} of its own; it holds {len(found)} "
+                         f"dataset(s) ({shown}): give one of them")
 
 
 def attrs_sha256(attrs: Mapping[str, Any]) -> str:

@@ -95,7 +95,7 @@ def _change(key: str, was: Any, now: Any) -> str:
 
 
 def _made_with(path: Path, tasks: list[ShardTask]) -> str:
-    """``"; made with KEY: old, now new"`` for a shard of another run's settings, or ``""``."""
+    """``"; made with FLAG: old, now new"`` (or what else set a stray shard apart), or ``""``."""
     try:
         with ShardReader(path) as r:
             old = r.attrs.get("task") or {}
@@ -109,6 +109,9 @@ def _made_with(path: Path, tasks: list[ShardTask]) -> str:
     splits = sorted({str(r.get("split")) for r in runs})
     if str(old.get("split")) not in splits:
         return f"; a {old['split']} shard, this run writes {', '.join(splits)} only (--split)"
+    if old:  # the same settings: a run of more frames made it
+        return (f"; a run of more --frames made it: this one makes "
+                f"{sum(t.frames for t in tasks)}, give at least the dataset's")
     return ""
 
 

@@ -120,7 +120,9 @@ def test_resume_refuses_other_settings(tmp_path, fake_pipeline):
         gen.generate(_spec(frames=8, split="train", config={"grid": {"height": 4, "width": 4,
                                                                      "cell_size": 0.5}}),
                      tmp_path, progress=False)
-    with pytest.raises(gen.GenerateError, match=r"not part of this run \(train/shard-00001"):
+    with pytest.raises(gen.GenerateError, match=r"not part of this run \(train/shard-00001"
+                                                r"\.h5\.\.\.; a run of more --frames made it: "
+                                                r"this one makes 4"):
         gen.generate(_spec(frames=4, split="train"), tmp_path, progress=False)
     # another --split: the refusal names it
     with pytest.raises(gen.GenerateError, match=r"a train shard, this run writes val only "
@@ -381,3 +383,17 @@ def test_gzip_settings_with_compression_none_are_refused(tmp_path, capsys, extra
     assert main(argv) == 2
     assert "with --compression none they would do nothing" in capsys.readouterr().err
     assert not (tmp_path / "d").exists()
+
+
+def test_a_folder_of_several_datasets_is_not_read_as_one(tmp_path, capsys):
+    from dstenv.cli import main
+    from dstenv.data.datasets import ShardDataset
+
+    gen.generate(_spec(frames=4, split="train"), tmp_path / "a", progress=False)
+    gen.generate(_spec(frames=4, split="train", seed=6), tmp_path / "b", progress=False)
+    with pytest.raises(ValueError, match=r"no manifest\.json of its own; it holds 2 "
+                                         r"dataset\(s\) \(a, b\): give one of them"):
+        ShardDataset(tmp_path, split="train")
+    assert main(["info", str(tmp_path)]) == 2
+    assert "it holds 2 dataset(s) (a, b)" in capsys.readouterr().err
+    assert len(ShardDataset(tmp_path / "a", split="train")) == 4  # each one still reads

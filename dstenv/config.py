@@ -318,14 +318,17 @@ def build_config(scenario: str | Path | None = None, *overrides: Override,
 
 
 def merge_config(
-    defaults: Mapping[str, Any], overrides: Mapping[str, Any] | None, where: str = "config"
+    defaults: Mapping[str, Any], overrides: Mapping[str, Any] | None, where: str = "config",
+    *, nested: bool = False,
 ) -> dict[str, Any]:
     """Deep-merge ``overrides`` into a copy of ``defaults``, validating keys and types.
 
     Args:
         defaults: the complete default configuration (nested dicts).
         overrides: a partial configuration; every key must exist in ``defaults``.
-        where: name of the source for error messages (e.g. a file path).
+        where: name of the source for error messages: a section (``config``: keys
+            read ``config.grid.height``), a file or a flag (``--set: grid.height``).
+        nested: ``where`` is already a key path (the recursion into sections).
 
     Returns:
         A new nested dict; ``defaults`` is not modified.
@@ -339,8 +342,9 @@ def merge_config(
         return out
     if not isinstance(overrides, Mapping):
         raise ConfigError(f"{where}: expected a table of settings, got {type(overrides).__name__}")
+    sep = ": " if not nested and (where.startswith("-") or where.endswith(".toml")) else "."
     for key, value in overrides.items():
-        path = f"{where}.{key}"
+        path = f"{where}{sep}{key}"
         if key not in out:
             allowed = ", ".join(sorted(out)) or "(none)"
             raise ConfigError(f"{path}: unknown key {key!r}; allowed keys: {allowed}")
@@ -348,7 +352,7 @@ def merge_config(
         if isinstance(default, Mapping) and default:
             if not isinstance(value, Mapping):
                 raise ConfigError(f"{path}: expected a table, got {value!r}")
-            out[key] = merge_config(default, value, path)
+            out[key] = merge_config(default, value, path, nested=True)
         else:
             out[key] = _check_type(default, value, path)
     return out

@@ -54,7 +54,7 @@ def test_scenario_file_errors(tmp_path):
         load_scenario(bad, DEFAULTS)
     typo = tmp_path / "typo.toml"
     typo.write_text('description = "x"\n[world]\nlanse = 2\n')
-    with pytest.raises(ConfigError, match=r"typo\.toml\.world\.lanse: unknown key"):
+    with pytest.raises(ConfigError, match=r"typo\.toml: world\.lanse: unknown key"):
         load_scenario(typo, DEFAULTS)
     with pytest.raises(ConfigError, match="unknown scenario 'nope'"):
         load_scenario("nope", DEFAULTS)

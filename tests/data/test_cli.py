@@ -133,5 +133,17 @@ def test_generate_names_set_in_config_errors(tmp_path, capsys):
     assert "error: --set: world.dt: must be in (0, 1] s" in capsys.readouterr().err
     assert main(["generate", "--frames", "2", "--out", str(tmp_path / "g"), "--set",
                  "world.dtt=1"]) == 2
-    assert "error: --set.world.dtt: unknown key 'dtt'" in capsys.readouterr().err
+    assert "error: --set: world.dtt: unknown key 'dtt'" in capsys.readouterr().err
     assert not (tmp_path / "g").exists()
+
+
+def test_a_bad_type_in_set_or_a_scenario_file_names_the_layer_then_the_key(tmp_path, capsys):
+    from dstenv.cli import main
+
+    out = str(tmp_path / "d")
+    assert main(["generate", "--frames", "2", "--out", out, "--set", "world.map.pool=1.5"]) == 2
+    assert "error: --set: world.map.pool: expected an integer, got 1.5" in capsys.readouterr().err
+    bad = tmp_path / "bad.toml"
+    bad.write_text('[world]\ndt = "x"\n')
+    assert main(["generate", "--frames", "2", "--out", out, "--scenario", str(bad)]) == 2
+    assert f"error: {bad}: world.dt: expected a number, got 'x'" in capsys.readouterr().err

@@ -33,6 +33,7 @@ No gymnasium here: the Gymnasium shell is :mod:`dstenv.envs`.
 from __future__ import annotations
 
 import inspect
+import numbers
 from collections.abc import Callable, Mapping
 from typing import Any, Protocol
 
@@ -258,8 +259,8 @@ class Pipeline:
         its ``pignistic_prev`` equals ``pignistic``. ``seed``: an integer >= 0.
         ``keep_map``: drive the current map again, all else from ``seed`` (city world).
         """
-        if int(seed) < 0:  # (numpy's own error came from deep inside the world's reset)
-            raise ValueError(f"Pipeline.reset: seed must be an integer >= 0, got {seed}")
+        if not isinstance(seed, numbers.Integral) or seed < 0:  # (not deep in the world)
+            raise ValueError(f"Pipeline.reset: seed must be an integer >= 0, got {seed!r}")
         if keep_map and self._world is None:
             raise RuntimeError("Pipeline.reset(keep_map=True): reset once without it first")
         if keep_map and "keep_map" not in inspect.signature(self._world.reset).parameters:

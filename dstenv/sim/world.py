@@ -84,12 +84,12 @@ class World:
         self.seed = seed
         self.rng = np.random.default_rng(seed)
         pool = int(self.config["map"]["pool"])
-        self.map_index = -1
+        kept, self.map_index = getattr(self, "map_index", -1), -1
         if self._fixed_map is not None:
             self._map = self._fixed_map
             self._map.kerb_height = self.config["map"]["kerb_height"]
         elif keep_map and self._map is not None:
-            pass
+            self.map_index = kept  # a pool map stays the pool's map k
         elif pool > 0:
             k = int(self.rng.integers(pool))
             if k not in self._pool:

@@ -34,6 +34,14 @@ def test_map_pool_draws_from_n_maps_generated_once():
         assert np.array_equal(other.map.raster, maps[other.map_index].raster)
 
 
+def test_keep_map_on_a_pool_map_keeps_its_index():
+    w = World({**TINY, "map": {**TINY["map"], "pool": 3}}, seed=0)
+    w.reset(5)
+    k, city = w.map_index, w.map
+    w.reset(6, keep_map=True)
+    assert w.map is city and w.map_index == k >= 0
+
+
 def test_without_pool_every_seed_has_its_map_and_keep_map_keeps_it():
     w = World(TINY, seed=0)
     first = w.map

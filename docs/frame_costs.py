@@ -102,7 +102,16 @@ def main() -> None:
                          "fresh map each)")
     args = ap.parse_args()
     if args.frames < 20:
-        raise SystemExit("--frames: at least 20 (one episode holds 19)")
+        ap.error("--frames: at least 20 (one episode holds 19)")
+    if not 1 <= args.episodes_per_map <= 10_000:
+        ap.error(f"--episodes-per-map must be in [1, 10000], got {args.episodes_per_map}")
+    if args.out is not None:  # before minutes of timing, not after
+        try:
+            args.out.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            ap.error(f"--out {args.out}: cannot create its folder ({exc.strerror or exc})")
+        if args.out.is_dir():
+            ap.error(f"--out {args.out}: is a folder; give a file name")
 
     import dstenv
     from dstenv.data.bench_goals import _protocol

@@ -40,6 +40,15 @@ def main() -> None:
                     help="episodes driven on each map (default 1: a fresh map each)")
     ap.add_argument("--out", type=Path, help="also write the figures as JSON")
     args = ap.parse_args()
+    for name, low in (("frames", 1), ("repeat", 1), ("workers", 1), ("frames_per_shard", 0),
+                      ("episodes_per_map", 1)):
+        if getattr(args, name) < low:
+            ap.error(f"--{name.replace('_', '-')} must be >= {low}, got {getattr(args, name)}")
+    if args.out is not None:  # before minutes of timing, not after
+        try:
+            args.out.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            ap.error(f"--out {args.out}: cannot create its folder ({exc.strerror or exc})")
     kw = {"episodes_per_map": args.episodes_per_map}
     if args.frames_per_shard:
         kw["frames_per_shard"] = args.frames_per_shard

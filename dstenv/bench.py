@@ -99,7 +99,9 @@ def _cmd(args: argparse.Namespace) -> int:
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add ``dstenv bench`` to the CLI."""
-    p = sub.add_parser("bench", help="run a speed benchmark", description=__doc__)
+    from dstenv.cli import plain
+
+    p = sub.add_parser("bench", help="run a speed benchmark", description=plain(__doc__))
     p.add_argument("name", choices=[*BENCHMARKS, "all"], help="which benchmark")
     p.add_argument("--repeats", type=int, default=0, help="timed repetitions (0: automatic)")
     p.add_argument("--quick", action="store_true", help="fewer repetitions, for a smoke run")

@@ -18,13 +18,14 @@ from __future__ import annotations
 import argparse
 import importlib
 import os
+import re
 import sys
 from collections.abc import Sequence
 
 from dstenv import __version__
 from dstenv.config import CLIError
 
-__all__ = ["COMMANDS", "CLIError", "build_parser", "main"]
+__all__ = ["COMMANDS", "CLIError", "build_parser", "main", "plain"]
 
 #: command -> (module that registers it, one-line help), in ``--help`` order.
 COMMANDS: dict[str, tuple[str, str]] = {
@@ -38,6 +39,12 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "render": ("dstenv.sim.cli", "draw a simulated scene to PNG"),
     "bench": ("dstenv.bench", "run a speed benchmark"),
 }
+
+
+def plain(doc: str | None) -> str:
+    """A module docstring as ``--help`` text: RST roles and literals as plain words."""
+    text = re.sub(r":[a-z]+:`~?([^`]+)`", r"\1", doc or "").replace("``", "")
+    return re.sub(r"\n::\n", "\n", text)  # a literal block's marker line
 
 
 def _command_of(argv: Sequence[str]) -> str | None:

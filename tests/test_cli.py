@@ -1,6 +1,7 @@
 """The dstenv command: version, help, bench, errors."""
 
 import os
+import re
 import subprocess
 import sys
 
@@ -144,3 +145,11 @@ def test_worker_tracebacks_become_one_line(capsys, monkeypatch):
            "call last):\n  File \"x.py\", line 1, in f\n    g()\nValueError: shard.h5: bad chunk\n")
     assert cli.one_line(ValueError(msg)) == ("Caught ValueError in DataLoader worker process "
                                               "0. ValueError: shard.h5: bad chunk")
+
+
+@pytest.mark.parametrize("command", ["bench", "render", "kitti", "generate", "train"])
+def test_help_shows_no_rst_markup(capsys, command):
+    with pytest.raises(SystemExit):
+        main([command, "--help"])
+    out = capsys.readouterr().out
+    assert "``" not in out and not re.search(r":[a-z]+:`", out) and "\n::\n" not in out

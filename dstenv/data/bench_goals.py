@@ -238,9 +238,9 @@ def _generation_row(runs: list[dict[str, Any]], frames: int, workers: int, goal:
             for r in runs]  # JSON has no NaN
     note = ("steady rate of a long run" if len(steady) == len(runs) else
             f"steady rate of a long run (median of the {len(steady)} of {len(runs)} runs "
-            "whose long run was slower than the short one)" if steady else
-            "no steady rate: in no run was the long run slower than the short one "
-            "(too few frames for this machine's noise; run without --quick)")
+            "whose extra frames took measurable extra time)" if steady else
+            "no steady rate: in no run did the long run's extra frames take measurable "
+            "extra time (too few frames for this machine's noise; run without --quick)")
     return {"value": statistics.median(steady) if steady else None, "runs": runs,
             "unit": f"frames/h, {workers} workers", "goal": goal,
             "note": f"{note}; a run of {frames} frames with start-up: "

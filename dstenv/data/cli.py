@@ -256,7 +256,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--frames", type=int, required=True, help="total frames to generate")
     p.add_argument("--out", required=True, metavar="DIR", help="output directory")
     p.add_argument("--seed", type=int, default=0, help="base seed (default 0)")
-    p.add_argument("--workers", type=int, default=1, help="parallel worker processes")
+    p.add_argument("--workers", type=int, default=1,
+                   help="parallel worker processes (default 1: one core)")
     p.add_argument("--split", default="auto", choices=["auto", "train", "val", "test"],
                    help="auto: 80/10/10 train/val/test from disjoint map seeds (default)")
     p.add_argument("--episode-length", type=int, default=200,
@@ -286,7 +287,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="gzip engine: isal (default; its deflate ~5x faster than zlib's, the "
                         "whole write path ~2.6x less CPU) or zlib (h5py's own bytes); "
                         "both read back with plain h5py")
-    p.add_argument("--frames-per-shard", type=int, default=256)
+    p.add_argument("--frames-per-shard", type=int, default=256,
+                   help="frames per shard file (default 256); shards are the unit of work "
+                        "and of resume")
     p.add_argument("--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
                    help="run shards as Ray tasks; no ADDRESS starts a local Ray")
     p.add_argument("--quiet", action="store_true", help="no progress bar or summary")

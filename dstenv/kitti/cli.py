@@ -292,6 +292,8 @@ def _export(args: argparse.Namespace) -> int:
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add ``dstenv kitti convert|render|evaluate`` and ``dstenv export-kitti`` to the CLI."""
+    from dstenv.cli import plain
+
     x = sub.add_parser("export-kitti", help="simulate a drive with the 3-D LIDAR, write it "
                        "in KITTI tracking format", description=(
                            "Simulated drive -> velodyne/SSSS/*.bin, label_02, oxts, calib "
@@ -303,7 +305,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     x.add_argument("--out", required=True, metavar="DIR", help="dataset folder (gets training/)")
     x.set_defaults(func=_export)
     k = sub.add_parser("kitti", help="KITTI tracking -> perception-grid shards",
-                       description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+                       description=plain(__doc__),
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
     ksub = k.add_subparsers(dest="kitti_command", metavar="ACTION", required=True)
     c = ksub.add_parser("convert", help="convert sequences to shards + manifest")
     _common(c)

@@ -171,7 +171,10 @@ def _cmd(args: argparse.Namespace) -> int:
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Add ``dstenv render`` to the CLI."""
-    p = sub.add_parser("render", help="draw a simulated scene to PNG", description=__doc__)
+    from dstenv.cli import plain
+
+    p = sub.add_parser("render", help="draw a simulated scene to PNG",
+                       description=plain(__doc__))
     p.add_argument("--scenario", default="default", help="scenario name or .toml file")
     p.add_argument("--seed", type=int, default=0, help="episode seed")
     p.add_argument("--out", required=True, help="PNG file to write")

@@ -197,13 +197,16 @@ def _read_whole(paths: list[Path]) -> None:
 def format_summary(s: dict[str, Any]) -> str:
     """Human-readable text of :func:`summarize`."""
     h, w = s["grid_shape"]
-    splits = ", ".join(f"{k} {v['frames']} frames / {v['shards']} shards"
+    def n(count: int, what: str) -> str:
+        return f"{count} {what}{'' if count == 1 else 's'}"
+
+    splits = ", ".join(f"{k} {n(v['frames'], 'frame')} / {n(v['shards'], 'shard')}"
                        for k, v in s["splits"].items())
     lines = [
         f"dataset   {s['path']}  ({s['source']})",
-        f"frames    {s['frames']} in {s['shards']} shards: {splits}",
+        f"frames    {s['frames']} in {n(s['shards'], 'shard')}: {splits}",
         f"grid      {h} x {w} cells of {s['cell_size']:g} m",
-        f"disk      {s['bytes'] / 1e6:.2f} MB, {s['bytes_per_frame'] / 1024:.1f} KiB per frame",
+        f"disk      {s['bytes'] / 2**20:.2f} MiB, {s['bytes_per_frame'] / 1024:.1f} KiB per frame",
         "class distribution (share of labelled cells)",
         f"  {'class':<15}{'ours':>10}{'paper (KITTI)':>16}",
     ]

@@ -124,7 +124,8 @@ def split_root(root: str | Path) -> Path:
         if (cand / "velodyne").is_dir():
             return cand
     raise KittiError(f"{root}: no KITTI tracking data (expected {root}/training/velodyne/ or "
-                     f"{root}/velodyne/); point the root at the folder that holds training/")
+                     f"{root}/velodyne/); point the root at KITTI's training/ folder or the "
+                     "one above it")
 
 
 def velodyne_path(split: Path, sequence: str, frame: int) -> Path:

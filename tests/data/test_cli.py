@@ -46,7 +46,7 @@ def test_info_prints_paper_reference(tmp_path, capsys, fake_pipeline):
     generate(spec, tmp_path, progress=False)
     assert main(["info", str(tmp_path)]) == 0
     text = capsys.readouterr().out
-    assert "frames    10 in 4 shards: test 1 frames / 1 shards, train 8 frames / 2 shards" in text
+    assert "frames    10 in 4 shards: test 1 frame / 1 shard, train 8 frames / 2 shards" in text
     assert "grid      8 x 6 cells of 0.5 m" in text
     assert "static" in text and "0.09%" in text and "0.26%" in text
     assert main(["info", str(tmp_path), "--json", "--verify", "hash"]) == 0
@@ -67,7 +67,7 @@ def test_info_prints_paper_reference(tmp_path, capsys, fake_pipeline):
     assert sum(s["class_frequencies"].values()) == pytest.approx(1.0)
     assert s["bytes_per_frame"] == pytest.approx(s["bytes"] / 10)
     assert main(["info", str(tmp_path / "train" / "shard-00000.h5")]) == 0
-    assert "4 in 1 shards" in capsys.readouterr().out
+    assert "4 in 1 shard:" in capsys.readouterr().out
 
 
 def test_info_into_a_closed_pipe_is_quiet(tmp_path, fake_pipeline):

@@ -120,5 +120,6 @@ def tiny_root(tmp_path: Path) -> Path:
 def real_root() -> Path:
     """The shared real sample (sequence 0003, frames 0-39), or skip."""
     if not (SHARED / "training" / "velodyne" / "0003").is_dir():
-        pytest.skip(f"real KITTI sample absent ({SHARED.resolve()}); see shared/data/README.md")
+        pytest.skip(f"real KITTI sample absent ({SHARED.resolve()}); set DSTENV_SHARED_DATA "
+                    "to a folder holding kitti-tracking/ (README, Set-up)")
     return SHARED

@@ -155,7 +155,7 @@ def test_a_root_one_level_too_deep_says_where_to_point(tiny_root, tmp_path, caps
     assert main(["kitti", "convert", "--root", str(deep), "--sequences", "0001",
                  "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "point the root at the folder that holds training/" in err
+    assert err.count("\n") == 1 and "at KITTI's training/ folder or the one above it" in err
 
 
 def test_a_convert_that_dies_leaves_a_folder_readers_refuse(tiny_root, tmp_path, capsys):

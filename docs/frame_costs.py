@@ -28,6 +28,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from dstenv.io import output_file
+
 STAGES = ("reset (fresh map)", "world steps", "LIDAR sweep", "sensor grid", "GIS grid",
           "DST update", "label grid", "shard writer", "other")
 
@@ -107,13 +109,12 @@ def main() -> None:
         ap.error(f"--episodes-per-map must be in [1, 10000], got {args.episodes_per_map}")
     if args.out is not None:  # before minutes of timing, not after
         try:
-            args.out.parent.mkdir(parents=True, exist_ok=True)
-        except OSError as exc:
-            ap.error(f"--out {args.out}: cannot create its folder ({exc.strerror or exc})")
-        if args.out.is_dir():
-            ap.error(f"--out {args.out}: is a folder; give a file name")
+            output_file(args.out, "--out")
+        except ValueError as exc:
+            ap.error(str(exc))
 
     import dstenv
+    from dstenv.io import atomic_write_text
     from dstenv.data.bench_goals import _protocol
     from dstenv.pipeline import default_config
 
@@ -134,7 +135,7 @@ def main() -> None:
             for s in STAGES:
                 print(f"    {s:20s} {costs[s]:6.2f} ms")
     if args.out:
-        args.out.write_text(json.dumps({
+        atomic_write_text(args.out, json.dumps({
             "command": f"python docs/frame_costs.py --frames {args.frames}"
                        + (f" --episodes-per-map {args.episodes_per_map}"
                           if args.episodes_per_map != 1 else ""),

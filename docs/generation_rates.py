@@ -28,6 +28,8 @@ import statistics
 import tempfile
 from pathlib import Path
 
+from dstenv.io import output_file
+
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -46,14 +48,15 @@ def main() -> None:
             ap.error(f"--{name.replace('_', '-')} must be >= {low}, got {getattr(args, name)}")
     if args.out is not None:  # before minutes of timing, not after
         try:
-            args.out.parent.mkdir(parents=True, exist_ok=True)
-        except OSError as exc:
-            ap.error(f"--out {args.out}: cannot create its folder ({exc.strerror or exc})")
+            output_file(args.out, "--out")
+        except ValueError as exc:
+            ap.error(str(exc))
     kw = {"episodes_per_map": args.episodes_per_map}
     if args.frames_per_shard:
         kw["frames_per_shard"] = args.frames_per_shard
 
     import dstenv
+    from dstenv.io import atomic_write_text
     from dstenv.data.bench_goals import _protocol, timed_generate
     from dstenv.pipeline import default_config
 
@@ -83,7 +86,7 @@ def main() -> None:
                   + f"; CPU {statistics.median(x['cpu_ms_per_frame'] for x in runs):.1f} ms/frame)",
                   flush=True)
     if args.out:
-        args.out.write_text(json.dumps(out, indent=1) + "\n")
+        atomic_write_text(args.out, json.dumps(out, indent=1) + "\n")
 
 
 if __name__ == "__main__":

@@ -259,7 +259,7 @@ class Pipeline:
         its ``pignistic_prev`` equals ``pignistic``. ``seed``: an integer >= 0.
         ``keep_map``: drive the current map again, all else from ``seed`` (city world).
         """
-        if not isinstance(seed, numbers.Integral) or seed < 0:  # (not deep in the world)
+        if not isinstance(seed, numbers.Integral) or isinstance(seed, bool) or seed < 0:
             raise ValueError(f"Pipeline.reset: seed must be an integer >= 0, got {seed!r}")
         if keep_map and self._world is None:
             raise RuntimeError("Pipeline.reset(keep_map=True): reset once without it first")

@@ -181,7 +181,7 @@ def test_degenerate_sensor_settings():
         Pipeline({"grid": {"height": 32, "width": 32}, "lidar": {"mount_x": 10, "mount_y": -10}})
     with pytest.raises(ValueError, match="seed must be an integer >= 0, got -1"):
         p.reset(seed=-1)
-    for seed in (1.5, None, "3"):  # 1.5 was taken as 1, None was a TypeError
+    for seed in (1.5, None, "3", True):  # 1.5 was taken as 1, None was a TypeError
         with pytest.raises(ValueError, match=f"seed must be an integer >= 0, got {seed!r}"):
             p.reset(seed=seed)
     assert p.reset(seed=np.int64(2)).seed == 2

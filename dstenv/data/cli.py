@@ -243,6 +243,10 @@ def _info(args: argparse.Namespace) -> int:
     if busy:
         print(f"dstenv info: note: {root} is still being written by {busy}: these are the "
               "shards finished so far", file=sys.stderr)
+    elif root.is_dir() and s["source"].startswith("scanned shards"):
+        print(f"dstenv info: note: {root} has no manifest.json: if a dstenv run made it, that "
+              "run did not finish (these are the shards it wrote); rerun its command to "
+              "complete it", file=sys.stderr)
     print(json.dumps(s, indent=1) if args.json else format_summary(s))
     return 0
 

@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from dstenv import __version__
+from dstenv.data.sampling import SPLITS
 from dstenv.data.shards import ShardReader, class_names
 from dstenv.io import atomic_write_text, file_sha256
 
@@ -59,9 +60,14 @@ def scan_shards(root: str | Path) -> list[Path]:
 
 def one_dataset(root: str | Path) -> None:
     """ValueError if ``root``, a folder without a manifest, holds finished datasets (folders
-    with a manifest) below it: their shards are not one dataset to read together."""
+    with a manifest) below it: their shards are not one dataset to read together; or is
+    the split folder of a finished dataset."""
+    root = Path(root)
+    if root.name in (*SPLITS, UNSPLIT) and (root.parent / MANIFEST_NAME).is_file():
+        raise ValueError(f"{root} is the {root.name} split of the dataset {root.parent}: give "
+                         f"{root.parent} (and the split)")
     found = sorted(p.parent.relative_to(root).as_posix()
-                   for p in Path(root).rglob(MANIFEST_NAME) if p.is_file())
+                   for p in root.rglob(MANIFEST_NAME) if p.is_file())
     if found:
         shown = ", ".join(found[:3]) + (f" and {len(found) - 3} more" if len(found) > 3 else "")
         raise ValueError(f"{root}: no {MANIFEST_NAME} of its own; it holds {len(found)} "
@@ -321,6 +327,11 @@ def load_manifest(root: str | Path, verify: str = "attrs") -> dict[str, Any]:
             raise ManifestError(f"{path}: {e['file']} content differs from its SHA-256 ({hint})")
     for f in scan_shards(root):
         if f.resolve() not in listed:
+            inner = next((d for d in f.parents if d != root and (d / MANIFEST_NAME).is_file()
+                          and root in d.parents), None)
+            if inner is not None:  # a finished dataset inside this one: not a changed file
+                raise ManifestError(f"{root} holds another dataset, {inner.relative_to(root)} "
+                                    f"(its own {MANIFEST_NAME}): move it out of {root}")
             raise ManifestError(f"{path}: shard {f.relative_to(root).as_posix()} is not listed "
                                 f"({hint})")
     return manifest

@@ -32,8 +32,9 @@ FLAGS: dict[str, str] = {
     "masses": "--masses", "quantize": "--float32", "compression": "--compression",
     "compression_level": "--gzip-level", "deflate": "--deflate",
 }
-#: configuration leaves that a flag sets (the rest come from the scenario or --set)
-FRAME_KEYS: dict[str, str] = {"frame.masses": "masses"}
+#: configuration leaves that a generate flag sets (the rest: --scenario or --set)
+CONFIG_FLAGS: dict[str, str] = {"frame.masses": "masses", "grid.height": "--grid (height)",
+                                "grid.width": "--grid (width)", "grid.cell_size": "--cell-size"}
 
 
 def _existing(out: Path, task: ShardTask, listed: str = "") -> dict[str, Any] | None:
@@ -64,8 +65,9 @@ def _existing(out: Path, task: ShardTask, listed: str = "") -> dict[str, Any] | 
     new_task = task.describe()
     if old_config != pipeline_config(task.spec):
         diff = leaf_diffs(old_config, json.loads(json.dumps(pipeline_config(task.spec))))
-        said = "; ".join(_change(FRAME_KEYS.get(k, k), a, b) for k, a, b in diff[:3]) or "?"
-        raise GenerateError(f"{path} was made with another configuration ({said}); use "
+        said = "; ".join(_change(CONFIG_FLAGS.get(k, k), a, b) for k, a, b in diff[:3]) or "?"
+        how = "" if all(k in CONFIG_FLAGS for k, _, _ in diff) else ": another --scenario or --set"
+        raise GenerateError(f"{path} was made with another configuration ({said}){how}; use "
                             "another --out or remove the old shards")
     if old_task != new_task:
         diff = sorted(k for k in set(new_task) | set(old_task or {})
@@ -89,8 +91,10 @@ def _change(key: str, was: Any, now: Any) -> str:
         if key == "quantize":  # --float32 stores what quantize=False does
             return "off" if v else "on"
         if key == "compression" and v is None:
-            return "'none'"
-        return ("on" if v else "off") if isinstance(v, bool) else repr(v)
+            return "none"
+        if isinstance(v, bool):
+            return "on" if v else "off"
+        return v if isinstance(v, str) else repr(v)
     return f"{FLAGS.get(key, key)}: {shown(was)}, now {shown(now)}"
 
 

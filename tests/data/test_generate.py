@@ -109,7 +109,7 @@ def test_resume_refuses_other_settings(tmp_path, fake_pipeline):
                                                 r"\(--stride: 3, now 2\)"):
         gen.generate(_spec(frames=8, split="train", stride=2), tmp_path, progress=False)
     # spelled as on the command line: --compression none, not None
-    with pytest.raises(gen.GenerateError, match=r"\(--compression: 'gzip', now 'none'\)"):
+    with pytest.raises(gen.GenerateError, match=r"\(--compression: gzip, now none\)"):
         gen.generate(_spec(frames=8, split="train", compression=None), tmp_path, progress=False)
     with pytest.raises(gen.GenerateError, match=r"\(--float32: off, now on\)"):
         gen.generate(_spec(frames=8, split="train", quantize=False), tmp_path, progress=False)
@@ -345,7 +345,7 @@ def test_a_shard_changed_since_its_manifest_is_made_again(tmp_path, fake_pipelin
         gen.generate(_spec(frames=8, split="train", frames_per_shard=8), tmp_path,
                      progress=False)
     # another configuration is refused, naming the setting
-    with pytest.raises(gen.GenerateError, match=r"another configuration \(grid\.height: "):
+    with pytest.raises(gen.GenerateError, match=r"another configuration \(--grid \(height\): "):
         gen.generate(_spec(frames=8, split="train", config={"grid": {"height": 4, "width": 4,
                                                                      "cell_size": 0.5}}),
                      tmp_path, progress=False)
@@ -397,3 +397,27 @@ def test_a_folder_of_several_datasets_is_not_read_as_one(tmp_path, capsys):
     assert main(["info", str(tmp_path)]) == 2
     assert "it holds 2 dataset(s) (a, b)" in capsys.readouterr().err
     assert len(ShardDataset(tmp_path / "a", split="train")) == 4  # each one still reads
+
+
+def test_a_dataset_inside_a_dataset_or_its_split_folder_is_named_as_such(tmp_path, capsys):
+    import shutil
+
+    from dstenv.cli import main
+    from dstenv.data.datasets import ShardDataset
+
+    gen.generate(_spec(frames=4, split="train"), tmp_path / "a", progress=False)
+    gen.generate(_spec(frames=4, split="train", seed=6), tmp_path / "b", progress=False)
+    # b copied inside a: not "changed files" to delete, but a dataset to move out
+    shutil.copytree(tmp_path / "b", tmp_path / "a" / "inner")
+    with pytest.raises(ValueError, match=r"holds another dataset, inner \(its own "
+                                         r"manifest\.json\): move it out of"):
+        ShardDataset(tmp_path / "a", split="train")
+    shutil.rmtree(tmp_path / "a" / "inner")
+    # the split folder of a finished dataset: not an unfinished run
+    with pytest.raises(ValueError, match=r"a/train is the train split of the dataset .*a: give"):
+        ShardDataset(tmp_path / "a" / "train", split="train")
+    # a folder of shards without a manifest: info says what that means
+    shutil.copytree(tmp_path / "b" / "train", tmp_path / "c" / "train")
+    assert main(["info", str(tmp_path / "c")]) == 0
+    assert "has no manifest.json: if a dstenv run made it, that run did not finish" in \
+        capsys.readouterr().err

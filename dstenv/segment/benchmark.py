@@ -125,9 +125,11 @@ def _same_data(out: Path, data_dir: Path) -> None:
     """Refuse to resume ``out`` on other data than it was made with (its networks would
     be scored on data they were not trained on, its results replaced in silence);
     record the data on a first run."""
-    from dstenv.data.manifest import data_identity
+    from dstenv.data.manifest import MANIFEST_NAME, data_identity, one_dataset
     from dstenv.io import atomic_write_text
 
+    if not (data_dir / MANIFEST_NAME).is_file():
+        one_dataset(data_dir)  # several datasets (or a split folder): refused before any record
     ident = {"data": str(data_dir.resolve()), "sha256": data_identity(data_dir)}
     path = out / _DATA_RECORD
     if path.exists():

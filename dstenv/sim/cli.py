@@ -141,7 +141,12 @@ def _cmd(args: argparse.Namespace) -> int:
         raise CLIError(f"--extent must be a size in metres >= 0 (0: the whole map), got "
                        f"{args.extent}")
     path = scenario_path(args.scenario)
-    cfg = build_config(path, ("--set", parse_set(args.set or [])))
+    over = parse_set(args.set or [])
+    unused = [k for k in over if k not in ("source", "world", "lidar")]
+    if unused:  # accepted and then ignored, it would draw something else than asked
+        raise CLIError(f"--set {unused[0]}...: render draws the world and its 2-D LIDAR sweep "
+                       f"and uses no {unused[0]} settings; set world or lidar keys only")
+    cfg = build_config(path, ("--set", over))
     if cfg["source"] != "city":  # what this command draws: the city world, the 2-D sweep
         raise CLIError(f"render draws the city world; source = {cfg['source']!r} is not "
                        "drawn (a highway-env scene: gym.make('DSTGrid-Highway-v0', "

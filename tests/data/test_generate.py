@@ -421,3 +421,14 @@ def test_a_dataset_inside_a_dataset_or_its_split_folder_is_named_as_such(tmp_pat
     assert main(["info", str(tmp_path / "c")]) == 0
     assert "has no manifest.json: if a dstenv run made it, that run did not finish" in \
         capsys.readouterr().err
+
+
+def test_benchmark_on_a_folder_of_datasets_writes_nothing(tmp_path, capsys):
+    from dstenv.cli import main
+
+    gen.generate(_spec(frames=4, split="train"), tmp_path / "d" / "a", progress=False)
+    gen.generate(_spec(frames=4, split="train", seed=6), tmp_path / "d" / "b", progress=False)
+    assert main(["benchmark", "--data", str(tmp_path / "d"), "--out", str(tmp_path / "bm"),
+                 "--quiet"]) == 2
+    assert "it holds 2 dataset(s) (a, b)" in capsys.readouterr().err
+    assert not (tmp_path / "bm" / "data-identity.json").exists()

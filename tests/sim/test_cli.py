@@ -69,3 +69,12 @@ def test_render_checks_its_numbers_before_drawing(tmp_path, capsys):
         assert message in err and err.count("\n") == 1, err
     assert not out.exists()
 
+
+
+def test_render_refuses_set_keys_it_would_not_use(tmp_path, capsys):
+    from dstenv.cli import main
+
+    out = tmp_path / "r.png"
+    assert main(["render", "--out", str(out), "--set", "grid.height=40"]) == 2
+    assert "uses no grid settings; set world or lidar keys only" in capsys.readouterr().err
+    assert not out.exists()

@@ -80,7 +80,7 @@ def _grid(text: str) -> tuple[int, int]:
 def _generate(args: argparse.Namespace) -> int:
     from dstenv.config import CLIError
     from dstenv.data.generate import GenerateError, GenerateSpec, generate
-    from dstenv.data.sampling import scenario_config
+    from dstenv.config import build_config
 
     if not str(args.out).strip():
         raise CLIError("--out: empty; give the dataset folder (. for the current one)")
@@ -88,7 +88,7 @@ def _generate(args: argparse.Namespace) -> int:
         raise CLIError("--gzip-level and --deflate set the gzip compression; with "
                        "--compression none they would do nothing: leave them out")
     overrides = parse_set(args.set or [])
-    grid = overrides.setdefault("grid", {})
+    grid = overrides.get("grid", {}) if isinstance(overrides.get("grid"), dict) else {}
     flags = {}
     if args.grid:
         flags["height"] = ("--grid", args.grid[0])
@@ -98,9 +98,10 @@ def _generate(args: argparse.Namespace) -> int:
     for key, (flag, value) in flags.items():
         if key in grid and grid[key] != value:  # one of the two would be dropped unseen
             raise CLIError(f"{flag} and --set grid.{key}={grid[key]} disagree: give one")
-        grid[key] = value
-    config = scenario_config(args.scenario, overrides,
-                             "/".join(["--set", *dict.fromkeys(f for f, _ in flags.values())]))
+    # two layers, so that an error names the one that wrote the value
+    layers = [("--set", overrides), ("/".join(dict.fromkeys(f for f, _ in flags.values())),
+                                     {"grid": {k: v for k, (_, v) in flags.items()}})]
+    config = build_config(args.scenario, *layers[:2 if flags else 1])
     if config.get("world", {}).get("map", {}).get("kind") == "osm" and not args.quiet:
         print("dstenv generate: note: this scenario has one fixed OSM map; its splits differ "
               "in traffic and route, not in map", file=sys.stderr)

@@ -101,7 +101,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     """Add ``dstenv bench`` to the CLI."""
     from dstenv.cli import plain
 
-    p = sub.add_parser("bench", help="run a speed benchmark", description=plain(__doc__))
+    p = sub.add_parser("bench", help="run a speed benchmark", description=plain(
+        "``dstenv bench NAME``: speed benchmarks. Each prints a table and reports ratios "
+        "against a reference run made in the same process, so the figures mean something on "
+        "any machine; ``bench data --goals`` gives the throughput goal rows (README)."))
     p.add_argument("name", choices=[*BENCHMARKS, "all"], help="which benchmark")
     p.add_argument("--repeats", type=int, default=0, help="timed repetitions (0: automatic)")
     p.add_argument("--quick", action="store_true", help="fewer repetitions, for a smoke run")

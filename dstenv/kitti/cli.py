@@ -10,8 +10,7 @@
 
 ``convert`` writes one shard per sequence (``DIR/<split>/kitti-SSSS.h5``, the format
 of ``dstenv generate``) and ``DIR/manifest.json``. ``evaluate`` is an alias of
-``dstenv benchmark --data DIR [--checkpoint PT]``: the same scoring
-(:func:`dstenv.segment.score.score`) and report.
+``dstenv benchmark --data DIR [--checkpoint PT]``: the same scoring and report.
 """
 
 from __future__ import annotations

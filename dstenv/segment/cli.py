@@ -322,14 +322,15 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--labels", choices=("full", "kitti"), default="full",
                    help="label convention: as stored (full) or KITTI's (kitti: objects, "
                         "seen-free cells navigable, the rest ignored), for real drives")
-    p.add_argument("--epochs", type=int)
-    p.add_argument("--batch-size", type=int)
+    p.add_argument("--epochs", type=int, help="passes over the training split (default 10)")
+    p.add_argument("--batch-size", type=int, help="grids per optimiser step (default 8)")
     p.add_argument("--lr", type=float, help="Adam learning rate (default 1e-3)")
-    p.add_argument("--crop", type=int, help="random square training crops [cells] (0: whole grids)")
+    p.add_argument("--crop", type=int,
+                   help="random square training crops [cells] (default 0: whole grids)")
     p.add_argument("--flip", type=float, help="probability of mirroring a training sample "
                                               "left-right (default 0: off)")
-    p.add_argument("--num-workers", type=int, help="DataLoader workers")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--num-workers", type=int, help="DataLoader workers (default 0: this process)")
+    p.add_argument("--seed", type=int, default=0, help="seed of weights and batches (default 0)")
     p.add_argument("--device", default="auto", help="cpu, cuda or auto (default)")
     p.add_argument(
         "--init",

@@ -180,10 +180,12 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser("render", help="draw a simulated scene to PNG",
                        description=plain(__doc__))
-    p.add_argument("--scenario", default="default", help="scenario name or .toml file")
-    p.add_argument("--seed", type=int, default=0, help="episode seed")
+    p.add_argument("--scenario", default="default", metavar="NAME|FILE",
+                   help="scenario name or .toml file (default: default)")
+    p.add_argument("--seed", type=int, default=0, help="episode seed (default 0)")
     p.add_argument("--out", required=True, help="PNG file to write")
-    p.add_argument("--steps", type=int, default=0, help="world steps before drawing")
+    p.add_argument("--steps", type=int, default=0,
+                   help="world steps of 0.1 s before drawing (default 0)")
     p.add_argument("--extent", type=float, default=0.0,
                    help="half width of the view around the ego [m] (0: whole map)")
     p.add_argument("--lanes", action="store_true", help="draw lane centre-lines")

@@ -12,6 +12,7 @@ import argparse
 import importlib
 import json
 import os
+import sys
 import tempfile
 import time
 from collections.abc import Callable
@@ -80,9 +81,17 @@ def _cmd(args: argparse.Namespace) -> int:
     if args.json is not None:  # "" too: a name, not "no file"
         output_file(args.json, "--json")  # before minutes of timing, not after
     results = {}
-    for name in names:
-        print(f"== bench {name}: {BENCHMARKS[name][1]}")
-        results[name] = run_benchmark(name, args)
+    try:
+        for name in names:
+            print(f"== bench {name}: {BENCHMARKS[name][1]}")
+            results[name] = run_benchmark(name, args)
+    except KeyboardInterrupt:  # keep the benchmarks that finished (bench all: minutes each)
+        if args.json and results:
+            atomic_write_text(args.json, json.dumps({**results, "interrupted": True}, indent=2,
+                                                    default=float))
+            print(f"dstenv bench: the finished benchmarks ({', '.join(results)}) are in "
+                  f"{args.json}", file=sys.stderr)
+        raise
     if args.json:
         text = json.dumps(results, indent=2, default=float)
         try:

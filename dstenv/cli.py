@@ -99,7 +99,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM where a command turned it into one
         terminated = type(exc).__name__ == "Terminated"
         kept = ("; finished work is kept, rerun the same command to resume"
-                if args.command not in UNRESUMABLE else "; nothing was written")
+                if args.command not in UNRESUMABLE else "; nothing to resume: rerun the command")
         print(f"dstenv: {'terminated' if terminated else 'interrupted'}{kept}", file=sys.stderr)
         return 143 if terminated else 130
     except BrokenPipeError:  # the reader of stdout went away (dstenv info ... | head)

@@ -83,7 +83,24 @@ def test_an_interrupted_bench_does_not_promise_a_resume(capsys, monkeypatch):
     monkeypatch.setattr(dstenv.bench, "run_benchmark", interrupted)
     assert main(["bench", "fusion"]) == 130
     err = capsys.readouterr().err
-    assert "interrupted; nothing was written" in err and "resume" not in err
+    assert "interrupted; nothing to resume: rerun the command" in err and "kept" not in err
+
+
+def test_an_interrupted_bench_all_keeps_the_finished_benchmarks(capsys, monkeypatch, tmp_path):
+    import json
+
+    import dstenv.bench
+
+    def first_only(name, args):
+        if name != "fusion":
+            raise KeyboardInterrupt
+        return {"rate": 1.0}
+
+    monkeypatch.setattr(dstenv.bench, "run_benchmark", first_only)
+    out = tmp_path / "all.json"
+    assert main(["bench", "all", "--json", str(out)]) == 130
+    assert "the finished benchmarks (fusion) are in" in capsys.readouterr().err
+    assert json.loads(out.read_text()) == {"fusion": {"rate": 1.0}, "interrupted": True}
 
 
 def test_bench_refuses_negative_repeats(capsys):

@@ -78,9 +78,8 @@ def _grid(text: str) -> tuple[int, int]:
 
 
 def _generate(args: argparse.Namespace) -> int:
-    from dstenv.config import CLIError
+    from dstenv.config import CLIError, build_config
     from dstenv.data.generate import GenerateError, GenerateSpec, generate
-    from dstenv.config import build_config
 
     if not str(args.out).strip():
         raise CLIError("--out: empty; give the dataset folder (. for the current one)")
@@ -98,10 +97,11 @@ def _generate(args: argparse.Namespace) -> int:
     for key, (flag, value) in flags.items():
         if key in grid and grid[key] != value:  # one of the two would be dropped unseen
             raise CLIError(f"{flag} and --set grid.{key}={grid[key]} disagree: give one")
-    # two layers, so that an error names the one that wrote the value
-    layers = [("--set", overrides), ("/".join(dict.fromkeys(f for f, _ in flags.values())),
-                                     {"grid": {k: v for k, (_, v) in flags.items()}})]
-    config = build_config(args.scenario, *layers[:2 if flags else 1])
+    layers = [("--set", overrides)]  # a layer per source: an error names the one that wrote it
+    if flags:
+        layers.append(("/".join(dict.fromkeys(f for f, _ in flags.values())),
+                       {"grid": {k: v for k, (_, v) in flags.items()}}))
+    config = build_config(args.scenario, *layers)
     if config.get("world", {}).get("map", {}).get("kind") == "osm" and not args.quiet:
         print("dstenv generate: note: this scenario has one fixed OSM map; its splits differ "
               "in traffic and route, not in map", file=sys.stderr)

@@ -10,7 +10,6 @@ spells it (``--float32: off, now on``), never mixed in.
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 from typing import Any
@@ -48,10 +47,11 @@ def _existing(out: Path, task: ShardTask, listed: str = "") -> dict[str, Any] | 
     path = out / task.file
     if not path.exists():
         return None
+    config, new_task = pipeline_config(task.spec), task.describe()
     try:
         with ShardReader(path) as r:
             old_task, old_config = r.attrs.get("task"), r.attrs.get("config")
-            same = old_config == pipeline_config(task.spec) and old_task == task.describe()
+            same = old_config == config and old_task == new_task
             if same:
                 r.verify()
         sha = file_sha256(path) if same and listed else ""
@@ -62,9 +62,8 @@ def _existing(out: Path, task: ShardTask, listed: str = "") -> dict[str, Any] | 
         path.replace(keep)
         print(f"dstenv generate: {exc}; kept as {keep.name}, regenerating", file=sys.stderr)
         return None
-    new_task = task.describe()
-    if old_config != pipeline_config(task.spec):
-        diff = leaf_diffs(old_config, json.loads(json.dumps(pipeline_config(task.spec))))
+    if old_config != config:
+        diff = leaf_diffs(old_config, config)  # (pipeline_config is plain JSON data already)
         said = "; ".join(_change(CONFIG_FLAGS.get(k, k), a, b) for k, a, b in diff[:3]) or "?"
         how = "" if all(k in CONFIG_FLAGS for k, _, _ in diff) else ": another --scenario or --set"
         raise GenerateError(f"{path} was made with another configuration ({said}){how}; use "

@@ -197,15 +197,13 @@ def check_map_reuse(config: Mapping[str, Any]) -> None:
 
 
 def scenario_config(scenario: str | Path | Mapping[str, Any] | None = None,
-                    overrides: Mapping[str, Any] | None = None, where: str = "override"
-                    ) -> dict[str, Any]:
+                    overrides: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """Full pipeline configuration from a scenario and overrides.
 
     Args:
         scenario: a shipped scenario name, a ``.toml`` path, a (partial) config dict,
             or ``None`` for the defaults.
-        overrides: applied last (e.g. ``{"grid": {"height": 64, "width": 64}}``), named
-            ``where`` in errors (e.g. ``"--set"``).
+        overrides: applied last (e.g. ``{"grid": {"height": 64, "width": 64}}``).
 
     Returns:
         The validated configuration of :func:`dstenv.config.build_config`.
@@ -216,5 +214,5 @@ def scenario_config(scenario: str | Path | Mapping[str, Any] | None = None,
     from dstenv.config import build_config
 
     if isinstance(scenario, Mapping):
-        return build_config(None, ("config", scenario), (where, overrides))
-    return build_config(scenario, (where, overrides))
+        return build_config(None, ("config", scenario), ("override", overrides))
+    return build_config(scenario, ("override", overrides))

@@ -16,6 +16,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import json
+import sys
 from collections.abc import Callable, Mapping
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
@@ -261,9 +262,16 @@ def _generate(spec: GenerateSpec, out: Path, workers: int, ray_address: str | No
 
     tasks = plan(spec)
     done, todo = prepare(out, tasks)
+    kept = sum(e["frames"] for e in done.values())
+    if progress and done:  # else a rerun looks like a run that did the work again
+        print(f"dstenv generate: {out}: " + (
+            f"all {kept} frames are there already (a finished run with these settings): "
+            "nothing to generate" if not todo else
+            f"resuming: {len(done)} of {len(tasks)} shard(s), {kept} of {spec.frames} frames, "
+            "are there already"), file=sys.stderr)
     # resumed frames count as initial, so frames/s is the rate of this run only
-    bar = tqdm(total=spec.frames, initial=sum(e["frames"] for e in done.values()), unit="frame",
-               disable=not progress, dynamic_ncols=True, desc="generate", smoothing=0.1)
+    bar = tqdm(total=spec.frames, initial=kept, unit="frame", disable=not progress or not todo,
+               dynamic_ncols=True, desc="generate", smoothing=0.1)
     try:
         with sigterm_as_interrupt():  # SIGTERM cleans up like Ctrl-C (workers, partials)
             if ray_address is not None:

@@ -432,3 +432,20 @@ def test_benchmark_on_a_folder_of_datasets_writes_nothing(tmp_path, capsys):
                  "--quiet"]) == 2
     assert "it holds 2 dataset(s) (a, b)" in capsys.readouterr().err
     assert not (tmp_path / "bm" / "data-identity.json").exists()
+
+
+def test_a_rerun_says_what_is_there_already(tmp_path, fake_pipeline, capsys):
+    """A rerun of a finished run says that nothing was generated; a resumed one how much
+    was kept (a progress bar starting at 100 % alone looked like work done again)."""
+    spec = _spec(frames=8, split="train")
+    gen.generate(spec, tmp_path, progress=True)
+    assert "there already" not in capsys.readouterr().err
+    gen.generate(spec, tmp_path, progress=True)
+    err = capsys.readouterr().err
+    assert "all 8 frames are there already" in err and "nothing to generate" in err
+    assert "generate:" not in err.replace("dstenv generate:", "")  # no bar
+    (tmp_path / "train" / "shard-00001.h5").unlink()
+    gen.generate(spec, tmp_path, progress=True)
+    assert "resuming: 1 of 2 shard(s), 4 of 8 frames" in capsys.readouterr().err
+    gen.generate(spec, tmp_path, progress=False)
+    assert capsys.readouterr().err == ""

@@ -92,13 +92,15 @@ LEGEND: tuple[tuple[str, Any], ...] = (
 
 
 def draw_legend(ax: Any, lidar: bool = True) -> None:
-    """A legend of :data:`LEGEND` (plus the LIDAR returns) in the axis' corner."""
+    """A legend of :data:`LEGEND` (plus the LIDAR returns) beside the axis, right of it
+    (inside, it hid the top-right corner of the map)."""
     from matplotlib.patches import Patch
 
     handles = [Patch(facecolor=c, edgecolor="k", linewidth=0.3, label=t) for t, c in LEGEND]
     if lidar:
         handles.append(Patch(facecolor="#ffd700", label="LIDAR return"))
-    ax.legend(handles=handles, loc="upper right", fontsize=7, framealpha=0.85)
+    ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7,
+              borderaxespad=0.0)
 
 
 def render_png(world: Any, out: str | Path, sweep: Any = None, extent: float | None = None,
@@ -110,7 +112,7 @@ def render_png(world: Any, out: str | Path, sweep: Any = None, extent: float | N
     import matplotlib.pyplot as plt
 
     out = Path(out)
-    fig, ax = plt.subplots(figsize=(9, 9))
+    fig, ax = plt.subplots(figsize=(11, 9))
     draw_world(ax, world, sweep, extent, lanes)
     ax.set_title(title)
     draw_legend(ax, sweep is not None)

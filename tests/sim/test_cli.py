@@ -78,3 +78,24 @@ def test_render_refuses_set_keys_it_would_not_use(tmp_path, capsys):
     assert main(["render", "--out", str(out), "--set", "grid.height=40"]) == 2
     assert "uses no grid settings; set world or lidar keys only" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_the_render_legend_is_beside_the_map_not_on_it():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from dstenv.sim.cli import LEGEND, draw_legend
+
+    fig, ax = plt.subplots(figsize=(11, 9))
+    try:
+        draw_legend(ax, lidar=True)
+        fig.canvas.draw()
+        legend = ax.get_legend()
+        box, axes = legend.get_window_extent(), ax.get_window_extent()
+        assert box.x0 >= axes.x1  # right of the map: no corner of it hidden
+        assert box.x1 <= fig.bbox.x1  # and inside the figure
+        assert len(legend.get_texts()) == len(LEGEND) + 1
+    finally:
+        plt.close(fig)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -131,7 +132,9 @@ def _nearest_folder(out: Path, option: str) -> Path:
 
 def output_file(path: str | Path, option: str) -> Path:
     """Refuse, before any work, an output ``path`` that cannot become a file: a directory,
-    or a path under a file. Nothing is created (the atomic writers make the folder).
+    or a path under a file, or a folder where no file can be made (an empty probe file
+    is made there and removed at once). Nothing else is created (the atomic writers make
+    the folder).
 
     Raises:
         ValueError: one line naming ``option``, the path and the fix.
@@ -145,6 +148,14 @@ def output_file(path: str | Path, option: str) -> Path:
     if not os.access(parent, os.W_OK | os.X_OK):
         raise ValueError(f"{option} {out}: {parent} is not writable; give a path you can "
                          "write to")
+    if parent == out.parent:  # access() says yes to root in /proc or a read-only mount
+        try:
+            fd, probe = tempfile.mkstemp(dir=parent, prefix=f".{out.name}.", suffix=".probe")
+        except OSError as exc:
+            raise ValueError(f"{option} {out}: cannot create a file in {parent} "
+                             f"({exc.strerror}); give a path you can write to") from None
+        os.close(fd)
+        os.unlink(probe)
     for folder in (out.parent, *out.parent.parents):  # never among a dataset's files
         if (folder / "manifest.json").is_file() or (folder / ".dstenv.lock").is_file():
             raise ValueError(f"{option} {out}: inside the dataset folder {folder}; write it "

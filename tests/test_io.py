@@ -74,3 +74,27 @@ def test_png_path_under_a_file_is_named(tmp_path):
                                          r"\(.*r1\.png is a file\)"):
         png_path(tmp_path / "r1.png" / "x.png")
     assert png_path(tmp_path / "new" / "x.png") == tmp_path / "new" / "x.png"
+
+
+def test_output_file_probes_a_folder_access_calls_writable(tmp_path):
+    """Root's access() says yes in /proc (or on a read-only mount); the results of a
+    long benchmark were then lost at the end. A probe file finds it first, and is gone."""
+    from dstenv.io import output_file
+
+    real = os.open
+
+    def no_create(path, flags, *a, **k):  # a folder that refuses new files
+        if flags & os.O_CREAT and str(path).startswith(str(tmp_path)):
+            raise OSError(errno.EROFS, "Read-only file system", str(path))
+        return real(path, flags, *a, **k)
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(os, "open", no_create)
+        with pytest.raises(ValueError, match=r"--json .*r\.json: cannot create a file in .* "
+                                             r"\(Read-only file system\); give a path"):
+            output_file(tmp_path / "r.json", "--json")
+    assert output_file(tmp_path / "r.json", "--json") == tmp_path / "r.json"
+    assert list(tmp_path.iterdir()) == []  # the probe is removed
+    if os.path.isdir("/proc/self") and os.geteuid() == 0:
+        with pytest.raises(ValueError, match="cannot create a file in /proc"):
+            output_file("/proc/x.json", "--json")

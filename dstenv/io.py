@@ -17,7 +17,8 @@ from contextlib import contextmanager
 from pathlib import Path
 
 __all__ = ["PARTIAL_SUFFIX", "partial_path", "atomic_path", "atomic_write_bytes",
-           "atomic_write_text", "fsync_file", "fsync_dir", "output_file", "png_path"]
+           "atomic_write_text", "fsync_file", "fsync_dir", "output_file", "output_folder",
+           "png_path"]
 
 #: suffix of a file being written; never a final file (readers and scans skip it)
 PARTIAL_SUFFIX = ".partial"
@@ -102,7 +103,64 @@ def atomic_write_text(path: str | Path, text: str) -> Path:
     return atomic_write_bytes(path, text.encode("utf-8"))
 
 
-def png_path(path: str | Path, option: str = "--out") -> Path:
+#: files that make a folder a dstenv dataset: its manifest, or the lock of a run writing it
+DATASET_MARKERS = ("manifest.json", ".dstenv.lock")
+#: files that make a folder a training run's or a benchmark's (never a dataset's)
+RESULT_MARKERS = ("best.pt", "last.pt", "results.json")
+
+
+def _refuse_inside(out: Path, option: str, inputs: tuple[tuple[str, str | Path], ...],
+                   self_too: bool) -> None:
+    """A one-line ValueError when ``out`` lies inside a dataset folder (or is one, with
+    ``self_too``) or is, or lies inside, one of ``inputs``."""
+    full = Path(os.path.abspath(out))
+    for flag, given in inputs:
+        src = Path(os.path.abspath(given))
+        if full == src or src in full.parents:
+            where = "is" if full == src else "inside"
+            raise ValueError(f"{option} {out}: {where} the input {flag} {given}; write it "
+                             "elsewhere")
+    for folder in ((full,) if self_too else ()) + tuple(full.parents):
+        if any((folder / m).is_file() for m in DATASET_MARKERS):
+            where = "is" if folder == full else "inside"
+            raise ValueError(f"{option} {out}: {where} the dataset folder {folder}; write "
+                             "it elsewhere")
+
+
+def output_folder(path: str | Path, option: str, *, dataset: bool = False,
+                  inputs: tuple[tuple[str, str | Path], ...] = ()) -> Path:
+    """Refuse, before any work, an output folder whose files would mix with others'.
+
+    Args:
+        path: the folder (made later by the writer).
+        option: the flag that gave it, for the message.
+        dataset: the folder will hold a dataset (its own, when resuming: allowed); else
+            checkpoints, a report or a KITTI root, which never go into a dataset.
+        inputs: ``(option, path)`` pairs of input folders it must stay out of.
+
+    Raises:
+        ValueError: one line naming ``option``, the path and the fix: an empty value
+            (usually an unset shell variable), a file, a place inside a dataset or an
+            input, a dataset folder for other files, or a checkpoint/report folder
+            for a dataset.
+    """
+    if not str(path).strip():
+        raise ValueError(f"{option}: empty; give a folder (. for the current one)")
+    out = Path(path)
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"{option} {out}: is a file; give a folder")
+    _nearest_folder(out / "x", option)
+    _refuse_inside(out, option, inputs, self_too=not dataset)
+    if dataset and out.is_dir():
+        found = [m for m in RESULT_MARKERS if (out / m).is_file()]
+        if found:
+            raise ValueError(f"{option} {out}: holds {found[0]} (a training run's or a "
+                             "benchmark's folder); give another folder for the dataset")
+    return out
+
+
+def png_path(path: str | Path, option: str = "--out",
+             inputs: tuple[tuple[str, str | Path], ...] = ()) -> Path:
     """``path`` as a :class:`Path` if it names a ``.png`` file (the renderers write PNG).
 
     Raises:
@@ -113,7 +171,8 @@ def png_path(path: str | Path, option: str = "--out") -> Path:
         raise ValueError(f"{option} {out}: the picture is a PNG; give a name ending in .png")
     if out.is_dir():  # before any work, not when the picture is written
         raise ValueError(f"{option} {out}: is a directory; give a file name ending in .png")
-    _nearest_folder(out, option)
+    _writable(out, option)
+    _refuse_inside(out, option, inputs, self_too=False)
     return out
 
 
@@ -130,20 +189,10 @@ def _nearest_folder(out: Path, option: str) -> Path:
     return parent
 
 
-def output_file(path: str | Path, option: str) -> Path:
-    """Refuse, before any work, an output ``path`` that cannot become a file: a directory,
-    or a path under a file, or a folder where no file can be made (an empty probe file
-    is made there and removed at once). Nothing else is created (the atomic writers make
-    the folder).
-
-    Raises:
-        ValueError: one line naming ``option``, the path and the fix.
-    """
-    if not str(path).strip():
-        raise ValueError(f"{option}: empty; give a file name")
-    out = Path(path)
-    if out.is_dir():
-        raise ValueError(f"{option} {out}: is a directory; give a file name")
+def _writable(out: Path, option: str) -> None:
+    """A one-line ValueError when no file ``out`` can be made: its nearest existing
+    folder is a file, is not writable, or refuses a new file (a probe made there and
+    removed at once: root's access() says yes in /proc or on a read-only mount)."""
     parent = _nearest_folder(out, option)
     if not os.access(parent, os.W_OK | os.X_OK):
         raise ValueError(f"{option} {out}: {parent} is not writable; give a path you can "
@@ -156,10 +205,26 @@ def output_file(path: str | Path, option: str) -> Path:
                              f"({exc.strerror}); give a path you can write to") from None
         os.close(fd)
         os.unlink(probe)
-    for folder in (out.parent, *out.parent.parents):  # never among a dataset's files
-        if (folder / "manifest.json").is_file() or (folder / ".dstenv.lock").is_file():
-            raise ValueError(f"{option} {out}: inside the dataset folder {folder}; write it "
-                             "elsewhere")
+
+
+def output_file(path: str | Path, option: str,
+                inputs: tuple[tuple[str, str | Path], ...] = ()) -> Path:
+    """Refuse, before any work, an output ``path`` that cannot become a file: a directory,
+    or a path under a file, or a folder where no file can be made (an empty probe file
+    is made there and removed at once), or a place among a dataset's files or inside an
+    input (``inputs``: ``(option, path)`` pairs, e.g. ``("--root", root)``). Nothing
+    else is created (the atomic writers make the folder).
+
+    Raises:
+        ValueError: one line naming ``option``, the path and the fix.
+    """
+    if not str(path).strip():
+        raise ValueError(f"{option}: empty; give a file name")
+    out = Path(path)
+    if out.is_dir():
+        raise ValueError(f"{option} {out}: is a directory; give a file name")
+    _writable(out, option)
+    _refuse_inside(out, option, inputs, self_too=False)
     if out.is_file():
         with open(out, "rb") as fh:
             head = fh.read(4096)

@@ -170,3 +170,35 @@ def test_help_shows_no_rst_markup(capsys, command):
         main([command, "--help"])
     out = capsys.readouterr().out
     assert "``" not in out and not re.search(r":[a-z]+:`", out) and "\n::\n" not in out
+
+
+@pytest.mark.parametrize("cmd, message", [
+    (["kitti", "convert", "--root", "{root}", "--sequences", "3", "--out", "{root}"],
+     "is the input --root"),
+    (["kitti", "convert", "--root", "{root}", "--sequences", "3", "--out",
+      "{root}/training/velodyne"], "inside the input --root"),
+    (["kitti", "render", "--root", "{root}", "--sequence", "3", "--frame", "5", "--out",
+      "{root}/training/x.png"], "inside the input --root"),
+    (["train", "--data", "{data}", "--out", "{other}"], "is the dataset folder"),
+    (["kitti", "evaluate", "--data", "{data}", "--out", "{other}"], "is the dataset folder"),
+    (["export-kitti", "--frames", "5", "--out", "{data}"], "is the dataset folder"),
+    (["generate", "--frames", "4", "--out", "{runs}"], "holds best.pt"),
+    (["benchmark", "--data", "{data}", "--out", ""], "--out: empty; give a folder"),
+    (["train", "--data", "{data}", "--out", " "], "--out: empty; give a folder"),
+])
+def test_outputs_never_mix_with_inputs_datasets_or_results(tmp_path, capsys, cmd, message):
+    """Attack 14: outputs were accepted inside the KITTI root, in another dataset, and a
+    dataset in a checkpoint folder; an empty --out meant the current folder."""
+    root, data, other, runs = (tmp_path / n for n in ("kitti", "data", "other", "runs"))
+    (root / "training" / "velodyne").mkdir(parents=True)
+    for d in (data, other):
+        d.mkdir()
+        (d / "manifest.json").write_text("{}")
+    runs.mkdir()
+    (runs / "best.pt").write_bytes(b"\0")
+    before = sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*"))
+    args = [a.format(root=root, data=data, other=other, runs=runs) for a in cmd]
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err and len(err.splitlines()) == 1
+    assert sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*")) == before

@@ -98,3 +98,39 @@ def test_output_file_probes_a_folder_access_calls_writable(tmp_path):
     if os.path.isdir("/proc/self") and os.geteuid() == 0:
         with pytest.raises(ValueError, match="cannot create a file in /proc"):
             output_file("/proc/x.json", "--json")
+
+
+def test_output_folder_keeps_outputs_apart_from_datasets_inputs_and_results(tmp_path):
+    from dstenv.io import output_folder
+
+    data = tmp_path / "data"
+    (data / "train").mkdir(parents=True)
+    (data / "manifest.json").write_text("{}")
+    runs = tmp_path / "run"
+    runs.mkdir()
+    (runs / "best.pt").write_bytes(b"\0")
+    root = tmp_path / "kitti"
+    (root / "training" / "velodyne").mkdir(parents=True)
+    (tmp_path / "file").write_text("x")
+    bad = [  # (path, kwargs, message)
+        ("", {}, r"--out: empty; give a folder \(\. for the current one\)"),
+        (" ", {"dataset": True}, "empty"),
+        (tmp_path / "file", {}, "is a file; give a folder"),
+        (tmp_path / "file" / "sub", {}, "cannot create its folder"),
+        (data, {}, "is the dataset folder"),  # checkpoints or a report into a dataset
+        (data / "train", {"dataset": True}, "inside the dataset folder"),
+        (data / "x" / "y", {}, "inside the dataset folder"),
+        (runs, {"dataset": True}, "holds best.pt"),
+        (root, {"dataset": True, "inputs": (("--root", root),)}, "is the input --root"),
+        (root / "training" / "velodyne", {"dataset": True, "inputs": (("--root", root),)},
+         "inside the input --root"),
+    ]
+    for path, kw, msg in bad:
+        with pytest.raises(ValueError, match=msg):
+            output_folder(path, "--out", **kw)
+    # what stays allowed: a dataset resumed, results beside data, a new folder
+    assert output_folder(data, "--out", dataset=True) == data
+    assert output_folder(runs, "--out") == runs
+    assert output_folder(tmp_path / "new" / "deep", "--out", dataset=True,
+                         inputs=(("--root", root),)) == tmp_path / "new" / "deep"
+    assert not (tmp_path / "new").exists()  # nothing made

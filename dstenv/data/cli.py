@@ -81,8 +81,12 @@ def _generate(args: argparse.Namespace) -> int:
     from dstenv.config import CLIError, build_config
     from dstenv.data.generate import GenerateError, GenerateSpec, generate
 
-    if not str(args.out).strip():
-        raise CLIError("--out: empty; give the dataset folder (. for the current one)")
+    from dstenv.io import output_folder
+
+    try:  # never inside another dataset, nor into a training run's or a report's folder
+        output_folder(args.out, "--out", dataset=True)
+    except ValueError as exc:
+        raise CLIError(str(exc)) from None
     if args.compression == "none" and (args.gzip_level is not None or args.deflate):
         raise CLIError("--gzip-level and --deflate set the gzip compression; with "
                        "--compression none they would do nothing: leave them out")

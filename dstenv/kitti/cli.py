@@ -107,7 +107,12 @@ def _convert(args: argparse.Namespace) -> int:
     from dstenv.data.manifest import MANIFEST_NAME, scan_shards, write_manifest
     from dstenv.kitti.sequence import KittiSequence, kitti_config
 
-    out = Path(args.out)
+    from dstenv.io import output_folder
+
+    try:  # never into the KITTI root it reads, another dataset, or a results folder
+        out = output_folder(args.out, "--out", dataset=True, inputs=(("--root", args.root),))
+    except ValueError as exc:
+        raise CLIError(str(exc)) from None
     cfg = kitti_config(_overrides(args))
     targets = {out / args.split / f"kitti-{int(s):04d}.h5" for s in args.sequences
                if s.isdigit()}
@@ -187,7 +192,7 @@ def _render(args: argparse.Namespace) -> int:
     from dstenv.kitti.render import render_frame
     from dstenv.kitti.sequence import KittiSequence, convert_sequence, kitti_config
 
-    png_path(args.out)  # before the conversion, not after
+    png_path(args.out, inputs=(("--root", args.root),))  # before the conversion, not after
     over = _overrides(args)
     every = over.get("update_every", 1)
     if args.frame < 0:
@@ -275,9 +280,13 @@ def _export(args: argparse.Namespace) -> int:
         raise CLIError(f"--frames must be >= 1, got {args.frames}")
     if not 0 <= args.seed < 2**63:  # as render and generate (a larger one wrapped around)
         raise CLIError(f"--seed must be in [0, 2**63), got {args.seed}")
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise CLIError(f"--out {out}: is a file; give a folder (a KITTI root to write into)")
+    from dstenv.io import output_folder
+
+    try:  # a KITTI root of its own: never inside a dataset
+        output_folder(args.out, "--out")
+    except ValueError as exc:
+        raise CLIError(str(exc).replace("give a folder", "give a folder (a KITTI root to "
+                                                      "write into)")) from None
     try:
         split = export_drive(scenario_config(args.scenario), args.seed, args.frames, args.out,
                              args.sequence)

@@ -194,6 +194,10 @@ def run_benchmark(
     cfg = merge_config(default_benchmark_config(), dict(config), "benchmark")
     check_config(cfg)
     protocol_overrides(cfg["protocol"])  # fail before any work
+    for ckpt in checkpoints or ():  # not after the data is generated and scored
+        path = ckpt[1] if isinstance(ckpt, tuple) else ckpt  # a path, or (label, path)
+        if isinstance(path, (str, Path)) and not Path(path).is_file():
+            raise FileNotFoundError(f"checkpoint not found: {path}")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     device = resolve_device(cfg["device"])

@@ -27,16 +27,20 @@ def _sequence_list(text: str) -> list[str]:
     return _sequences(text)
 
 
-def _apart(out: str | None, data: str | None) -> None:
-    """Refuse an output folder that is, or lies inside, the dataset (its checkpoints or
-    results would sit among the shards, and a later generate would take the folder)."""
+def _apart(args: argparse.Namespace) -> None:
+    """Refuse an ``--out`` whose files would mix with others': one that is, or lies inside,
+    a dataset (the ``--data`` one or any other: a later generate would take the folder)
+    or an input folder (``--data``, ``--kitti``, ``--root``)."""
     from dstenv.config import CLIError
+    from dstenv.io import output_folder
 
-    if not out or not data:
-        return
-    o, d = Path(out).resolve(), Path(data).resolve()
-    if o == d or d in o.parents:
-        raise CLIError(f"--out {out}: inside the dataset --data {data}; give another folder")
+    inputs = tuple((flag, v) for flag, v in (("--data", getattr(args, "data", None)),
+                                            ("--kitti", getattr(args, "kitti", None)),
+                                            ("--root", getattr(args, "root", None))) if v)
+    try:
+        output_folder(args.out, "--out", inputs=inputs)
+    except ValueError as exc:
+        raise CLIError(str(exc)) from None
 
 
 def _train(args: argparse.Namespace) -> int:
@@ -46,9 +50,7 @@ def _train(args: argparse.Namespace) -> int:
     from dstenv.segment.checkpoint import training_data
     from dstenv.segment.train import default_train_config, train
 
-    if Path(args.out).exists() and not Path(args.out).is_dir():
-        raise CLIError(f"--out {args.out}: is a file; give a folder for the checkpoints")
-    _apart(args.out, args.data)
+    _apart(args)
     defaults = default_train_config()  # --model and --inputs: None when not given
     cfg: dict[str, Any] = {
         "model": args.model or defaults["model"],
@@ -178,7 +180,7 @@ def run_cli_benchmark(args: argparse.Namespace, split: str = "test", kept: bool 
     from dstenv.segment.benchmark import run_benchmark
     from dstenv.segment.presets import preset_config
 
-    _apart(args.out, args.data)
+    _apart(args)
     overrides = parse_set(args.set or [])
     for section, row in (("tune", "dst-tuned"), ("complete", "dst-complete")):
         node = overrides.get(section, {})
@@ -234,6 +236,20 @@ def _with_real(args: argparse.Namespace, results: dict[str, Any]) -> dict[str, A
     return results
 
 
+def _evaluation_only(data: str) -> bool:
+    """Whether the dataset ``data`` is scored without training (no train frames, or a
+    KITTI conversion), read from its manifest; False when that cannot be read (the
+    benchmark's own checks then name the problem)."""
+    from dstenv.data.manifest import load_manifest
+
+    try:
+        m = load_manifest(data, verify="none")
+    except (OSError, ValueError):
+        return False
+    kitti = m.get("meta", {}).get("command") == "kitti convert"
+    return kitti or not m.get("splits", {}).get("train", {}).get("frames", 0)
+
+
 def _check_kitti_flags(args: argparse.Namespace) -> None:
     """The ``--kitti`` options, before any stage runs (not after the whole benchmark)."""
     from dstenv.config import CLIError
@@ -246,6 +262,9 @@ def _check_kitti_flags(args: argparse.Namespace) -> None:
         return
     if not args.sequences:
         raise CLIError("--kitti needs --sequences LIST (e.g. 0003)")
+    if args.data and _evaluation_only(args.data):
+        raise CLIError("--kitti adds real drives to a simulated benchmark; --data is "
+                       "evaluation-only data already (score it with dstenv benchmark --data)")
     if not Path(args.kitti).is_dir():
         raise CLIError(f"--kitti {args.kitti}: no such folder (KITTI tracking's root, holding "
                        "training/velodyne/...)")

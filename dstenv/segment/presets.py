@@ -347,8 +347,9 @@ def check_config(cfg: Mapping[str, Any]) -> None:
     if not isinstance(cfg["eval_batch_size"], int) or cfg["eval_batch_size"] < 1:
         raise ConfigError(f"eval_batch_size must be an integer >= 1, got "
                           f"{cfg['eval_batch_size']!r}")
-    from dstenv.segment.train import default_train_config
+    from dstenv.segment.train import check_train_config, default_train_config
 
+    check_train_config(cfg["train"])  # not after the data is generated and scored
     if cfg["search"]["values"] and cfg["search"]["key"] not in default_train_config():
         raise ConfigError(
             f"search.key: {cfg['search']['key']!r} is not a training option; choose from "

@@ -33,7 +33,7 @@ from dstenv.segment.metrics import ConfusionMeter, iou_per_class, mean_iou
 from dstenv.segment.models import MODELS
 from dstenv.segment.segmenters import TorchSegmenter
 
-__all__ = ["default_train_config", "train", "resolve_device"]
+__all__ = ["check_train_config", "default_train_config", "train", "resolve_device"]
 
 
 def default_train_config() -> dict[str, Any]:
@@ -77,6 +77,14 @@ def resolve_device(name: str) -> torch.device:
         return torch.device(name)
     except RuntimeError:  # torch's message is several lines
         raise ConfigError(f"device {name!r}: not a torch device; use auto, cpu or cuda") from None
+
+
+def check_train_config(config: Mapping[str, Any]) -> dict[str, Any]:
+    """``config`` over :func:`default_train_config`, checked: the config :func:`train`
+    runs with, or one ConfigError naming the ``train.`` key (before any data is read)."""
+    cfg = merge_config(default_train_config(), dict(config), where="train")
+    _check(cfg)
+    return cfg
 
 
 def _check(cfg: dict[str, Any]) -> None:
@@ -189,8 +197,7 @@ def train(
         ``(segmenter, history)``: the trained network (weights of the last epoch) and
         ``{"epoch", "train_loss", "val_loss", "val_miou", "val_iou"}`` lists.
     """
-    cfg = merge_config(default_train_config(), dict(config), where="train")
-    _check(cfg)
+    cfg = check_train_config(config)
     device = resolve_device(cfg["device"])
     streaming = isinstance(train_data, torch.utils.data.IterableDataset)
     if streaming and cfg["max_batches"] < 1:

@@ -1,6 +1,7 @@
 """End-to-end: the tiny benchmark preset (generate, replay, tune, train, score, report)."""
 
 import json
+import re
 
 import pytest
 
@@ -118,7 +119,7 @@ def test_cli_benchmark_on_existing_data_and_errors(tiny, tmp_path, capsys):
     for cmd in (["train", "--data", str(tmp_path), "--out", str(tmp_path / "m")],
                 ["benchmark", "--data", str(tmp_path), "--out", str(tmp_path)]):
         assert main(cmd) == 2
-        assert "inside the dataset --data" in capsys.readouterr().err
+        assert re.search(r"(inside|is) the input --data", capsys.readouterr().err)
 
 
 def test_cli_train_resumes(tiny, tmp_path, capsys):
@@ -183,6 +184,7 @@ def test_kitti_flags_are_checked_before_any_stage(tmp_path, capsys, extra, messa
     ("data.frames=-5", "data.frames must be an integer >= 1, got -5"),
     ("data.stride=0", "data.stride must be an integer >= 1"),
     ("eval_batch_size=0", "eval_batch_size must be an integer >= 1, got 0"),
+    ("train.epochs=-1", "train.epochs: must be >= 1, got -1"),  # was found after the data
 ])
 def test_benchmark_numbers_are_checked_before_any_stage(tmp_path, capsys, item, message):
     out = tmp_path / "out"
@@ -190,3 +192,22 @@ def test_benchmark_numbers_are_checked_before_any_stage(tmp_path, capsys, item, 
     captured = capsys.readouterr()
     assert message in captured.err and "generating" not in captured.out
     assert not out.exists() or not any(out.iterdir())
+
+
+def test_benchmark_on_evaluation_only_data_refuses_late_flags_first(tmp_path, capsys):
+    """--kitti on evaluation-only data, and a missing --checkpoint, were refused only after
+    the scoring (with a finished-looking report, or a data-identity.json, left behind)."""
+    data = tmp_path / "evalonly"
+    assert main(["generate", "--frames", "2", "--grid", "16", "--cell-size", "1.0",
+                 "--episode-length", "30", "--split", "test", "--quiet", "--out",
+                 str(data)]) == 0
+    out = tmp_path / "out"
+    for extra, message in (
+            (["--kitti", str(tmp_path), "--sequences", "0003"],
+             "--kitti adds real drives to a simulated benchmark; --data is evaluation-only"),
+            (["--checkpoint", str(tmp_path / "nosuch.pt")], "checkpoint not found"),
+            (["--set", "train.epochs=-1"], "train.epochs: must be >= 1")):
+        assert main(["benchmark", "--data", str(data), "--out", str(out), *extra]) == 2
+        err = capsys.readouterr().err.strip()
+        assert message in err and len(err.splitlines()) == 1
+        assert not out.exists()

@@ -29,10 +29,26 @@ _NO_MAP = ("no map: GIS grid vacuous (all 0), map masses carry no information; "
 
 
 def _overrides(args: argparse.Namespace) -> dict[str, Any]:
+    """The ``kitti`` config overrides of the options, each checked by its flag (the
+    config's own errors would name keys and values the user never typed)."""
+    from dstenv.config import CLIError
+    from dstenv.kitti.sequence import default_config
+
     out: dict[str, Any] = {"labels": {}}
-    for key in ("stride", "warmup", "update_every"):
-        if getattr(args, key, None) is not None:
-            out[key] = getattr(args, key)
+    for key, low in (("stride", 1), ("warmup", 0), ("update_every", 1)):
+        value = getattr(args, key, None)
+        if value is not None:
+            if value < low:
+                raise CLIError(f"--{key.replace('_', '-')} must be >= {low}, got {value}")
+            out[key] = value
+    if hasattr(args, "stride"):  # convert (render keeps its --frame, checked there)
+        d = default_config()
+        every = out.get("update_every", d["update_every"])
+        for key in ("stride", "warmup"):
+            if out.get(key, d[key]) % every:
+                given = "" if key in out else f" (the default: give --{key})"
+                raise CLIError(f"--{key} {out.get(key, d[key])}{given} is no multiple of "
+                               f"--update-every {every}: kept frames must be filtered frames")
     if args.label_rule is not None:
         out["labels"]["rule"] = args.label_rule
     if args.free_label is not None:
@@ -138,6 +154,7 @@ def _convert(args: argparse.Namespace) -> int:
                            f"{seq.n_frames} frames")
         _same_conversion(path, attrs, args.masses)
         plans.append((path, attrs))
+    made = not out.exists()
     try:
         with dataset_lock(out):
             (out / MANIFEST_NAME).unlink(missing_ok=True)
@@ -150,6 +167,10 @@ def _convert(args: argparse.Namespace) -> int:
     except DatasetLocked as exc:
         raise CLIError(f"{out}: another run writes into it ({exc}); wait for it or use "
                        "another --out") from None
+    except CLIError:
+        if made and out.is_dir() and not any(out.iterdir()):
+            out.rmdir()  # nothing written: no empty folder left behind
+        raise
     print(f"wrote {out / MANIFEST_NAME}")
     return 0
 
@@ -167,11 +188,21 @@ def _write_sequence(seq: Any, cfg: dict[str, Any], gis_fn: Any, note: str, path:
           f"keep every {cfg['stride']} from {cfg['warmup']}, labels {cfg['labels']['rule']}; "
           f"{note}")
     skipped: list[str] = []
-    with ShardWriter(path, attrs, masses=masses) as writer:
-        for frame in convert_sequence(seq, cfg, gis_fn, skipped):
-            writer.add(frame)
-        if writer.n_frames == 0:
-            raise CLIError(f"sequence {seq.name}: no usable frame ({len(skipped)} skipped)")
+    made = not path.parent.exists()
+    try:
+        with ShardWriter(path, attrs, masses=masses) as writer:
+            for frame in convert_sequence(seq, cfg, gis_fn, skipped):
+                writer.add(frame)
+            if writer.n_frames == 0:
+                first = (skipped[0].split(": skipped: ", 1)[-1] if skipped
+                         else "no frame is kept")
+                raise CLIError(f"sequence {seq.name}: no usable frame ({len(skipped)} "
+                               f"skipped; the first: {first}); fix its files or leave it "
+                               "out of --sequences")
+    except CLIError:
+        if made and path.parent.is_dir() and not any(path.parent.iterdir()):
+            path.parent.rmdir()  # the split folder this run made, left empty
+        raise
     for msg in [*seq.notes, *skipped]:
         print(f"  warning: {msg}")
     entry = shard_entry(out, path)
@@ -208,13 +239,16 @@ def _render(args: argparse.Namespace) -> int:
                        f"(0 .. {seq.n_frames - 1})")
     gis_fn, note = _gis(args, seq)
     frame = None
-    for fr in convert_sequence(seq, cfg, gis_fn):
+    skipped: list[str] = []
+    for fr in convert_sequence(seq, cfg, gis_fn, skipped):
         if fr.step == args.frame:
             frame = fr
             break
     if frame is None:
-        raise CLIError(f"sequence {seq.name}: frame {args.frame} was not converted "
-                       f"(beyond {seq.n_frames} frames, or its scan was skipped)")
+        why = next((m.split(": skipped: ", 1)[-1] for m in skipped
+                    if m.startswith(f"sequence {seq.name} frame {args.frame}: ")), None)
+        raise CLIError(f"sequence {seq.name}: frame {args.frame} was skipped: {why}" if why
+                       else f"sequence {seq.name}: frame {args.frame} was not converted")
     boxes = seq.boxes.select(seq.boxes.frame == args.frame)
     where = f"map: {args.osm}" if args.osm else "no map"
     title = (f"KITTI tracking {seq.name} frame {args.frame} (DST every {every} scan(s), "

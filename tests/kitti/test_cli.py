@@ -82,8 +82,42 @@ def test_every_scan_missing_is_an_error(tiny_root, tmp_path, capsys):
     for p in (tiny_root / "training" / "velodyne" / "0001").glob("*.bin"):
         p.unlink()
     assert _convert(tiny_root, tmp_path / "o") == 2
-    assert "no usable frame (6 skipped)" in capsys.readouterr().err
-    assert not list((tmp_path / "o").rglob("*.h5*"))
+    err = capsys.readouterr().err
+    # the first reason, with its file (it used to be only a count), and no folder left
+    assert "no usable frame (6 skipped; the first: " in err and "000000.bin" in err
+    assert "leave it out of --sequences" in err and err.count("\n") == 1
+    assert not (tmp_path / "o").exists()
+
+
+def test_render_names_why_its_frame_was_skipped(tiny_root, tmp_path, capsys):
+    scan = tiny_root / "training" / "velodyne" / "0001" / "000003.bin"
+    scan.write_bytes(scan.read_bytes()[:1003])  # truncated
+    assert main(["kitti", "render", "--root", str(tiny_root), "--sequence", "1", "--frame",
+                 "3", "--out", str(tmp_path / "f.png")]) == 2
+    err = capsys.readouterr().err
+    assert "frame 3 was skipped: " in err and "000003.bin: 1003 bytes" in err
+    assert "truncated" in err and err.count("\n") == 1
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["render", "--frame", "4", "--update-every", "0"], "--update-every must be >= 1, got 0"),
+    (["render", "--frame", "4", "--update-every", "-2"], "--update-every must be >= 1, got -2"),
+    (["convert", "--stride", "0"], "--stride must be >= 1, got 0"),
+    (["convert", "--warmup", "-1"], "--warmup must be >= 0, got -1"),
+    (["convert", "--update-every", "2"],
+     "--stride 5 (the default: give --stride) is no multiple of --update-every 2"),
+    (["convert", "--update-every", "2", "--stride", "4"],
+     "--warmup 5 (the default: give --warmup) is no multiple of --update-every 2"),
+])
+def test_frame_counts_are_checked_by_their_flags(tiny_root, tmp_path, capsys, extra, message):
+    """--update-every 0 was a ZeroDivisionError traceback, -2 named kitti.stride = -2000000."""
+    cmd, *rest = extra
+    where = (["--sequence", "1", "--out", str(tmp_path / "f.png")] if cmd == "render"
+             else ["--sequences", "1", "--out", str(tmp_path / "o")])
+    assert main(["kitti", cmd, "--root", str(tiny_root), *where, *rest]) == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1
+    assert not list(tmp_path.glob("[fo]*"))
 
 
 def test_a_warmup_past_the_sequence_is_named_and_writes_nothing(tiny_root, tmp_path, capsys):

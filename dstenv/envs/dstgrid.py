@@ -109,7 +109,8 @@ class DSTGridEnv(gym.Env):
     Terminated on a collision, on leaving the road, or on arrival at the route's end
     (highway-env scenes with a destination). Truncated by the ``TimeLimit`` of the
     registration (``max_episode_steps``, counted in env steps: with ``action.repeat =
-    r`` an env step is r world steps of 0.1 s, rewards summed over them).
+    r`` an env step is r world steps of 0.1 s, rewards summed over them). A step after
+    ``terminated=True`` raises: call ``reset()``.
 
     ## Info
 
@@ -155,19 +156,15 @@ class DSTGridEnv(gym.Env):
                                 RL-sized grid, highway-env meta-actions
     =========================== ==========================================================
 
-    ``DSTGrid-Occluded-v0`` is the task where perception under occlusion matters: the
-    world's ``task`` section places cars on the side streets of the ego's next
-    junctions, parked cars along its route and pedestrians about to cross; corner
-    buildings hide them until late. Collisions cost 10, so a policy that reads the
-    grid's unknown (dark) regions should slow before blind junctions, while one
-    that ignores them collides or must crawl everywhere.
+    ``DSTGrid-Occluded-v0``: the world's ``task`` section places cars on the side streets
+    of the ego's next junctions, parked cars along its route and pedestrians about to
+    cross, hidden by corner buildings until late. Collisions cost 10: a policy that reads
+    the grid's unknown regions slows before blind junctions; one that does not collides.
 
     ## Version History
 
-    * v0: initial version; ``"dict"`` observation default on the RL ids, ``"speed"``
-      actions on ``DSTGrid-Occluded-v0`` (``action.turns`` removed), episode outcome
-      in ``info``; ``info["labels"]``/``info["visible"]`` opt-in (``info.labels``) to
-      keep the step cost to what the observation needs.
+    * v0: initial version; ``"dict"`` observation on the RL ids, ``"speed"`` actions on
+      ``DSTGrid-Occluded-v0``, episode outcome in ``info``, ``info.labels`` opt-in.
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
@@ -191,6 +188,7 @@ class DSTGridEnv(gym.Env):
         self._world = world
         self._window: HumanWindow | None = None
         self._frame: Frame | None = None
+        self._ended: str | None = None  # the termination reason once an episode ended
         self._give_way = GiveWayWatch()
         self._last_info: dict[str, Any] = {}
         self._configure()
@@ -253,11 +251,10 @@ class DSTGridEnv(gym.Env):
               ) -> tuple[np.ndarray, dict[str, Any]]:
         super().reset(seed=seed)
         saved = None
+        if options is not None and not isinstance(options, Mapping) or set(options or ()) - {
+                "config"}:  # a list was 'unhashable', a string 'unknown key c'
+            raise ConfigError(f"reset options: a dict of the one key 'config', got {options!r}")
         if options:
-            unknown = set(options) - {"config"}
-            if unknown:
-                raise ConfigError(f"reset options: unknown key {sorted(unknown)[0]!r}; "
-                                  "allowed: config")
             if options.get("config"):
                 # transactional: validate and build first; restore all if the new
                 # configuration fails to build or to start its first episode
@@ -278,6 +275,7 @@ class DSTGridEnv(gym.Env):
                         "with gym.make(id, config=...) instead")
             started = True  # from here on the running episode is gone
             self._frame = self.pipeline.reset(episode_seed)
+            self._ended = None
             self._world = self.pipeline.world
             self._controller = self._action.controller(self.config["action"], self._world,
                                                        self.config["source"])
@@ -298,6 +296,9 @@ class DSTGridEnv(gym.Env):
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         if self._frame is None:
             raise RuntimeError("DSTGridEnv.step: call reset() first")
+        if self._ended is not None:  # it went on simulating, charging the penalty again
+            raise RuntimeError(f"DSTGridEnv.step: the episode has ended ({self._ended}, "
+                               "terminated=True); call reset() first")
         if isinstance(self.action_space, spaces.Discrete):
             # an integer or a 0-d array inside the space (-1 was taken as the last action,
             # 99 raised an IndexError)
@@ -343,6 +344,8 @@ class DSTGridEnv(gym.Env):
             if terminated:
                 break
         info = self._info(terms, terminated)
+        if terminated:
+            self._ended = str(info.get("termination_reason") or "terminated")
         if self.render_mode == "human":
             self.render()
         return self._observation(), float(sum(terms.values())), terminated, False, info

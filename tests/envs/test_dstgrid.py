@@ -137,8 +137,9 @@ def test_reset_options_config_keeps_spaces_fixed():
         env.reset(seed=0, options={"config": {"grid": {"height": 48, "width": 44}}})
     with pytest.raises(ConfigError, match="unknown key 'colour'"):
         env.reset(options={"config": {"observation": {"colour": 1}}})
-    with pytest.raises(ConfigError, match="unknown key 'cfg'"):
-        env.reset(options={"cfg": {}})
+    for bad in ({"cfg": {}}, "config", [{"config": {}}]):  # a list was 'unhashable type'
+        with pytest.raises(ConfigError, match="reset options: a dict of the one key 'config'"):
+            env.reset(options=bad)
 
 
 def test_bad_config_names_the_key():
@@ -166,6 +167,14 @@ def test_collision_terminates_with_penalty_and_info_is_complete():
                               ("lidar_points", (360, 2), np.float32)]:
         assert info[key].shape == shape and info[key].dtype == dtype, key
     assert np.array_equal(info["visible"], info["sensor"] != 0)
+    # a step after the end went on simulating and charged the penalty again (attack 14)
+    pose = info["ego_pose"].copy()
+    with pytest.raises(RuntimeError, match=rf"the episode has ended \({info['termination_reason']}"
+                                           r", terminated=True\); call reset\(\) first"):
+        env.step(2)
+    assert np.array_equal(env.unwrapped.pipeline.world.ego_pose, pose)  # nothing moved
+    env.reset(seed=1)
+    env.step(1)  # a new episode steps again
 
 
 def test_continuous_actions_on_highway_scene():

@@ -242,7 +242,8 @@ def highway_settings(cfg: Mapping[str, Any]) -> dict[str, Any]:
     as they reach the city's controller), after refusing what a world cannot take.
 
     Raises:
-        ConfigError: speeds that do not increase; on ``source = "highway"``:
+        ConfigError: speeds that do not increase; elsewhere an ``initial_speed_index``
+            past them; on ``source = "highway"``:
             ``info.autopilot``, ``action.type = "autopilot"``, ``initial_speed_index``
             or ``speed_gain`` (city only), fewer than two speeds, or ``action`` and
             ``highway`` speeds that differ.
@@ -257,7 +258,12 @@ def highway_settings(cfg: Mapping[str, Any]) -> dict[str, Any]:
                               f"down, FASTER up), got {v}")
     out = {"action_mode": "continuous" if act["type"] == "continuous" else "meta",
            "brake_decel": min(act["brake_decel"], act["max_accel"])}
-    if cfg["source"] != "highway":
+    if cfg["source"] != "highway":  # (highway-env's vehicle does not read the index)
+        if act["initial_speed_index"] >= len(speeds):
+            raise ConfigError(f"config.action.target_speeds: {speeds} has no index "
+                              f"{act['initial_speed_index']} (the speed at reset, action."
+                              "initial_speed_index): give more speeds or an index in "
+                              f"0 .. {len(speeds) - 1}")
         return out
     if cfg["info"]["autopilot"]:
         raise ConfigError("config.info.autopilot: highway-env's world has no autopilot to "
@@ -296,6 +302,4 @@ SECTION = Section(default_action_config, {
 }, (
     ("type", lambda c: action_mode(c["type"]) is not None, "unknown mode"),
     ("target_speeds", lambda c: len(c["target_speeds"]) >= 1, "needs at least one speed"),
-    ("initial_speed_index", lambda c: c["initial_speed_index"] < len(c["target_speeds"]),
-     "must index target_speeds"),
 ))

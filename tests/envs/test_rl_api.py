@@ -235,6 +235,18 @@ def test_action_speeds_reach_the_highway_world_and_bad_ones_are_refused():
     for cfg, match in bad:  # refused when the env is made, not at its first reset
         with pytest.raises(ConfigError, match=match):
             gym.make("DSTGrid-Highway-v0", config={**SMALL_HIGHWAY, **cfg})
+    # two speeds: highway-env's vehicle does not read initial_speed_index, whose default
+    # (2) made any two-speed list impossible there ('must index target_speeds')
+    env = gym.make("DSTGrid-Highway-v0", config={**SMALL_HIGHWAY,
+                                                 "action": {"target_speeds": [0.0, 9.0]}})
+    env.reset(seed=0)
+    assert env.unwrapped.pipeline.config["highway"]["target_speeds"] == [0.0, 9.0]
+    with pytest.raises(ConfigError, match=r"target_speeds: \[0.0, 9.0\] has no index 2 \(the "
+                                          r"speed at reset, action.initial_speed_index\)"):
+        gym.make("DSTGrid-RL-v0", config={"action": {"target_speeds": [0, 9]}})
+    env = gym.make("DSTGrid-RL-v0", config={"grid": {"height": 36, "width": 36}, "action": {
+        "target_speeds": [0, 9], "initial_speed_index": 1}})
+    env.reset(seed=0)
 
 
 def test_a_refused_reset_option_leaves_the_env_as_it_was():

@@ -15,17 +15,15 @@ One :class:`Pipeline` step is one LIDAR period (0.1 s):
 
 The ``protocol`` section holds the paper's evaluation protocol as options: the fusion
 rate (``update_every``: 10 fuses at 1 Hz, t-1 is the previous fused frame), labels
-restricted to a front camera's field of view (``camera_fov``, the rest
-:data:`~dstenv.frame.IGNORE_INDEX` as on KITTI), KITTI's moving rule (``moving_rule =
-"displacement"``: moved more than 10 cm between fused frames) and KITTI's labels at
-the rim of road users (``object_edges = "ignore"``: occupied cells just outside a box
-are ignored, not labelled by the ground under them).
+only in a front camera's view (``camera_fov``, the rest
+:data:`~dstenv.frame.IGNORE_INDEX`), KITTI's moving rule (``moving_rule =
+"displacement"``: 10 cm between fused frames) and KITTI's labels at the rim of road
+users (``object_edges = "ignore"``: occupied cells just outside a box are ignored).
 
 The world source is pluggable (:data:`WORLD_SOURCES`): ``"city"`` is dstenv's own
-:class:`dstenv.sim.World`, ``"highway"`` a highway-env scene
-(:class:`dstenv.sim.highway.HighwayWorld`). Any object with the same interface
-(``reset(seed)``, ``step(ego_action)``, ``map``, ``agents``, ``ego_pose``, ``ego_speed``,
-``time``, ``collision``, ``off_road``) can be passed as ``world=``.
+:class:`dstenv.sim.World`, ``"highway"`` a highway-env scene (:class:`dstenv.sim.highway.
+HighwayWorld`); any object with their interface (``reset(seed)``, ``step(ego_action)``,
+``map``, ``agents``, ``ego_pose``, ``ego_speed``, ``time``, ``collision``, ``off_road``).
 
 No gymnasium here: the Gymnasium shell is :mod:`dstenv.envs`.
 """
@@ -106,11 +104,10 @@ def default_config() -> dict[str, Any]:
     ``labels``, ``dst`` (:class:`~dstenv.dst.DSTParams` fields) and ``frame``
     (optional outputs: ``labels`` false leaves ``Frame.labels``/``visible`` None).
     """
+    from dstenv.grid import SECTION as grid_section
     from dstenv.sensing.config import default_config as sensing_defaults
     from dstenv.sim.config import default_config as world_defaults
     from dstenv.sim.highway import default_config as highway_defaults
-
-    from dstenv.grid import SECTION as grid_section
 
     sensing = sensing_defaults()
     return {
@@ -136,10 +133,9 @@ def _protocol_defaults() -> dict[str, Any]:
         # view (KITTI's left colour camera: 81), the rest ignored (255); 0: all cells
         "camera_fov": 0.0,
         "moving_rule": "speed",  # "speed" (labels.moving_threshold) or "displacement"
-        # occupied cells just outside a road user's box (its hits in cells whose centre
-        # the box misses): "map" labels them by the ground under them, "ignore" leaves
-        # them ignored as KITTI's converter without a map does
-        # (dstenv.sensing.labels.ignore_object_edges)
+        # occupied cells just outside a road user's box (hits in cells whose centre it
+        # misses): "map" labels them by the ground under them, "ignore" as KITTI's
+        # converter without a map does (dstenv.sensing.labels.ignore_object_edges)
         "object_edges": "map",
         # the ego motion the filter is given (dstenv.sensing.odometry: a real INS's step
         # errors; 0: exact): along-track std [m], across-track drift std [m], yaw std
@@ -232,6 +228,10 @@ class Pipeline:
         self.filter_pose: np.ndarray | None = None
         self.camera = (camera_mask(self.spec, prot["camera_fov"]) if prot["camera_fov"] > 0
                        else None)
+        if world is None and cfg["source"] == "city" and cfg["world"]["map"]["kind"] == "osm":
+            from dstenv.sim.osm import check_osm_file  # now, not at the first reset
+
+            check_osm_file(cfg["world"]["map"])
         self._world = world
         self.seed = 0
         self.step_index = 0

@@ -123,14 +123,9 @@ def _check_generation_config(config: Mapping[str, Any]) -> None:
         raise ValueError(f"world.map.pool = {wm['pool']}: generate draws a map per episode seed "
                          "(splits are disjoint map seeds); a pool would reuse its maps in "
                          "every split: leave it 0 (--episodes-per-map reuses maps within one)")
-    if wm.get("kind") == "osm":
-        from dstenv.sim.osm import resolve_osm_file
+    from dstenv.sim.osm import check_osm_file
 
-        path = resolve_osm_file(str(wm.get("osm_file", "")))
-        if not path.is_file():
-            raise ValueError(f"world.map.osm_file {wm['osm_file']!r}: no such file ({path}); "
-                             "give it absolute, beside the scenario file, or in the current "
-                             "folder")
+    check_osm_file(wm)
 
 
 @dataclass(frozen=True)

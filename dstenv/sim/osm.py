@@ -17,6 +17,7 @@ position of ``meta["latlon_origin"] = (lat0, lon0)``, the centre of the extract.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -37,12 +38,30 @@ from dstenv.sim.osm_xml import (
 )
 from dstenv.sim.types import MapClass, WorldMap
 
-__all__ = ["load_osm"]
+__all__ = ["check_osm_file", "load_osm", "resolve_osm_file"]
 
 FOOT_TYPES = {"footway", "path", "pedestrian", "steps", "cycleway", "bridleway", "corridor"}
 FOOT_WIDTH = 2.0  # [m]
 WALK_OFFSET = 0.6  # [m] half distance between the two walking lines of a footway
 KERB_RADIUS = 4.0  # [m] rounding of the kerb at junctions
+
+
+def check_osm_file(map_cfg: Mapping[str, Any], base_dir: str | Path | None = None) -> None:
+    """Before any world exists: the file of a ``world.map.kind = "osm"`` section must
+    exist (else the first reset, in every env of a vector env, found out).
+
+    Raises:
+        ConfigError: no such file, named with where it was looked for.
+    """
+    from dstenv.config import ConfigError
+
+    if map_cfg.get("kind") != "osm":
+        return
+    path = resolve_osm_file(str(map_cfg.get("osm_file", "")), base_dir)
+    if not path.is_file():
+        raise ConfigError(f"world.map.osm_file {map_cfg['osm_file']!r}: no such file ({path}); "
+                          "give it absolute, beside the scenario file, or in the current "
+                          "folder")
 
 
 def resolve_osm_file(name: str, base_dir: str | Path | None = None) -> Path:

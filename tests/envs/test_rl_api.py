@@ -305,3 +305,13 @@ def test_meta_actions_imitate_the_autopilot_command(speed, index, accel, expecte
     env.unwrapped.pipeline.world._state["v"][-1] = speed
     assert env.unwrapped.get_action_meanings()[ctrl.imitate(accel, 0.0)] == expected
     env.close()
+
+
+def test_a_missing_osm_file_is_refused_when_the_env_is_made(tmp_path, monkeypatch):
+    """gym.make used to accept it; the first reset (of every env of a vector env) raised."""
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(ConfigError, match=r"world\.map\.osm_file 'nosuch\.osm': no such file"):
+        gym.make("DSTGrid-RL-v0", config={"world": {"map": {"kind": "osm",
+                                                            "osm_file": "nosuch.osm"}}})
+    # a procedural map does not read the key
+    gym.make("DSTGrid-RL-v0", config={"world": {"map": {"osm_file": "nosuch.osm"}}})

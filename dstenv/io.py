@@ -149,7 +149,8 @@ def output_folder(path: str | Path, option: str, *, dataset: bool = False,
     out = Path(path)
     if out.exists() and not out.is_dir():
         raise ValueError(f"{option} {out}: is a file; give a folder")
-    _nearest_folder(out / "x", option)
+    if not out.exists():
+        _nearest_folder(out, option)
     _refuse_inside(out, option, inputs, self_too=not dataset)
     if dataset and out.is_dir():
         found = [m for m in RESULT_MARKERS if (out / m).is_file()]

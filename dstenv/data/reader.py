@@ -14,7 +14,8 @@ from dstenv.data.format import (
     DERIVED_FIELDS, FORMAT, FRAME_FIELDS, N_CLASSES, N_MASSES, PROB_FIELDS, READ_VERSIONS,
     SCALAR_FIELDS, ShardError, derive, grid_fields, prob_shape, short_error,
 )
-from dstenv.frame import Frame
+from dstenv.dst.frame import CLASSES
+from dstenv.frame import IGNORE_INDEX, Frame
 
 __all__ = ["ShardReader"]
 
@@ -101,6 +102,14 @@ class ShardReader:
             got = self._file[name].shape
             if got != shape:
                 raise ShardError(f"{self.path}: dataset {name!r} has shape {got}, expected {shape}")
+        # values a writer never makes: decoded they gave NaN inputs, or classes out of order
+        for key in ("cell_size", "prob_scale"):
+            if not (isinstance(a[key], (int, float)) and np.isfinite(a[key]) and a[key] > 0):
+                raise ShardError(f"{self.path}: attribute {key!r} is {a[key]!r}, not a "
+                                 "number > 0: not a shard as dstenv writes it")
+        if list(a["classes"]) != list(CLASSES):
+            raise ShardError(f"{self.path}: attribute 'classes' is {a['classes']!r}, not "
+                             f"{list(CLASSES)}: not a shard as dstenv writes it")
         self.n_frames = n
         self.grid_shape: tuple[int, int] = (h, w)
         self.cell_size = float(a["cell_size"])
@@ -148,6 +157,11 @@ class ShardReader:
                                  f"(corrupt chunk?): {short_error(exc)}") from None
             if name in PROB_FIELDS and self.format_version >= 2:
                 value = np.moveaxis(value, -1, 0)  # cell-major on disk: a (5, H, W) view
+            if name == "labels" and value.max(initial=0) >= N_CLASSES:  # 255: ignored
+                bad = value[(value >= N_CLASSES) & (value != IGNORE_INDEX)]
+                if bad.size:  # (the loss said only "label outside [0, 5)", no file)
+                    raise ShardError(f"{self.path}: frame {index}: label {int(bad[0])} is no "
+                                     f"class (0..{N_CLASSES - 1}) nor ignored ({IGNORE_INDEX})")
             out[name] = value if stored else self.dequantise(name, value)
         for name in later:  # format 3: computed from a stored grid (read once)
             src = DERIVED_FIELDS[name]

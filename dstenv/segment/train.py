@@ -24,6 +24,7 @@ from tqdm import tqdm
 
 from dstenv.config import ConfigError, merge_config
 from dstenv.data.datasets import INPUT_CHANNELS, LABELS
+from dstenv.segment.augment import random_crop, random_flip
 from dstenv.dst.frame import CLASSES
 from dstenv.io import file_sha256
 from dstenv.segment.checkpoint import (json_ready, load_checkpoint, network_checkpoint,
@@ -142,30 +143,6 @@ def _class_weights(
         + ", ".join(f"{n} {w:.3g}" for n, w in zip(CLASSES, weights))
     )
     return [float(w) for w in weights]
-
-
-def _crop(
-    batch: dict[str, torch.Tensor], size: int, gen: torch.Generator
-) -> dict[str, torch.Tensor]:
-    h, w = batch["labels"].shape[-2:]
-    if size <= 0 or (size >= h and size >= w):
-        return batch
-    ch, cw = min(size, h), min(size, w)
-    i = int(torch.randint(0, h - ch + 1, (1,), generator=gen))
-    j = int(torch.randint(0, w - cw + 1, (1,), generator=gen))
-    return {k: (v[..., i : i + ch, j : j + cw] if v.dim() >= 3 else v) for k, v in batch.items()}
-
-
-def _flip(
-    batch: dict[str, torch.Tensor], p: float, gen: torch.Generator
-) -> dict[str, torch.Tensor]:
-    """Mirror each sample left-right with probability ``p`` (``x (B, C, H, W)``,
-    ``labels (B, H, W)``: the last axis); ``p == 0`` draws nothing from ``gen``."""
-    if p <= 0:
-        return batch
-    pick = torch.rand(batch["labels"].shape[0], generator=gen) < p
-    return {k: (torch.where(pick.view(-1, *([1] * (v.dim() - 1))), v.flip(-1), v)
-                if v.dim() >= 3 else v) for k, v in batch.items()}
 
 
 def train(
@@ -314,14 +291,19 @@ def train(
         for b, batch in enumerate(bar):
             if b >= n_batches:
                 break
-            batch = _flip(_crop(batch, cfg["crop"], gen), cfg["flip"], gen)
+            batch = random_flip(random_crop(batch, cfg["crop"], gen), cfg["flip"], gen)
             x = batch["x"].to(device).float()
             y = batch["labels"].to(device).long()
             loss = loss_fn(model(x), y)
+            if not math.isfinite(value := float(loss.detach())):  # before the step: no NaN
+                raise ValueError(  # weights, and no checkpoint of them
+                    f"train: the loss is {value} at epoch {epoch + 1}, batch {b + 1}: an "
+                    "input holds NaN or inf (check the data: dstenv info --verify frames) "
+                    "or train.lr is too high")
             opt.zero_grad(set_to_none=True)
             loss.backward()
             opt.step()
-            total += float(loss.detach())
+            total += value
             count += 1
             bar.set_postfix(loss=f"{total / count:.4f}")
         bar.close()

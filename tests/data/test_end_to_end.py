@@ -65,7 +65,7 @@ def test_cli_errors_are_one_line(tmp_path, capsys):
     blocker = tmp_path / "file"
     blocker.write_text("")
     assert main(["generate", "--frames", "2", "--out", str(blocker / "x"), *TINY_ARGS]) == 2
-    assert "is not writable" in capsys.readouterr().err
+    assert "/x: cannot create its folder (" in capsys.readouterr().err
     assert main(["generate", "--frames", "2", "--out", str(tmp_path / "y"), "--stride", "50",
                  "--episode-length", "20"]) == 2
     assert "keeps no frame" in capsys.readouterr().err

@@ -70,8 +70,7 @@ def test_episodes_per_map_reuse_the_map_with_new_traffic():
 
 
 def test_episodes_per_map_needs_a_procedural_city():
-    osm = scenario_config(None, {"grid": {"height": 48, "width": 40},
-                                 "world": {"map": {"kind": "osm"}}})
+    osm = scenario_config("osm", {"grid": {"height": 48, "width": 40}})
     with pytest.raises(ValueError, match="procedural"):
         next(iter_frames(lambda: Pipeline(osm), iter([1]), 6, 2, 1, episodes_per_map=2))
     with pytest.raises(ValueError, match="episodes per map"):

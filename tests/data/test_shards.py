@@ -150,6 +150,38 @@ def test_missing_dataset_and_wrong_shape(tmp_path, frames, shard_attrs):
         ShardReader(tmp_path / "plain.h5")
 
 
+@pytest.mark.parametrize("key, value, message", [
+    ("prob_scale", 0, r"attribute 'prob_scale' is 0, not a number > 0"),
+    ("prob_scale", float("nan"), r"attribute 'prob_scale' is nan"),
+    ("cell_size", float("nan"), r"attribute 'cell_size' is nan"),
+    ("cell_size", -0.33, r"attribute 'cell_size' is -0.33"),
+    ("classes", json.dumps(["a", "b"]), r"attribute 'classes' is \['a', 'b'\], not "),
+])
+def test_attributes_no_writer_makes_are_refused(tmp_path, frames, shard_attrs, key, value,
+                                                message):
+    """A prob_scale of 0 decoded to NaN inputs (training then saved NaN weights); a NaN
+    cell size or other classes were listed by info as if fine (attack 14)."""
+    path = _write(tmp_path / "a.h5", frames, shard_attrs)
+    with h5py.File(path, "a") as f:
+        f.attrs[key] = value
+    with pytest.raises(ShardError, match=r"a\.h5: " + message):
+        ShardReader(path)
+
+
+def test_a_label_no_class_has_is_named_with_its_shard_and_frame(tmp_path, frames,
+                                                               shard_attrs):
+    path = _write(tmp_path / "a.h5", frames, shard_attrs)
+    with h5py.File(path, "a") as f:
+        lab = f["labels"][2]
+        lab[1, 1] = 77
+        f["labels"][2] = lab
+    with ShardReader(path) as r:
+        r.get(1, ["labels"])  # the other frames read
+        with pytest.raises(ShardError, match=r"a\.h5: frame 2: label 77 is no class \(0\.\.4\) "
+                                             r"nor ignored \(255\)"):
+            r.get(2, ["labels"])
+
+
 def test_hdf5_write_failure_becomes_one_line_oserror(tmp_path, frames, shard_attrs, monkeypatch):
     def full(self, f):
         raise RuntimeError("Unable to flush file (file write failed: time = x\n, errno = 28, "

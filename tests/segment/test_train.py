@@ -5,7 +5,7 @@ from dstenv.config import ConfigError
 from dstenv.segment.checkpoint import load_checkpoint, load_segmenter
 from dstenv.segment.evaluate import batches, evaluate
 from dstenv.segment.registry import create_segmenter
-from dstenv.segment.train import _flip, train
+from dstenv.segment.train import train
 
 SMALL = {
     "model": "unet-light",
@@ -269,27 +269,6 @@ def test_inputs_are_recorded_checked_and_loaded(tmp_path, make_frames):
           **quiet)
 
 
-def test_flip_mirrors_inputs_and_labels_together():
-    x = torch.arange(2 * 3 * 4 * 5, dtype=torch.float32).reshape(2, 3, 4, 5)
-    y = torch.arange(2 * 4 * 5).reshape(2, 4, 5)
-    batch = {"x": x, "labels": y, "seed": torch.tensor([7, 8])}
-    gen = torch.Generator().manual_seed(0)
-    assert _flip(batch, 0.0, gen) is batch
-    assert torch.equal(gen.get_state(), torch.Generator().manual_seed(0).get_state())
-    out = _flip(batch, 1.0, gen)
-    assert torch.equal(out["x"][:, :, :, 0], x[:, :, :, -1])
-    assert torch.equal(out["labels"][:, 2, 0], y[:, 2, -1])
-    assert torch.equal(out["seed"], batch["seed"])
-    # half the samples: each one flipped whole or not at all, inputs with its labels
-    many = {"x": x.repeat(20, 1, 1, 1), "labels": y.repeat(20, 1, 1)}
-    out = _flip(many, 0.5, torch.Generator().manual_seed(1))
-    flipped = [bool(torch.equal(out["x"][i], many["x"][i].flip(-1))) for i in range(40)]
-    assert 5 < sum(flipped) < 35
-    for i in range(40):
-        assert torch.equal(out["labels"][i], many["labels"][i].flip(-1) if flipped[i]
-                           else many["labels"][i])
-
-
 def test_flip_changes_training_and_stays_seeded(tmp_path, make_frames):
     data = make_frames(8, seed=1)
     quiet = {"progress": False, "log": lambda m: None}
@@ -351,3 +330,15 @@ def test_a_fine_tuning_knows_its_start_by_content(tmp_path, make_frames):
     with pytest.raises(ConfigError, match="started from other weights than train.init"):
         train({**tune, "epochs": 3, "init": str(moved / "best.pt")}, data, None, tmp_path / "b",
               **quiet)
+
+
+def test_a_nan_loss_stops_training_before_any_checkpoint(tmp_path, make_frames):
+    """Shards whose inputs decode to NaN (a prob_scale of 0) trained to NaN weights and
+    saved them, with exit 0 (attack 14)."""
+    data = make_frames(8, seed=1)
+    data.items[5]["x"][0, 3, 3] = float("nan")
+    with pytest.raises(ValueError, match=r"the loss is nan at epoch 1, batch \d: an input "
+                                         r"holds NaN or inf \(check the data"):
+        train({**SMALL, "epochs": 2, "class_weights": [1.0] * 5}, data, None, tmp_path / "m",
+              progress=False, log=lambda m: None)
+    assert not list((tmp_path / "m").glob("*.pt"))

@@ -316,7 +316,12 @@ def read_calib(path: str | Path) -> Calibration:
         found[key] = (_floats(tok[1:], path, lineno), lineno)
     mats: dict[str, np.ndarray] = {}
     for name, (aliases, count) in _CALIB_KEYS.items():
-        hit = next((a for a in aliases if a in found), None)
+        hits = [a for a in aliases if a in found]
+        if len(hits) > 1:  # two spellings of one matrix: as two P2 lines, not guessed
+            (a, la), (b, lb) = sorted(((h, found[h][1]) for h in hits), key=lambda t: t[1])[:2]
+            raise KittiError(f"{path}:{lb}: {b} is {a} of line {la} again (another spelling "
+                             "of one matrix); keep one")
+        hit = hits[0] if hits else None
         if hit is None:
             raise KittiError(f"{path}: calibration has no {name} (keys found: {', '.join(found)})")
         vals, lineno = found[hit]

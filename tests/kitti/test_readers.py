@@ -144,6 +144,13 @@ def test_calib_with_a_key_twice_names_both_lines(tmp_path):
     (tmp_path / "c.txt").write_text("\n".join([*lines, p2]) + "\n")
     with pytest.raises(KittiError, match=rf"c\.txt:{len(lines) + 1}: P2 again \(first on line "):
         read_calib(tmp_path / "c.txt")
+    # two spellings of one matrix were read silently, the later one winning (attack 14)
+    tr = next(line for line in lines if line.startswith("Tr_velo_cam"))
+    (tmp_path / "d.txt").write_text("\n".join([*lines, tr.replace("Tr_velo_cam",
+                                                                  "Tr_velo_to_cam")]) + "\n")
+    with pytest.raises(KittiError, match=rf"d\.txt:{len(lines) + 1}: Tr_velo_to_cam is "
+                                         r"Tr_velo_cam of line \d+ again \(another spelling"):
+        read_calib(tmp_path / "d.txt")
 
 
 

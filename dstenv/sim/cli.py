@@ -139,9 +139,9 @@ def _cmd(args: argparse.Namespace) -> int:
         raise CLIError(f"--seed must be in [0, 2**63), got {args.seed}")
     if not 0 <= args.steps <= 100_000:
         raise CLIError(f"--steps must be in 0..100000 (0.1 s each), got {args.steps}")
-    if not (np.isfinite(args.extent) and args.extent >= 0):
-        raise CLIError(f"--extent must be a size in metres >= 0 (0: the whole map), got "
-                       f"{args.extent}")
+    if not (np.isfinite(args.extent) and 0 <= args.extent <= 100_000):  # 1e308: NaN axes
+        raise CLIError(f"--extent must be a size in metres in [0, 100000] (0: the whole "
+                       f"map), got {args.extent}")
     path = scenario_path(args.scenario)
     over = parse_set(args.set or [])
     unused = [k for k in over if k not in ("source", "world", "lidar")]

@@ -63,7 +63,8 @@ def test_render_checks_its_numbers_before_drawing(tmp_path, capsys):
     for flag, value, message in (("--seed", "-1", "--seed must be in [0, 2**63)"),
                                  ("--steps", "-5", "--steps must be in 0..100000"),
                                  ("--extent", "nan", "--extent must be a size in metres"),
-                                 ("--extent", "-5", "--extent must be a size in metres")):
+                                 ("--extent", "-5", "--extent must be a size in metres"),
+                                 ("--extent", "1e308", "in [0, 100000]")):
         assert main(["render", "--out", str(out), flag, value]) == 2, flag
         err = capsys.readouterr().err
         assert message in err and err.count("\n") == 1, err

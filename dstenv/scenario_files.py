@@ -48,6 +48,9 @@ def scenario_path(name_or_path: str | Path) -> Path:
     Raises:
         ConfigError: if no such scenario exists (listing the known names).
     """
+    if not isinstance(name_or_path, (str, os.PathLike)):
+        raise ConfigError(f"scenario: a shipped name or a .toml path, got "
+                          f"{type(name_or_path).__name__} {name_or_path!r}")
     text = str(name_or_path)
     candidate = Path(name_or_path)
     if candidate.suffix == ".toml" or "/" in text or (os.sep != "/" and os.sep in text):
@@ -60,7 +63,8 @@ def scenario_path(name_or_path: str | Path) -> Path:
     if not path.is_file():
         known = ", ".join(list_scenarios())
         raise ConfigError(f"unknown scenario {text!r}; known scenarios: {known} "
-                          f"(a file needs its .toml suffix or a folder, e.g. ./{text}.toml)")
+                          "(a file needs its .toml suffix or a folder, e.g. "
+                          f"./{text if text.strip('.') else 'my_scenario'}.toml)")
     return path
 
 

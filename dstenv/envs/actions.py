@@ -104,7 +104,11 @@ class _Continuous:
         self.scale = np.array([cfg["max_accel"], cfg["max_steer"]], np.float64)
 
     def world_action(self, action: Any) -> tuple[float, float]:
-        a = np.asarray(action, np.float64)
+        raw = np.asarray(action)
+        if raw.dtype.kind not in "biuf":  # complex: a warning and the real part; text: junk
+            raise ValueError(f"continuous action: expected 2 real numbers (acceleration, "
+                             f"steering in [-1, 1]), got {raw.dtype} {raw.tolist()!r}")
+        a = raw.astype(np.float64)
         if a.size != 2 or not np.isfinite(a).all():
             raise ValueError(f"continuous action: expected 2 finite numbers (acceleration, "
                              f"steering in [-1, 1]), got {np.asarray(action).tolist()!r}")

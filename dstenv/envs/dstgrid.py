@@ -181,6 +181,9 @@ class DSTGridEnv(gym.Env):
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, "
                              f"got {render_mode!r}")
         self.render_mode = render_mode
+        if world is not None and not callable(getattr(world, "step", None)):
+            raise TypeError(f"world: a world source object (reset, step, map, ...), got "
+                            f"{world!r}; to pick one by name use config={{'source': ...}}")
         self.scenario = scenario
         self.config = build_config(scenario, ("preset", preset), ("config", config),
                                    defaults=self.default_config())
@@ -246,7 +249,6 @@ class DSTGridEnv(gym.Env):
                             "continuous (acceleration, steering)")
         return list(self._action.names)
 
-    # -- gymnasium API ------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None
               ) -> tuple[np.ndarray, dict[str, Any]]:
         super().reset(seed=seed)

@@ -244,3 +244,21 @@ def test_an_action_outside_the_space_is_refused_in_one_line():
     for good in (1, np.int64(2), np.array(0)):
         env.step(good)
     env.close()
+
+
+def test_wrong_argument_kinds_are_named():
+    """Attack 14: scenario=3 was a TypeError from pathlib, world='city' passed until the
+    first reset, a complex action ran on its real part with a ComplexWarning."""
+    with pytest.raises(ConfigError, match="scenario: a shipped name or a .toml path, got int 3"):
+        DSTGridEnv(scenario=3)
+    with pytest.raises(ConfigError, match=r"e\.g\. \./my_scenario\.toml"):
+        DSTGridEnv(scenario=".")
+    with pytest.raises(TypeError, match=r"world: a world source object .* got 'city'; to pick "
+                                        r"one by name use config=\{'source': \.\.\.\}"):
+        DSTGridEnv(world="city")
+    env = DSTGridEnv({**SMALL_HIGHWAY, "action": {"type": "continuous"}})
+    env.reset(seed=0)
+    for bad in (np.array([0.5 + 1j, 0.0]), np.array(["a", "b"])):
+        with pytest.raises(ValueError, match="expected 2 real numbers"):
+            env.step(bad)
+    env.step(np.array([True, False]))  # bools and ints are numbers

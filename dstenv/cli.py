@@ -32,7 +32,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "generate": ("dstenv.data.cli", "generate labelled frames as HDF5 shards"),
     "info": ("dstenv.data.cli", "describe a shard dataset"),
     "train": ("dstenv.segment.cli", "train a segmentation network on shards or a stream"),
-    "benchmark": ("dstenv.segment.cli", "compare DST and FCN-DST segmenters on held-out maps"),
+    "benchmark": ("dstenv.segment.bench_cli",
+                  "compare DST and FCN-DST segmenters on held-out maps"),
     "kitti": ("dstenv.kitti.cli", "KITTI tracking -> perception-grid shards"),
     "export-kitti": ("dstenv.kitti.cli", "simulate a drive with the 3-D LIDAR, write it in "
                      "KITTI's tracking layout"),

@@ -133,8 +133,8 @@ def test_top_level_cli_is_light(argv):
 def test_subcommand_loads_only_its_module():
     code = ("import sys\nfrom dstenv.cli import main\n"
             "try:\n    main(['render', '--help'])\nexcept SystemExit:\n    pass\n"
-            "print('LOADED', [m for m in ('torch', 'dstenv.segment.cli', 'dstenv.kitti.cli')"
-            " if m in sys.modules])")
+            "print('LOADED', [m for m in ('torch', 'dstenv.segment.cli', "
+            "'dstenv.segment.bench_cli', 'dstenv.kitti.cli') if m in sys.modules])")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert "--scenario" in out.stdout and "LOADED []" in out.stdout, out.stdout + out.stderr
 

@@ -243,11 +243,16 @@ def _info(args: argparse.Namespace) -> int:
     except (ManifestError, ShardError) as exc:
         raise CLIError(str(exc)) from None
     from dstenv.data.lock import writer_of
+    from dstenv.io import PARTIAL_SUFFIX
 
     busy = writer_of(root) if root.is_dir() else None
     if busy:
         print(f"dstenv info: note: {root} is still being written by {busy}: these are the "
               "shards finished so far", file=sys.stderr)
+    elif root.is_file() and root.name.endswith(PARTIAL_SUFFIX):
+        print(f"dstenv info: note: {root} is a shard being written, or left by a run that "
+              "was killed: not part of any dataset (a rerun of that run replaces it)",
+              file=sys.stderr)
     elif root.is_dir() and s["source"].startswith("scanned shards"):
         print(f"dstenv info: note: {root} has no manifest.json: if a dstenv run made it, that "
               "run did not finish (these are the shards it wrote); rerun its command to "

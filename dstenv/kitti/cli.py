@@ -264,7 +264,7 @@ def _evaluate(args: argparse.Namespace) -> int:
     import shutil
     import tempfile
 
-    from dstenv.segment.cli import run_cli_benchmark
+    from dstenv.segment.bench_cli import run_cli_benchmark
 
     if args.batch_size < 1:
         from dstenv.config import CLIError

@@ -147,3 +147,15 @@ def test_a_bad_type_in_set_or_a_scenario_file_names_the_layer_then_the_key(tmp_p
     bad.write_text('[world]\ndt = "x"\n')
     assert main(["generate", "--frames", "2", "--out", out, "--scenario", str(bad)]) == 2
     assert f"error: {bad}: world.dt: expected a number, got 'x'" in capsys.readouterr().err
+
+
+def test_info_on_a_partial_shard_says_what_it_is(tmp_path, capsys, fake_pipeline):
+    assert main(["generate", "--frames", "2", "--split", "val", "--quiet", "--workers", "1",
+                 "--out", str(tmp_path / "d"), "--set", "grid.height=16",
+                 "--set", "grid.width=16"]) == 0
+    shard = next((tmp_path / "d").rglob("*.h5"))
+    partial = shard.with_name(shard.name + ".partial")
+    partial.write_bytes(shard.read_bytes())  # as a killed run leaves it
+    assert main(["info", str(partial)]) == 0
+    err = capsys.readouterr().err
+    assert "is a shard being written, or left by a run that was killed" in err

@@ -66,7 +66,7 @@ def test_cli_params_from_results_json(tmp_path):
     import argparse
 
     from dstenv.config import CLIError
-    from dstenv.segment.cli import _params_value
+    from dstenv.segment.bench_cli import _params_value
 
     res = {"segmenters": {"dst-tuned": {"describe": {"params": {"alpha": 0.4}}}}}
     path = tmp_path / "results.json"

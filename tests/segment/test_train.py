@@ -342,3 +342,24 @@ def test_a_nan_loss_stops_training_before_any_checkpoint(tmp_path, make_frames):
         train({**SMALL, "epochs": 2, "class_weights": [1.0] * 5}, data, None, tmp_path / "m",
               progress=False, log=lambda m: None)
     assert not list((tmp_path / "m").glob("*.pt"))
+
+
+def test_a_failed_cli_training_leaves_no_empty_folder(tmp_path, capsys, monkeypatch):
+    import dstenv.segment.train as train_module
+    from dstenv.cli import main
+
+    data = tmp_path / "d"
+    assert main(["generate", "--frames", "4", "--grid", "16", "--cell-size", "1.0",
+                 "--episode-length", "30", "--split", "train", "--quiet", "--out",
+                 str(data)]) == 0
+
+    def broken(*a, **k):
+        raise ValueError("train: the loss is nan at epoch 1, batch 1")
+
+    monkeypatch.setattr(train_module, "train", broken)
+    assert main(["train", "--data", str(data), "--out", str(tmp_path / "m")]) == 2
+    assert "the loss is nan" in capsys.readouterr().err
+    assert not (tmp_path / "m").exists()
+    (tmp_path / "kept").mkdir()  # a folder that was there stays
+    assert main(["train", "--data", str(data), "--out", str(tmp_path / "kept")]) == 2
+    assert (tmp_path / "kept").is_dir()

@@ -236,8 +236,9 @@ def _check_entries(manifest: dict[str, Any], path: Path) -> None:
         if manifest.get(key) != derived[key]:
             at, mine, theirs = (leaf_diffs(manifest.get(key), derived[key], key)
                                 or [(key, manifest.get(key), derived[key])])[0]
-            raise ManifestError(f"{path}: {at!r} is {mine!r:.60} but its shard entries add up "
-                                f"to {theirs!r:.60} ({fix})")
+            say = "say" if key in ("cell_size", "classes", "grid_shape") else "add up to"
+            raise ManifestError(f"{path}: {at!r} is {mine!r:.60} but its shard entries {say} "
+                                f"{theirs!r:.60} ({fix})")
 
 
 class _DuplicateKey(Exception):

@@ -190,6 +190,8 @@ def test_manifest_mismatch_is_reported(tmp_path):
     (lambda m: m["shards"][0].update(grid_shape="abc"), r"'grid_shape' is missing"),
     (lambda m: m["shards"][0].update(cell_size=None), r"'cell_size' is missing or not a number"),
     (lambda m: m.update(frames=999), r"'frames' is 999 but its shard entries add up to 8"),
+    (lambda m: m.update(cell_size=float("nan")), r"'cell_size' is nan but its shard entries "
+                                                 r"say 0\.5"),
     (lambda m: m.pop("splits"), r"'splits' is None but"),
     # the shares printed by dstenv info are checked against the counts, leaf by leaf
     (lambda m: m["class_frequencies"].update(moving=0.9),

@@ -128,8 +128,9 @@ def parse_osm(path: Path) -> tuple[dict, list, list, tuple | None]:
             raise FileNotFoundError(f"{path}: OSM file not found") from None
         raise ValueError(f"{path}: cannot read OSM file: {exc}") from None
     except (TypeError, ValueError) as exc:
-        text = str(exc).removeprefix(f"{path}: ")  # a message that names the file already
-        raise ValueError(f"{path}: invalid OSM element: {text}") from None
+        if str(exc).startswith(f"{path}: "):  # our own check, naming the file already
+            raise ValueError(str(exc)) from None
+        raise ValueError(f"{path}: invalid OSM element: {exc}") from None
     return nodes, ways, rels, bounds
 
 

@@ -17,8 +17,8 @@ from contextlib import contextmanager
 from pathlib import Path
 
 __all__ = ["PARTIAL_SUFFIX", "partial_path", "atomic_path", "atomic_write_bytes",
-           "atomic_write_text", "fsync_file", "fsync_dir", "output_file", "output_folder",
-           "png_path"]
+           "atomic_write_text", "fsync_file", "fsync_dir", "is_dataset_folder", "made_folders",
+           "output_file", "output_folder", "png_path", "remove_made"]
 
 #: suffix of a file being written; never a final file (readers and scans skip it)
 PARTIAL_SUFFIX = ".partial"
@@ -103,25 +103,43 @@ def atomic_write_text(path: str | Path, text: str) -> Path:
     return atomic_write_bytes(path, text.encode("utf-8"))
 
 
-#: files that make a folder a dstenv dataset: its manifest, or the lock of a run writing it
-DATASET_MARKERS = ("manifest.json", ".dstenv.lock")
+#: a folder holding a ``manifest.json`` of this format is a dstenv dataset
+MANIFEST_FORMAT = "dstenv-manifest"
 #: files that make a folder a training run's or a benchmark's (never a dataset's)
 RESULT_MARKERS = ("best.pt", "last.pt", "results.json")
+
+
+def is_dataset_folder(folder: Path) -> bool:
+    """Whether ``folder`` holds a dstenv dataset: its manifest (another program's
+    ``manifest.json``, a web app's, does not count), or the lock of a run still writing
+    one beside its split folders (a training run's own lock does not count)."""
+    manifest = folder / "manifest.json"
+    if manifest.is_file():
+        try:
+            with open(manifest, "rb") as fh:
+                return f'"{MANIFEST_FORMAT}"'.encode() in fh.read(1 << 16)
+        except OSError:
+            return False
+    return (folder / ".dstenv.lock").is_file() and any(
+        (folder / split).is_dir() for split in ("train", "val", "test"))
 
 
 def _refuse_inside(out: Path, option: str, inputs: tuple[tuple[str, str | Path], ...],
                    self_too: bool) -> None:
     """A one-line ValueError when ``out`` lies inside a dataset folder (or is one, with
-    ``self_too``) or is, or lies inside, one of ``inputs``."""
-    full = Path(os.path.abspath(out))
+    ``self_too``) or is, or lies inside, one of ``inputs`` (paths compared resolved:
+    a symlink or ``..`` does not get round it; empty inputs are their own checks')."""
+    full = Path(os.path.realpath(out))
     for flag, given in inputs:
-        src = Path(os.path.abspath(given))
+        if not str(given).strip():
+            continue
+        src = Path(os.path.realpath(given))
         if full == src or src in full.parents:
             where = "is" if full == src else "inside"
             raise ValueError(f"{option} {out}: {where} the input {flag} {given}; write it "
                              "elsewhere")
     for folder in ((full,) if self_too else ()) + tuple(full.parents):
-        if any((folder / m).is_file() for m in DATASET_MARKERS):
+        if is_dataset_folder(folder):
             where = "is" if folder == full else "inside"
             raise ValueError(f"{option} {out}: {where} the dataset folder {folder}; write "
                              "it elsewhere")
@@ -140,17 +158,18 @@ def output_folder(path: str | Path, option: str, *, dataset: bool = False,
 
     Raises:
         ValueError: one line naming ``option``, the path and the fix: an empty value
-            (usually an unset shell variable), a file, a place inside a dataset or an
-            input, a dataset folder for other files, or a checkpoint/report folder
-            for a dataset.
+            (usually an unset shell variable), a file or a broken link, a folder where
+            no file can be made (probed), a place inside a dataset or an input, a
+            dataset folder for other files, or a checkpoint/report folder for a dataset.
     """
     if not str(path).strip():
         raise ValueError(f"{option}: empty; give a folder (. for the current one)")
     out = Path(path)
     if out.exists() and not out.is_dir():
         raise ValueError(f"{option} {out}: is a file; give a folder")
-    if not out.exists():
-        _nearest_folder(out, option)
+    if not out.exists() and os.path.lexists(out):
+        raise ValueError(f"{option} {out}: is a broken symbolic link; give a folder")
+    _writable(out / "x", option, shown=out)
     _refuse_inside(out, option, inputs, self_too=not dataset)
     if dataset and out.is_dir():
         found = [m for m in RESULT_MARKERS if (out / m).is_file()]
@@ -160,6 +179,31 @@ def output_folder(path: str | Path, option: str, *, dataset: bool = False,
     return out
 
 
+def made_folders(out: str | Path) -> Path | None:
+    """The topmost of ``out`` and its parents that does not exist yet (what a writer
+    will make), or None: :func:`remove_made` takes them away again after a failure."""
+    top = None
+    for folder in (Path(out), *Path(out).parents):
+        if folder.exists():
+            break
+        top = folder
+    return top
+
+
+def remove_made(out: str | Path, top: Path | None) -> None:
+    """Remove ``out`` and its parents up to ``top`` (from :func:`made_folders`) while
+    they are empty folders; never a folder that was there before."""
+    if top is None:
+        return
+    for folder in (Path(out), *Path(out).parents):
+        try:
+            folder.rmdir()  # only when empty
+        except OSError:
+            return
+        if folder == top:
+            return
+
+
 def png_path(path: str | Path, option: str = "--out",
              inputs: tuple[tuple[str, str | Path], ...] = ()) -> Path:
     """``path`` as a :class:`Path` if it names a ``.png`` file (the renderers write PNG).
@@ -167,6 +211,8 @@ def png_path(path: str | Path, option: str = "--out",
     Raises:
         ValueError: another suffix (a ``.jpg`` name would hold PNG bytes), naming the fix.
     """
+    if not str(path).strip():
+        raise ValueError(f"{option}: empty; give a file name ending in .png")
     out = Path(path)
     if out.suffix.lower() != ".png":
         raise ValueError(f"{option} {out}: the picture is a PNG; give a name ending in .png")
@@ -177,35 +223,37 @@ def png_path(path: str | Path, option: str = "--out",
     return out
 
 
-def _nearest_folder(out: Path, option: str) -> Path:
+def _nearest_folder(out: Path, option: str, shown: Path | None = None) -> Path:
     """The nearest existing folder above ``out`` (where its folders would be made).
 
     Raises:
-        ValueError: that path is a file, not a folder (naming ``option``)."""
+        ValueError: that path is a file, not a folder (naming ``option`` and ``shown``)."""
     parent = out.parent
     while not parent.exists() and parent != parent.parent:
         parent = parent.parent
     if not parent.is_dir():
-        raise ValueError(f"{option} {out}: cannot create its folder ({parent} is a file)")
+        raise ValueError(f"{option} {out if shown is None else shown}: cannot create its "
+                         f"folder ({parent} is a file)")
     return parent
 
 
-def _writable(out: Path, option: str) -> None:
-    """A one-line ValueError when no file ``out`` can be made: its nearest existing
-    folder is a file, is not writable, or refuses a new file (a probe made there and
-    removed at once: root's access() says yes in /proc or on a read-only mount)."""
-    parent = _nearest_folder(out, option)
+def _writable(out: Path, option: str, shown: Path | None = None) -> None:
+    """A one-line ValueError (naming ``shown``, default ``out``) when no file ``out``
+    can be made: its nearest existing folder is a file, is not writable, or refuses a
+    new file (a probe made there and removed at once: root's access() says yes in /proc
+    or on a read-only mount)."""
+    shown = out if shown is None else shown
+    parent = _nearest_folder(out, option, shown)
     if not os.access(parent, os.W_OK | os.X_OK):
-        raise ValueError(f"{option} {out}: {parent} is not writable; give a path you can "
+        raise ValueError(f"{option} {shown}: {parent} is not writable; give a path you can "
                          "write to")
-    if parent == out.parent:  # access() says yes to root in /proc or a read-only mount
-        try:
-            fd, probe = tempfile.mkstemp(dir=parent, prefix=f".{out.name}.", suffix=".probe")
-        except OSError as exc:
-            raise ValueError(f"{option} {out}: cannot create a file in {parent} "
-                             f"({exc.strerror}); give a path you can write to") from None
-        os.close(fd)
-        os.unlink(probe)
+    try:
+        fd, probe = tempfile.mkstemp(dir=parent, prefix=".dstenv-", suffix=".probe")
+    except OSError as exc:
+        raise ValueError(f"{option} {shown}: cannot create a file in {parent} "
+                         f"({exc.strerror}); give a path you can write to") from None
+    os.close(fd)
+    os.unlink(probe)
 
 
 def output_file(path: str | Path, option: str,

@@ -177,8 +177,6 @@ def test_help_shows_no_rst_markup(capsys, command):
      "is the input --root"),
     (["kitti", "convert", "--root", "{root}", "--sequences", "3", "--out",
       "{root}/training/velodyne"], "inside the input --root"),
-    (["kitti", "render", "--root", "{root}", "--sequence", "3", "--frame", "5", "--out",
-      "{root}/training/x.png"], "inside the input --root"),
     (["train", "--data", "{data}", "--out", "{other}"], "is the dataset folder"),
     (["kitti", "evaluate", "--data", "{data}", "--out", "{other}"], "is the dataset folder"),
     (["export-kitti", "--frames", "5", "--out", "{data}"], "is the dataset folder"),
@@ -193,7 +191,7 @@ def test_outputs_never_mix_with_inputs_datasets_or_results(tmp_path, capsys, cmd
     (root / "training" / "velodyne").mkdir(parents=True)
     for d in (data, other):
         d.mkdir()
-        (d / "manifest.json").write_text("{}")
+        (d / "manifest.json").write_text('{"format": "dstenv-manifest"}')
     runs.mkdir()
     (runs / "best.pt").write_bytes(b"\0")
     before = sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*"))

@@ -55,7 +55,7 @@ def test_output_file_never_replaces_a_datasets_file_or_a_binary(tmp_path):
     ds = tmp_path / "ds"
     (ds / "test").mkdir(parents=True)
     (ds / "test" / "shard-00000.h5").write_bytes(b"\x89HDF\r\n\x1a\n\0\0")
-    (ds / "manifest.json").write_text("{}")
+    (ds / "manifest.json").write_text('{"format": "dstenv-manifest"}')
     for target in (ds / "manifest.json", ds / "test" / "shard-00000.h5", ds / "r.json"):
         with pytest.raises(ValueError, match="inside the dataset folder"):
             output_file(target, "--json")
@@ -105,7 +105,7 @@ def test_output_folder_keeps_outputs_apart_from_datasets_inputs_and_results(tmp_
 
     data = tmp_path / "data"
     (data / "train").mkdir(parents=True)
-    (data / "manifest.json").write_text("{}")
+    (data / "manifest.json").write_text('{"format": "dstenv-manifest"}')
     runs = tmp_path / "run"
     runs.mkdir()
     (runs / "best.pt").write_bytes(b"\0")
@@ -134,3 +134,54 @@ def test_output_folder_keeps_outputs_apart_from_datasets_inputs_and_results(tmp_
     assert output_folder(tmp_path / "new" / "deep", "--out", dataset=True,
                          inputs=(("--root", root),)) == tmp_path / "new" / "deep"
     assert not (tmp_path / "new").exists()  # nothing made
+
+
+def test_what_makes_a_dataset_folder_and_links_do_not_hide_one(tmp_path):
+    """Attack 15: a killed train's own lock made its folder 'a dataset' (no resume); a web
+    app's manifest.json blocked every output below it; a symlink or .. got round the
+    check; a broken link and a read-only folder were found only at the first write."""
+    from dstenv.io import is_dataset_folder, made_folders, output_folder, remove_made
+
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / ".dstenv.lock").write_text("123\n")  # a train killed: its lock, its checkpoints
+    (run / "last.pt").write_bytes(b"\0")
+    assert not is_dataset_folder(run)
+    assert output_folder(run, "--out") == run  # the rerun resumes
+    app = tmp_path / "app"
+    app.mkdir()
+    (app / "manifest.json").write_text('{"name": "my web app"}')
+    assert output_folder(app / "runs" / "a", "--out") == app / "runs" / "a"
+    ds = tmp_path / "ds"
+    (ds / "train").mkdir(parents=True)
+    (ds / "manifest.json").write_text('{"format": "dstenv-manifest", "frames": 1}')
+    writing = tmp_path / "writing"  # a generate still running: its lock beside a split
+    (writing / "val").mkdir(parents=True)
+    (writing / ".dstenv.lock").write_text("1\n")
+    assert is_dataset_folder(ds) and is_dataset_folder(writing)
+    (tmp_path / "link").symlink_to(ds / "train")
+    (tmp_path / "deep").mkdir()
+    for path in (tmp_path / "link", tmp_path / "link" / ".." / "sneaky", writing / "x"):
+        with pytest.raises(ValueError, match="(inside|is) the dataset folder"):
+            output_folder(path, "--out")
+    with pytest.raises(ValueError, match="inside the input --root"):
+        output_folder(tmp_path / "link" / "out", "--out", dataset=True,
+                      inputs=(("--root", ds),))
+    (tmp_path / "broken").symlink_to(tmp_path / "nowhere")
+    with pytest.raises(ValueError, match="--out .*broken: is a broken symbolic link"):
+        output_folder(tmp_path / "broken", "--out")
+    real = os.open
+    with pytest.MonkeyPatch.context() as mp:  # a read-only folder: found by the probe
+        mp.setattr(os, "open", lambda p, f, *a, **k: (_ for _ in ()).throw(
+            OSError(errno.EROFS, "Read-only file system")) if f & os.O_CREAT else real(p, f, *a))
+        with pytest.raises(ValueError, match=r"--out .*ro/t: cannot create a file in .* "
+                                             r"\(Read-only file system\)"):
+            output_folder(tmp_path / "ro" / "t", "--out")
+    # a failed run takes away the folders it made, never one that was there
+    top = made_folders(tmp_path / "new1" / "new2" / "new3")
+    (tmp_path / "new1" / "new2" / "new3").mkdir(parents=True)
+    remove_made(tmp_path / "new1" / "new2" / "new3", top)
+    assert not (tmp_path / "new1").exists() and (tmp_path / "deep").is_dir()
+    assert made_folders(tmp_path / "deep") is None
+    remove_made(tmp_path / "deep", None)
+    assert (tmp_path / "deep").is_dir()

@@ -28,7 +28,7 @@ from dstenv.config import CLIError
 from dstenv.data.codec import DEFLATE_ENGINES
 from dstenv.data.lifeline import sigterm_as_interrupt
 from dstenv.data.lock import DatasetLocked, dataset_lock
-from dstenv.data.manifest import scan_shards, shard_entry, write_manifest
+from dstenv.data.manifest import MANIFEST_NAME, scan_shards, shard_entry, write_manifest
 from dstenv.data.sampling import (SPLIT_BUCKETS, SPLITS, check_map_reuse, episode_seeds,
                                   frame_steps, iter_frames)
 from dstenv.data.shards import FORMAT_VERSION, ShardError, ShardWriter
@@ -259,9 +259,12 @@ def _generate(spec: GenerateSpec, out: Path, workers: int, ray_address: str | No
     done, todo = prepare(out, tasks)
     kept = sum(e["frames"] for e in done.values())
     if progress and done:  # else a rerun looks like a run that did the work again
+        listed = (out / MANIFEST_NAME).is_file()
         print(f"dstenv generate: {out}: " + (
-            f"all {kept} frames are there already (a finished run with these settings): "
-            "nothing to generate" if not todo else
+            f"all {kept} frames are there already" + (
+                " (a finished run with these settings): nothing to generate" if listed
+                else ": nothing to generate, only their manifest.json to write")
+            if not todo else
             f"resuming: {len(done)} of {len(tasks)} shard(s), {kept} of {spec.frames} frames, "
             "are there already"), file=sys.stderr)
     # resumed frames count as initial, so frames/s is the rate of this run only

@@ -29,7 +29,7 @@ import numpy as np
 from dstenv import __version__
 from dstenv.data.sampling import SPLITS
 from dstenv.data.shards import ShardReader, class_names
-from dstenv.io import atomic_write_text, file_sha256
+from dstenv.io import MANIFEST_FORMAT, atomic_write_text, file_sha256
 
 __all__ = [
     "MANIFEST_NAME",
@@ -43,7 +43,6 @@ __all__ = [
 ]
 
 MANIFEST_NAME = "manifest.json"
-MANIFEST_FORMAT = "dstenv-manifest"
 MANIFEST_VERSION = 1
 #: split name of shards that carry no ``split`` attribute
 UNSPLIT = "unsplit"

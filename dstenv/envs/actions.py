@@ -280,8 +280,8 @@ def highway_settings(cfg: Mapping[str, Any]) -> dict[str, Any]:
     for key in ("initial_speed_index", "speed_gain"):
         if act[key] != mine[key]:
             raise ConfigError(f"config.action.{key}: the city world's controller only "
-                              f"(highway-env's vehicle tracks its speeds itself); leave it "
-                              f"at {mine[key]}")
+                              "(highway-env's vehicle tracks its speeds itself and does not "
+                              "read it); leave it out")
     if speeds != mine["target_speeds"] and theirs not in (speeds, highway_defaults()[
             "target_speeds"]):
         raise ConfigError(f"config.action.target_speeds {speeds} and config.highway."

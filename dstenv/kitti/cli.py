@@ -123,7 +123,7 @@ def _convert(args: argparse.Namespace) -> int:
     from dstenv.data.manifest import MANIFEST_NAME, scan_shards, write_manifest
     from dstenv.kitti.sequence import KittiSequence, kitti_config
 
-    from dstenv.io import output_folder
+    from dstenv.io import made_folders, output_folder, remove_made
 
     try:  # never into the KITTI root it reads, another dataset, or a results folder
         out = output_folder(args.out, "--out", dataset=True, inputs=(("--root", args.root),))
@@ -154,7 +154,7 @@ def _convert(args: argparse.Namespace) -> int:
                            f"{seq.n_frames} frames")
         _same_conversion(path, attrs, args.masses)
         plans.append((path, attrs))
-    made = not out.exists()
+    made = made_folders(out)
     try:
         with dataset_lock(out):
             (out / MANIFEST_NAME).unlink(missing_ok=True)
@@ -168,8 +168,7 @@ def _convert(args: argparse.Namespace) -> int:
         raise CLIError(f"{out}: another run writes into it ({exc}); wait for it or use "
                        "another --out") from None
     except CLIError:
-        if made and out.is_dir() and not any(out.iterdir()):
-            out.rmdir()  # nothing written: no empty folder left behind
+        remove_made(out, made)  # nothing written: no empty folders left behind
         raise
     print(f"wrote {out / MANIFEST_NAME}")
     return 0
@@ -223,7 +222,7 @@ def _render(args: argparse.Namespace) -> int:
     from dstenv.kitti.render import render_frame
     from dstenv.kitti.sequence import KittiSequence, convert_sequence, kitti_config
 
-    png_path(args.out, inputs=(("--root", args.root),))  # before the conversion, not after
+    png_path(args.out)  # before the conversion, not after (a picture mixes with nothing)
     over = _overrides(args)
     every = over.get("update_every", 1)
     if args.frame < 0:
@@ -266,10 +265,13 @@ def _evaluate(args: argparse.Namespace) -> int:
 
     from dstenv.segment.bench_cli import run_cli_benchmark
 
-    if args.batch_size < 1:
-        from dstenv.config import CLIError
+    from dstenv.config import CLIError
 
+    if args.batch_size < 1:
         raise CLIError(f"--batch-size must be >= 1, got {args.batch_size}")
+    for flag, value in (("--out", args.out), ("--json", args.json)):
+        if value is not None and not value.strip():  # an unset variable, not "no --out"
+            raise CLIError(f"{flag}: empty; leave it out or give a path")
     if args.json:
         from dstenv.io import output_file
 
@@ -319,8 +321,8 @@ def _export(args: argparse.Namespace) -> int:
     try:  # a KITTI root of its own: never inside a dataset
         output_folder(args.out, "--out")
     except ValueError as exc:
-        raise CLIError(str(exc).replace("give a folder", "give a folder (a KITTI root to "
-                                                      "write into)")) from None
+        raise CLIError(str(exc).replace("give a folder", "give a folder for the KITTI root",
+                                        1)) from None
     try:
         split = export_drive(scenario_config(args.scenario), args.seed, args.frames, args.out,
                              args.sequence)

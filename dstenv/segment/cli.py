@@ -42,6 +42,7 @@ def _train(args: argparse.Namespace) -> int:
     from dstenv.data import ShardDataset, StreamingDataset
     from dstenv.data.lock import DatasetLocked, dataset_lock
     from dstenv.segment.checkpoint import training_data
+    from dstenv.io import made_folders, remove_made
     from dstenv.segment.train import default_train_config, train
 
     check_out(args)
@@ -105,7 +106,7 @@ def _train(args: argparse.Namespace) -> int:
     if args.class_weights is not None:
         cfg["class_weights"] = args.class_weights
     out = Path(args.out)
-    made = not out.exists()
+    made = made_folders(out)
     try:
         with dataset_lock(out):  # one training per folder at a time
             _, history = train(cfg, train_ds, val_ds, out, resume=not args.no_resume,
@@ -114,8 +115,7 @@ def _train(args: argparse.Namespace) -> int:
     except DatasetLocked as exc:
         raise CLIError(f"--out {out}: another dstenv train writes into it ({exc})") from None
     except BaseException:
-        if made and out.is_dir() and not any(out.iterdir()):
-            out.rmdir()  # a run that failed before its first checkpoint leaves no folder
+        remove_made(out, made)  # a run that failed before its first checkpoint leaves none
         raise
     best = max((m for m in history["val_miou"] if m is not None), default=None)
     print(

@@ -299,7 +299,7 @@ def train(
                 raise ValueError(  # weights, and no checkpoint of them
                     f"train: the loss is {value} at epoch {epoch + 1}, batch {b + 1}: an "
                     "input holds NaN or inf (check the data: dstenv info --verify frames) "
-                    "or train.lr is too high")
+                    "or the learning rate (train.lr, --lr) is too high")
             opt.zero_grad(set_to_none=True)
             loss.backward()
             opt.step()

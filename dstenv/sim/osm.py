@@ -58,6 +58,9 @@ def check_osm_file(map_cfg: Mapping[str, Any], base_dir: str | Path | None = Non
     if map_cfg.get("kind") != "osm":
         return
     path = resolve_osm_file(str(map_cfg.get("osm_file", "")), base_dir)
+    if path.is_dir():
+        raise ConfigError(f"world.map.osm_file {map_cfg['osm_file']!r}: {path} is a folder; "
+                          "give the .osm or .osm.bz2 file in it")
     if not path.is_file():
         raise ConfigError(f"world.map.osm_file {map_cfg['osm_file']!r}: no such file ({path}); "
                           "give it absolute, beside the scenario file, or in the current "

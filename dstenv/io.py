@@ -1,10 +1,16 @@
-"""Atomic file writes: the one helper every writer of dstenv uses.
+"""Atomic file writes, and the checks of output paths: the one home of both for
+every writer of dstenv.
 
 A file appears under its final name complete or not at all: the data go to
 ``NAME.partial`` in the same folder (same file system, so the rename is atomic),
 the file is flushed and fsynced, renamed over ``NAME``, and the folder is fsynced
 so the rename itself survives a power cut. On any error the partial file is
 removed and the previous ``NAME``, if any, is left untouched.
+
+Before any work, :func:`output_file`, :func:`png_path` and :func:`output_folder` refuse
+an output that cannot be written or whose files would mix with others' (inside a
+dataset, inside an input, a dataset into a results folder), in one line naming the
+option.
 """
 
 from __future__ import annotations
@@ -204,8 +210,7 @@ def remove_made(out: str | Path, top: Path | None) -> None:
             return
 
 
-def png_path(path: str | Path, option: str = "--out",
-             inputs: tuple[tuple[str, str | Path], ...] = ()) -> Path:
+def png_path(path: str | Path, option: str = "--out") -> Path:
     """``path`` as a :class:`Path` if it names a ``.png`` file (the renderers write PNG).
 
     Raises:
@@ -219,7 +224,7 @@ def png_path(path: str | Path, option: str = "--out",
     if out.is_dir():  # before any work, not when the picture is written
         raise ValueError(f"{option} {out}: is a directory; give a file name ending in .png")
     _writable(out, option)
-    _refuse_inside(out, option, inputs, self_too=False)
+    _refuse_inside(out, option, (), self_too=False)
     return out
 
 

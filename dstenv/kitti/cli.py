@@ -222,7 +222,7 @@ def _render(args: argparse.Namespace) -> int:
     from dstenv.kitti.render import render_frame
     from dstenv.kitti.sequence import KittiSequence, convert_sequence, kitti_config
 
-    png_path(args.out)  # before the conversion, not after (a picture mixes with nothing)
+    png_path(args.out)  # before the conversion, not after (under --root is fine)
     over = _overrides(args)
     every = over.get("update_every", 1)
     if args.frame < 0:

@@ -110,7 +110,7 @@ def _made_with(path: Path, tasks: list[ShardTask]) -> str:
     if diff:
         return f"; made with {_change(*diff[0])}"
     splits = sorted({str(r.get("split")) for r in runs})
-    if str(old.get("split")) not in splits:
+    if str(old.get("split")) not in splits and not (tasks and tasks[0].spec.split == "auto"):
         return f"; a {old['split']} shard, this run writes {', '.join(splits)} only (--split)"
     if old:  # the same settings: a run of more frames made it
         return (f"; a run of more --frames made it: this one makes "

@@ -451,3 +451,14 @@ def test_a_rerun_says_what_is_there_already(tmp_path, fake_pipeline, capsys):
     assert "resuming: 1 of 2 shard(s), 4 of 8 frames" in capsys.readouterr().err
     gen.generate(spec, tmp_path, progress=False)
     assert capsys.readouterr().err == ""
+
+
+def test_fewer_frames_with_split_auto_are_not_blamed_on_split(tmp_path, fake_pipeline):
+    """Attack 15: 8 frames into a 12-frame --split auto dataset deal no frame to test, and
+    the refusal said 'this run writes train, val only (--split)', though --split was the
+    same."""
+    gen.generate(_spec(frames=12, split="auto"), tmp_path, progress=False)
+    with pytest.raises(gen.GenerateError, match=r"a run of more --frames made it: this one "
+                                                r"makes 8") as err:
+        gen.generate(_spec(frames=8, split="auto"), tmp_path, progress=False)
+    assert "--split" not in str(err.value)

@@ -133,11 +133,15 @@ def prepare(out: Path, tasks: list[ShardTask]) -> tuple[dict[str, dict[str, Any]
     known: dict[str, str] = {}  # file -> sha256 the last manifest listed
     if (out / MANIFEST_NAME).exists():  # the run rewrites it: never someone else's file
         try:
-            known = {e["file"]: e.get("sha256", "")
-                     for e in load_manifest(out, verify="none")["shards"]}
+            listed = load_manifest(out, verify="none")
         except ManifestError:
             raise GenerateError(f"{out / MANIFEST_NAME}: not a dstenv manifest, and this run "
                                 "would replace it; use another --out") from None
+        maker = listed.get("meta", {}).get("command")
+        if maker is not None and maker != "generate":  # its shards' settings are not ours
+            raise GenerateError(f"{out} holds a dataset of dstenv {maker}, not of generate; "
+                                "use another --out")
+        known = {e["file"]: e.get("sha256", "") for e in listed["shards"]}
     planned = {(out / t.file).resolve() for t in tasks}
     strays = [p for p in scan_shards(out) if p.resolve() not in planned]
     if strays:

@@ -462,3 +462,14 @@ def test_fewer_frames_with_split_auto_are_not_blamed_on_split(tmp_path, fake_pip
                                                 r"makes 8") as err:
         gen.generate(_spec(frames=8, split="auto"), tmp_path, progress=False)
     assert "--split" not in str(err.value)
+
+
+def test_generate_into_a_kitti_conversion_names_the_tool(tmp_path, fake_pipeline):
+    """Attack 15: it said 'made with --compression: none, now gzip'."""
+    from dstenv.data.manifest import write_manifest
+
+    gen.generate(_spec(frames=4, split="train"), tmp_path, progress=False)
+    write_manifest(tmp_path, meta={"command": "kitti convert"})  # the same shards, re-listed
+    with pytest.raises(gen.GenerateError, match=r"holds a dataset of dstenv kitti convert, "
+                                                r"not of generate; use another --out"):
+        gen.generate(_spec(frames=4, split="train"), tmp_path, progress=False)

@@ -254,6 +254,8 @@ def _render(args: argparse.Namespace) -> int:
              f"{cfg['labels']['rule']} motion rule); {where}")
     spec = GridSpec(**cfg["grid"])
     path = render_frame(frame, boxes, spec, args.out, title, seq.scan(args.frame))
+    for msg in skipped:  # scans of the filter's history before this frame (as convert)
+        print(f"  warning: {msg}")
     print(f"{note}\nwrote {path}")
     return 0
 

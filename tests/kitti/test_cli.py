@@ -97,6 +97,10 @@ def test_render_names_why_its_frame_was_skipped(tiny_root, tmp_path, capsys):
     err = capsys.readouterr().err
     assert "frame 3 was skipped: " in err and "000003.bin: 1003 bytes" in err
     assert "truncated" in err and err.count("\n") == 1
+    # a later frame renders, and names the skipped scan of its filter history
+    assert main(["kitti", "render", "--root", str(tiny_root), "--sequence", "1", "--frame",
+                 "5", "--out", str(tmp_path / "g.png")]) == 0
+    assert "warning: sequence 0001 frame 3: skipped: " in capsys.readouterr().out
 
 
 @pytest.mark.parametrize("extra, message", [

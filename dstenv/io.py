@@ -16,11 +16,13 @@ option.
 from __future__ import annotations
 
 import hashlib
+import json
 import os
 import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 __all__ = ["PARTIAL_SUFFIX", "partial_path", "atomic_path", "atomic_write_bytes",
            "atomic_write_text", "fsync_file", "fsync_dir", "is_dataset_folder", "made_folders",
@@ -223,9 +225,15 @@ def png_path(path: str | Path, option: str = "--out") -> Path:
         raise ValueError(f"{option} {out}: the picture is a PNG; give a name ending in .png")
     if out.is_dir():  # before any work, not when the picture is written
         raise ValueError(f"{option} {out}: is a directory; give a file name ending in .png")
+    _replaceable(out, option, "a PNG picture", _is_png)
     _writable(out, option)
     _refuse_inside(out, option, (), self_too=False)
     return out
+
+
+def _is_png(path: Path) -> bool:
+    with open(path, "rb") as fh:
+        return fh.read(8) == b"\x89PNG\r\n\x1a\n"
 
 
 def _nearest_folder(out: Path, option: str, shown: Path | None = None) -> Path:
@@ -277,13 +285,37 @@ def output_file(path: str | Path, option: str,
     out = Path(path)
     if out.is_dir():
         raise ValueError(f"{option} {out}: is a directory; give a file name")
+    _replaceable(out, option, "a report (JSON or CSV)", _is_report)
     _writable(out, option)
     _refuse_inside(out, option, inputs, self_too=False)
-    if out.is_file():
-        with open(out, "rb") as fh:
-            head = fh.read(4096)
-        if b"\0" in head:  # a report replaces a report, never a binary file
-            raise ValueError(f"{option} {out}: exists and is not a text file; give a new "
-                             "file name")
     return out
+
+
+def _is_report(path: Path) -> bool:
+    """A text file that a report may replace: JSON, or a CSV table by its name."""
+    with open(path, "rb") as fh:
+        data = fh.read(64 << 20)
+    if b"\0" in data[:4096]:
+        return False
+    if path.suffix.lower() == ".csv":
+        return True
+    try:
+        json.loads(data)
+    except ValueError:
+        return False
+    return True
+
+
+def _replaceable(out: Path, option: str, kind: str, same_kind: Any) -> None:
+    """A one-line ValueError when an existing ``out`` may not be replaced: anything but a
+    regular file (the atomic rename would put a file in place of a device such as
+    /dev/null, a pipe or a link), or a file that is not ``kind`` (``same_kind(path)``)."""
+    if not os.path.lexists(out):
+        return
+    if out.is_symlink() or not out.is_file():
+        raise ValueError(f"{option} {out}: exists and is not a regular file (a device, a "
+                         "pipe or a link); give a new file name")
+    if not same_kind(out):
+        raise ValueError(f"{option} {out}: exists and is not {kind}; give a new file name "
+                         "(or remove it)")
 

@@ -60,10 +60,28 @@ def test_output_file_never_replaces_a_datasets_file_or_a_binary(tmp_path):
         with pytest.raises(ValueError, match="inside the dataset folder"):
             output_file(target, "--json")
     (tmp_path / "victim.h5").write_bytes(b"\x89HDF\r\n\x1a\n\0\0")
-    with pytest.raises(ValueError, match="exists and is not a text file"):
+    with pytest.raises(ValueError, match=r"exists and is not a report \(JSON or CSV\)"):
         output_file(tmp_path / "victim.h5", "--json")
     (tmp_path / "old.json").write_text("{}")
     assert output_file(tmp_path / "old.json", "--json") == tmp_path / "old.json"  # a report
+    (tmp_path / "runs.csv").write_text("a,b\n1,2\n")
+    assert output_file(tmp_path / "runs.csv", "--csv") == tmp_path / "runs.csv"
+    # attack 16: any text file was replaced (a script, a README), and as root a device,
+    # a pipe or a link became a plain file (/dev/null did)
+    for name in ("script.py", "README.md", "my.toml"):
+        (tmp_path / name).write_text("print('mine')\n")
+        with pytest.raises(ValueError, match="exists and is not a report"):
+            output_file(tmp_path / name, "--json")
+    os.mkfifo(tmp_path / "fifo")
+    (tmp_path / "link.json").symlink_to(tmp_path / "old.json")
+    for target in (tmp_path / "fifo", tmp_path / "link.json", "/dev/null"):
+        with pytest.raises(ValueError, match="exists and is not a regular file"):
+            output_file(target, "--json")
+    from dstenv.io import png_path
+
+    (tmp_path / "notes.png").write_text("not a picture")
+    with pytest.raises(ValueError, match="exists and is not a PNG picture"):
+        png_path(tmp_path / "notes.png")
 
 
 def test_png_path_under_a_file_is_named(tmp_path):

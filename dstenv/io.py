@@ -225,9 +225,9 @@ def png_path(path: str | Path, option: str = "--out") -> Path:
         raise ValueError(f"{option} {out}: the picture is a PNG; give a name ending in .png")
     if out.is_dir():  # before any work, not when the picture is written
         raise ValueError(f"{option} {out}: is a directory; give a file name ending in .png")
+    _refuse_inside(out, option, (), self_too=False)
     _replaceable(out, option, "a PNG picture", _is_png)
     _writable(out, option)
-    _refuse_inside(out, option, (), self_too=False)
     return out
 
 
@@ -285,9 +285,9 @@ def output_file(path: str | Path, option: str,
     out = Path(path)
     if out.is_dir():
         raise ValueError(f"{option} {out}: is a directory; give a file name")
+    _refuse_inside(out, option, inputs, self_too=False)
     _replaceable(out, option, "a report (JSON or CSV)", _is_report)
     _writable(out, option)
-    _refuse_inside(out, option, inputs, self_too=False)
     return out
 
 

@@ -238,6 +238,10 @@ def generate(spec: GenerateSpec, out: str | Path, workers: int = 1, ray_address:
         raise ValueError(f"workers must be >= 1, got {workers}")
     if out.exists() and not out.is_dir():
         raise GenerateError(f"output directory {out} is a file; give a folder name")
+    if ray_address is not None:
+        from dstenv.data.ray_backend import check_ray_address
+
+        check_ray_address(ray_address)  # before the folder: a wrong one failed minutes later
     with contextlib.ExitStack() as stack:
         try:  # one writer per folder, even where HDF5 file locking is off (NFS, Lustre)
             stack.enter_context(dataset_lock(out, force_unlock))

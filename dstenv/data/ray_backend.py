@@ -10,6 +10,7 @@ local Ray is started with ``--workers`` CPUs.
 from __future__ import annotations
 
 import hashlib
+import socket
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
@@ -17,7 +18,7 @@ from typing import Any
 
 from dstenv.io import atomic_write_bytes
 
-__all__ = ["run_ray", "shard_bytes"]
+__all__ = ["check_ray_address", "run_ray", "shard_bytes"]
 
 
 def shard_bytes(task: Any) -> tuple[bytes, dict[str, Any]]:
@@ -31,6 +32,34 @@ def shard_bytes(task: Any) -> tuple[bytes, dict[str, Any]]:
     with tempfile.TemporaryDirectory(prefix="dstenv-shard-") as tmp:
         entry = write_shard(task, tmp)
         return (Path(tmp) / task.file).read_bytes(), entry
+
+
+def check_ray_address(address: str, timeout: float = 3.0) -> None:
+    """Before any folder or task exists: a cluster address names a head that answers.
+
+    ``ray.init`` on an address where nothing listens waited minutes, printing Ray's
+    C++ warnings (and an address other than the one given), and ignored SIGTERM.
+    ``"local"`` and ``"auto"`` are Ray's to resolve; ``HOST:PORT`` and
+    ``ray://HOST:PORT`` must parse and accept a TCP connection within ``timeout`` [s].
+
+    Raises:
+        GenerateError: one line naming ``--ray``, the address and the fix.
+    """
+    from dstenv.data.generate import GenerateError
+
+    if address in ("local", "auto"):
+        return
+    host, sep, port = address.removeprefix("ray://").rpartition(":")
+    if not sep or not host or not port.isdigit() or not 1 <= int(port) <= 65535:
+        raise GenerateError(f"--ray {address!r}: expected HOST:PORT of a head started with "
+                            "'ray start --head' (e.g. 127.0.0.1:6379), ray://HOST:PORT, auto, "
+                            "or no address for a local Ray")
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=timeout).close()
+    except OSError as exc:
+        raise GenerateError(f"--ray {address}: no Ray head answers at {host}:{port} "
+                            f"({exc.strerror or exc}); start one with 'ray start --head "
+                            f"--port {port}' or check the address") from None
 
 
 def run_ray(todo: list[Any], out: Path, address: str, workers: int,

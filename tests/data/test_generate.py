@@ -473,3 +473,17 @@ def test_generate_into_a_kitti_conversion_names_the_tool(tmp_path, fake_pipeline
     with pytest.raises(gen.GenerateError, match=r"holds a dataset of dstenv kitti convert, "
                                                 r"not of generate; use another --out"):
         gen.generate(_spec(frames=4, split="train"), tmp_path, progress=False)
+
+
+@pytest.mark.parametrize("address, message", [
+    ("127.0.0.1:1", r"--ray 127\.0\.0\.1:1: no Ray head answers at 127\.0\.0\.1:1 \("),
+    ("ray://127.0.0.1:1", r"no Ray head answers at 127\.0\.0\.1:1"),
+    ("127.0.0.1:99999", r"expected HOST:PORT of a head started with 'ray start --head'"),
+    ("garbage", r"expected HOST:PORT"),
+])
+def test_a_ray_address_where_no_head_answers_fails_at_once(tmp_path, address, message):
+    """Attack 16: ray.init waited minutes on it (ignoring SIGTERM), naming another address."""
+    with pytest.raises(gen.GenerateError, match=message):
+        gen.generate(_spec(frames=4, split="train"), tmp_path / "o", ray_address=address,
+                     progress=False)
+    assert not (tmp_path / "o").exists()  # refused before the folder

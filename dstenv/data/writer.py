@@ -27,6 +27,10 @@ from dstenv.data.format import (
 )
 from dstenv.frame import IGNORE_INDEX, Frame
 
+#: grids of codes and their number: SensorState 0..2, MapClass 0..3 (labels: the
+#: class counts check 0..4 and the ignore index)
+CODE_LIMITS = {"sensor": 3, "gis": 4}
+
 __all__ = ["ShardWriter"]
 
 
@@ -268,6 +272,14 @@ class ShardWriter:
                         f"{FORMAT_VERSION} derive it from {DERIVED_FIELDS[name]}: build it "
                         f"with dstenv.sensing.visible_mask(sensor)")
                 continue
+            if a.dtype != dtype and (a.dtype.kind not in "biu" or a.size and (
+                    a.min() < 0 or a.max() > 255)):  # the cast wrapped 259 to 3, cut 1.7 to 1
+                raise ValueError(f"{self.path}: frame {self.n_frames}: {name} must hold "
+                                 f"integer codes 0..255, got {a.dtype} values "
+                                 f"{a.min()!r}..{a.max()!r}")
+            if name in CODE_LIMITS and a.size and int(a.max()) >= CODE_LIMITS[name]:
+                raise ValueError(f"{self.path}: frame {self.n_frames}: {name} holds code "
+                                 f"{int(a.max())}; allowed codes are 0..{CODE_LIMITS[name] - 1}")
             # encoded in add() on this thread: no copy; h5py's path and the codec
             # threads read them later, so they get a copy
             out[name] = a.astype(dtype, copy=not self._direct or self._threads > 0)

@@ -105,6 +105,29 @@ def test_bad_frames_are_rejected(tmp_path, frames, shard_attrs, make_frame):
     assert not list(tmp_path.iterdir())
 
 
+@pytest.mark.parametrize("name, value, message", [
+    ("labels", np.int64(259), r"labels must hold integer codes 0\.\.255, got int64"),
+    ("labels", np.int64(-1), r"labels must hold integer codes 0\.\.255, got int64"),
+    ("labels", np.float64(1.7), r"labels must hold integer codes 0\.\.255, got float64"),
+    ("gis", np.float64(2.7), r"gis must hold integer codes 0\.\.255, got float64"),
+    ("sensor", np.int64(258), r"sensor must hold integer codes 0\.\.255"),
+    ("sensor", np.uint8(7), r"sensor holds code 7; allowed codes are 0\.\.2"),
+    ("gis", np.uint8(9), r"gis holds code 9; allowed codes are 0\.\.3"),
+])
+def test_grids_are_checked_before_their_cast(tmp_path, frames, shard_attrs, name, value,
+                                             message):
+    """Attack 16: the uint8 cast came first, so 259 was stored as 3 ('static'), -1 as 255
+    (ignored), 1.7 as 1; codes no sensor or map has were stored as they came."""
+    grid = np.asarray(getattr(frames[0], name)).astype(np.asarray(value).dtype)
+    grid[1, 1] = value
+    if name == "sensor":  # visible is derived from it: keep the two consistent
+        frames[0].visible = grid != 0
+    setattr(frames[0], name, grid)
+    with pytest.raises(ValueError, match=r"x\.h5: frame 0: " + message):
+        _write(tmp_path / "x.h5", frames[:1], shard_attrs)
+    assert not list(tmp_path.iterdir())
+
+
 def test_truncated_shard_names_the_file(tmp_path, frames, shard_attrs):
     path = _write(tmp_path / "t.h5", frames, shard_attrs)
     data = path.read_bytes()

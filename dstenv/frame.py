@@ -28,7 +28,9 @@ class Frame:
             ``Pipeline(fuse=False)``, whose grids a batched filter fuses elsewhere).
         pignistic_prev: ``(5, H, W) float32`` BetP at t-1 (equal to ``pignistic``
             on the first frame of an episode). Stacked, the two are the paper's
-            10-channel FCN input.
+            10-channel FCN input. From a :class:`~dstenv.pipeline.Pipeline` both are
+            read-only and shared, not copied: one frame's t is the next one's t-1 (and,
+            between fused steps, the next one's t too); copy them to change them.
         labels: ``(H, W) uint8`` ground truth, class index in ``dstenv.dst.CLASSES``
             order, or :data:`IGNORE_INDEX`; ``None`` when the producer was told not
             to compute labels (``frame.labels = false`` in the pipeline config, the

@@ -204,3 +204,23 @@ def test_protocol_object_edges_ignores_the_occupied_rim_of_road_users():
     assert changed > 0  # the rule met some rims in these drives
     with pytest.raises(ConfigError, match="protocol.object_edges"):
         Pipeline({**CITY, "protocol": {"object_edges": "dilate"}})
+
+
+def test_frames_share_betp_read_only_so_no_frame_changes_another():
+    """Attack 16: f0.pignistic[:] = 0 wiped f1's t-1 input (the same buffer, writable)."""
+    p = Pipeline({"grid": {"height": 32, "width": 32}})
+    f0 = p.reset(3)
+    f1 = p.step()
+    assert np.shares_memory(f1.pignistic_prev, f0.pignistic)  # shared, as documented
+    for frame in (f0, f1):
+        for a in (frame.pignistic, frame.pignistic_prev):
+            with pytest.raises(ValueError, match="read-only"):
+                a[:] = 0
+    x = f1.fcn_input()
+    x[:] = 0  # the stacked input is the caller's own array
+    assert f0.pignistic.sum() > 0
+    p = Pipeline({"grid": {"height": 32, "width": 32}, "protocol": {"update_every": 2}})
+    p.reset(3)
+    g1 = p.step()  # not fused: carries the last fused BetP (computed here, once)
+    with pytest.raises(ValueError, match="read-only"):
+        g1.pignistic[0, 0, 0] = 1.0

@@ -114,10 +114,11 @@ class GridTracker:
             self._last_prev, self.prev_betp, self._skipped = last_prev, None, True
             return TrackerStep(betp=None, betp_prev=None, masses=m)
         if self._skipped:  # the masses are still the last frame's: its BetP, computed now
-            self.prev_betp, self._skipped = self.filter.pignistic(), False
+            self.prev_betp, self._skipped = _read_only(self.filter.pignistic()), False
         # the kernel writes BetP straight into this frame's own array (no copy)
         out = np.empty((NUM_CLASSES, *self.filter.shape), np.float32)
         m = self.filter.update(sensor, gis, motion, copy=masses, betp=out)
+        out.flags.writeable = False  # shared with the next frame (its t-1): never changed
         prev = out if self.prev_betp is None else self.prev_betp
         self.prev_betp, self._last_prev = out, prev
         return TrackerStep(betp=out, betp_prev=prev, masses=m)
@@ -137,8 +138,14 @@ class GridTracker:
             if self._last_prev is None and self.steps > 1:
                 raise RuntimeError("GridTracker.latest: the last two fused frames skipped "
                                    "BetP (step(betp=False)), so t-1 is gone")
-            self.prev_betp, self._skipped = self.filter.pignistic(), False
+            self.prev_betp, self._skipped = _read_only(self.filter.pignistic()), False
             if self._last_prev is None:  # the first frame: t-1 is t
                 self._last_prev = self.prev_betp
         assert self.prev_betp is not None and self._last_prev is not None
         return self.prev_betp, self._last_prev
+
+
+def _read_only(a: np.ndarray) -> np.ndarray:
+    """``a``, marked read-only (a BetP that frames share)."""
+    a.flags.writeable = False
+    return a

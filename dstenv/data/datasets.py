@@ -38,10 +38,10 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset, IterableDataset, get_worker_info
 
-from dstenv.data.lock import LOCK_NAME, writer_of
-from dstenv.data.manifest import MANIFEST_NAME, UNSPLIT, load_manifest, one_dataset, scan_shards
+from dstenv.data.manifest import MANIFEST_NAME, UNSPLIT, one_dataset, scan_shards
 from dstenv.data.sampling import (SPLITS, episode_seeds, frame_steps, iter_frames,
                                    scenario_config)
+from dstenv.data.shardfiles import resolve_files, same_dataset
 from dstenv.data.shards import N_CLASSES, ShardError, ShardReader
 from dstenv.data.inputs import (
     INPUT_CHANNELS,
@@ -87,41 +87,6 @@ def frame_to_sample(frame: Frame, inputs: str = "fcn10", labels: str = "full"
                    names, _check_labels(labels))
 
 
-def _resolve_files(root_or_files: str | Path | Sequence[str | Path], split: str | None
-                   ) -> list[tuple[Path, int | None]]:
-    """Shard files (and frame counts when a manifest knows them) of a dataset."""
-    if isinstance(root_or_files, (str, Path)):
-        root = Path(root_or_files)
-        if root.is_file():
-            return [(root, None)]
-        busy = writer_of(root)
-        if busy:  # a dataset being generated: its manifest and last shards are missing
-            raise ValueError(f"{root}: still being written by {busy} ({root / LOCK_NAME}); "
-                             "read it when that run is done")
-        if (root / MANIFEST_NAME).is_file():
-            m = load_manifest(root)
-            return [(root / e["file"], int(e["frames"])) for e in m["shards"]
-                    if split is None or e["split"] == split]
-        if not root.is_dir():
-            raise FileNotFoundError(f"{root}: no such dataset directory or shard file")
-        return [(p, None) for p in scan_shards(root)]
-    return [(Path(p), None) for p in root_or_files]
-
-
-def _same_dataset(first: tuple[Path, Any, Any], other: tuple[Path, Any, Any],
-                  folder: bool) -> None:
-    """Refuse shards of another geometry (they cannot be batched together) and, in a
-    dataset folder, of another configuration (a folder mixing two datasets)."""
-    (p0, g0, c0), (p1, g1, c1) = first, other
-    if g1 != g0:
-        raise ShardError(f"{p1}: grid {g1[0][0]} x {g1[0][1]} of {g1[1]:g} m, but {p0.name} "
-                         f"has {g0[0][0]} x {g0[0][1]} of {g0[1]:g} m; keep one dataset per "
-                         "folder (or pass the files of one)")
-    if folder and c1 != c0:
-        raise ShardError(f"{p1}: made with another configuration than {p0.name} (two datasets "
-                         "in one folder); keep one dataset per folder")
-
-
 class ShardDataset(Dataset):
     """Map-style dataset over shard files (random access; safe with DataLoader workers).
 
@@ -161,7 +126,7 @@ class ShardDataset(Dataset):
         # generate and kitti convert write manifest.json last: without it, their run died
         if unfinished := folder and not (Path(root_or_files) / MANIFEST_NAME).is_file():
             one_dataset(root_or_files)  # (unless it holds finished datasets: not one)
-        for path, _ in _resolve_files(root_or_files, split):
+        for path, _ in resolve_files(root_or_files, split):
             try:
                 with ShardReader(path) as r:
                     if unfinished and (r.attrs.get("source") == "kitti" or "task" in r.attrs):
@@ -183,7 +148,7 @@ class ShardDataset(Dataset):
                 self._fail(exc)
                 continue
             first = first or mine
-            _same_dataset(first, mine, folder)
+            same_dataset(first, mine, folder)
             self.files.append(path)
             lengths.append(n)
             self.class_counts += counts

@@ -69,7 +69,7 @@ def test_strided_frames_score_only_the_stored_betp(tmp_path):
 
 def test_no_test_split_is_an_error(tmp_path):
     (tmp_path / "empty").mkdir()
-    with pytest.raises(ValueError, match="no test frames"):
+    with pytest.raises(ValueError, match="empty: no manifest.json and no shard files"):
         _run(tmp_path / "empty", tmp_path / "out")
 
 

@@ -97,7 +97,12 @@ class BatchedGridFilter:
             raise ValueError(f"cell_size must be > 0 m, got {cell_size}")
         self.batch, self.shape, self.cell_size = int(batch), (h, w), float(cell_size)
         self.params = params if params is not None else DSTParams.default()
-        self.device = torch.device(device)
+        try:
+            self.device = torch.device(device)
+            torch.zeros(1, device=self.device)  # a device this torch build can use
+        except (RuntimeError, AssertionError) as exc:
+            raise ValueError(f"device {device!r}: not usable here ({str(exc).splitlines()[0]});"
+                             " use 'cpu' or an available 'cuda'") from None
         t = _tables(self.params)
         dev = self.device
         self._t = {k: torch.as_tensor(v, device=dev) for k, v in t.items()}
@@ -116,7 +121,10 @@ class BatchedGridFilter:
         """Total ignorance (m(Omega) = 1, zeta = 0) for all grids or the ``(B,) bool`` ones."""
         if which is None:
             which = torch.ones(self.batch, dtype=torch.bool, device=self.device)
-        which = torch.as_tensor(which, dtype=torch.bool, device=self.device)
+        which = torch.as_tensor(which, device=self.device)
+        if which.dtype != torch.bool or tuple(which.shape) != (self.batch,):
+            raise ValueError(f"reset: which must be a ({self.batch},) bool mask, got "
+                             f"{which.dtype} {tuple(which.shape)}")
         self._m[which] = 0.0
         self._m[which, _POS[OMEGA]] = 1.0
         self._z[which] = 0.0
@@ -165,14 +173,18 @@ class BatchedGridFilter:
                 (:func:`dstenv.grid.relative_pose`), or ``None``: no grid moved.
         """
         b, (h, w), dev = self.batch, self.shape, self.device
-        sensor = torch.as_tensor(sensor_states, device=dev).to(torch.int64)
-        gis = torch.as_tensor(map_classes, device=dev).to(torch.int64)
-        for name, a, top in (("sensor_states", sensor, _N_SENSOR - 1),
-                             ("map_classes", gis, _N_MAP - 1)):
+        codes = []
+        for name, given, top in (("sensor_states", sensor_states, _N_SENSOR - 1),
+                                 ("map_classes", map_classes, _N_MAP - 1)):
+            a = torch.as_tensor(given, device=dev)
+            if a.is_floating_point() or a.is_complex():  # 0.7 was truncated to a code
+                raise ValueError(f"{name} must hold integer codes, got {a.dtype}")
             if tuple(a.shape) != (b, h, w):
                 raise ValueError(f"{name} must have shape {(b, h, w)}, got {tuple(a.shape)}")
             if int(a.min()) < 0 or int(a.max()) > top:
                 raise ValueError(f"{name} holds codes outside 0..{top}")
+            codes.append(a.to(torch.int64).contiguous())  # (a strided one failed in view)
+        sensor, gis = codes
         if ego_motion is None:
             p, z = self._m, self._z
         else:
@@ -180,6 +192,8 @@ class BatchedGridFilter:
                                      torch.is_tensor(ego_motion) else ego_motion, device=dev)
             if tuple(motion.shape) != (b, 3):
                 raise ValueError(f"ego_motion must have shape {(b, 3)}, got {tuple(motion.shape)}")
+            if not bool(torch.isfinite(motion).all()):  # NaN indexed out of bounds
+                raise ValueError("ego_motion must be finite")
             moved = (motion != 0).any(dim=1)
             p, z = self._warp(motion)
             p = torch.where(moved[:, None, None], p, self._m)

@@ -52,3 +52,21 @@ def test_batched_update_rejects_bad_inputs():
         bf.update(ok, ok + 4)
     with pytest.raises(ValueError, match="ego_motion must have shape"):
         bf.update(ok, ok, np.zeros((2, 2)))
+    # attack 16: float codes were truncated, NaN motion an index error, a strided
+    # tensor a view error, and bad devices or reset masks torch's own errors
+    before = bf.masses.clone()
+    with pytest.raises(ValueError, match="sensor_states must hold integer codes, got "
+                                         "torch.float32"):
+        bf.update(torch.zeros((2, 8, 6)) + 0.7, ok)
+    for bad in (np.nan, np.inf):
+        with pytest.raises(ValueError, match="ego_motion must be finite"):
+            bf.update(ok, ok, np.array([[bad, 0, 0], [0, 0, 0]]))
+    assert torch.equal(bf.masses, before)  # refused before any change
+    codes = torch.from_numpy(np.random.default_rng(0).integers(0, 3, (2, 8, 12), np.uint8))
+    strided, dense = BatchedGridFilter(2, (8, 6)), BatchedGridFilter(2, (8, 6))
+    np.testing.assert_array_equal(strided.update(codes[:, :, ::2], ok).numpy(),
+                                  dense.update(codes[:, :, ::2].contiguous(), ok).numpy())
+    with pytest.raises(ValueError, match=r"reset: which must be a \(2,\) bool mask"):
+        bf.reset(torch.tensor([0, 2]))
+    with pytest.raises(ValueError, match="device 'tpu0': not usable here"):
+        BatchedGridFilter(2, (8, 6), device="tpu0")

@@ -91,4 +91,6 @@ def history_rows(geo: np.ndarray, shape: tuple[int, int]) -> tuple[int, bool]:
     eps = 1e-6  # float64 rounding of row_sources' formula
     behind = max(0, math.floor(0.5 - min(lag) + eps))  # ascending: max(i - si)
     ahead = max(0, math.floor(0.5 + max(lag) + eps))  # descending: max(si - i)
-    return (ahead, True) if ahead < behind else (behind, False)
+    # a source more than H - 1 rows away is outside the grid (the vacuous pad): the ring
+    # never needs more than H rows (a (1, 100000) grid turning asked for 29.7 GiB)
+    return (min(ahead, h), True) if ahead < behind else (min(behind, h), False)

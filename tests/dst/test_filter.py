@@ -197,6 +197,24 @@ def test_in_place_update_equals_the_double_buffer(motion, ring, desc, monkeypatc
         assert np.array_equal(one.pignistic(), two.pignistic())
 
 
+def test_a_wide_short_grid_turning_needs_no_ring_past_its_rows(monkeypatch):
+    """Attack 16: a (1, 100000) grid turning sized its ring by the width (29.7 GiB);
+    sources further than H - 1 rows are outside the grid, so H rows are enough."""
+    monkeypatch.setattr(filter_module, "IN_PLACE_MIN_CELLS", 0)
+    shape, params = (3, 400), DSTParams.default()
+    geo = np.array([np.cos(0.2), np.sin(0.2), 0.0, 0.0, 0.5])
+    assert history_rows(geo, shape)[0] == 3  # (the lag alone: ~40 rows)
+    rng = np.random.default_rng(4)
+    f = PerceptionGridFilter(shape, params, cell_size=0.5)
+    m_ref, z_ref = vacuous(shape), np.zeros(shape, np.float32)
+    for motion in [(0.0, 0.0, 0.2), (0.3, 0.1, -0.4)]:
+        sensor = rng.integers(0, 3, shape).astype(np.uint8)
+        gis = rng.integers(0, 4, shape).astype(np.uint8)
+        m = f.update(sensor, gis, motion)
+        m_ref, z_ref = reference_update(m_ref, z_ref, sensor, gis, params, 0.5, motion)
+        np.testing.assert_allclose(m, m_ref, atol=2e-6)
+
+
 def test_in_place_update_refuses_a_short_ring():
     # a turn needs the ring; without it the kernel stops instead of reading new values
     h, w = 32, 32

@@ -122,6 +122,7 @@ class ShardWriter:
         self._qbufs: list[np.ndarray] = []
         self._last_chunk: Any = None  # its encoded chunk (bytes or Future)
         self._file: h5py.File | None = None
+        self._closed = False  # entered and left: a writer writes one shard once
         self._shape: tuple[int, int] | None = None
         self._datasets: dict[str, h5py.Dataset] = {}
         self._pending: list[dict[str, Any]] = []
@@ -132,7 +133,15 @@ class ShardWriter:
 
     def __enter__(self) -> ShardWriter:
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._file = h5py.File(self.tmp_path, "w", track_order=False)
+        if self._file is not None or self._closed:
+            raise RuntimeError(f"{self.path}: a ShardWriter is entered once; make a new one")
+        try:
+            self._file = h5py.File(self.tmp_path, "w", track_order=False)
+        except OSError as exc:  # h5py's text named neither the file nor the cause
+            busy = "lock" in str(exc) or "already open" in str(exc)
+            raise OSError(exc.errno, f"{self.path}: cannot create {self.tmp_path.name}: " + (
+                "another writer has it open (one writer per shard)" if busy
+                else short_error(exc))) from None
         if self._threads:
             self._pool = cf.ThreadPoolExecutor(self._threads, thread_name_prefix="shard-codec")
         return self
@@ -328,6 +337,7 @@ class ShardWriter:
         f, self._file = self._file, None
         if f is None:
             return
+        self._closed = True
         try:
             self._close(f, exc_type)
         finally:

@@ -316,3 +316,20 @@ def test_format_3_derives_visible_and_the_writer_refuses_another(tmp_path, frame
     with pytest.raises(ValueError, match=r"b\.h5: frame 0: visible is not sensor != 0"):
         _write(tmp_path / "b.h5", [bad], shard_attrs)
     assert not (tmp_path / "b.h5").exists()
+
+
+def test_one_writer_per_shard_and_each_writer_once(tmp_path, frames, shard_attrs):
+    """Attack 16: a second writer of one path got h5py's bare 'unable to truncate a file
+    which is already open', and re-entering a closed writer an HDF5 identifier error."""
+    with ShardWriter(tmp_path / "a.h5", shard_attrs) as w:
+        w.add(frames[0])
+        with pytest.raises(OSError, match=r"a\.h5: cannot create a\.h5\.partial: another "
+                                          r"writer has it open"):
+            with ShardWriter(tmp_path / "a.h5", shard_attrs) as w2:
+                w2.add(frames[1])
+        w.add(frames[1])
+    with ShardReader(tmp_path / "a.h5") as r:
+        assert len(r) == 2  # the first writer's shard, whole
+    with pytest.raises(RuntimeError, match="a ShardWriter is entered once"):
+        with w:
+            pass

@@ -210,12 +210,9 @@ class Pipeline:
         params = DSTParams.from_dict(cfg["dst"])
         prot = cfg["protocol"]
         self._3d = cfg["lidar"]["model"] == "hdl64"
-        if self._3d:
-            from dstenv.sensing.lidar3d import Hdl64
+        from dstenv.sensing.lidar3d import Hdl64
 
-            self.lidar: Any = Hdl64(cfg["lidar"])
-        else:
-            self.lidar = Lidar(cfg["lidar"])
+        self.lidar: Any = Hdl64(cfg["lidar"]) if self._3d else Lidar(cfg["lidar"])
         mx, my = cfg["lidar"]["mount_x"], cfg["lidar"]["mount_y"]  # the sensor grid's origin
         if not self.spec.inside(*self.spec.to_cell(np.array([mx]), np.array([my])))[0]:
             raise ConfigError(f"lidar.mount_x / mount_y {mx:g}, {my:g} m: outside the grid "
@@ -223,8 +220,7 @@ class Pipeline:
         self.fuse = bool(fuse)
         self.tracker = GridTracker(self.spec.shape, params, self.spec.cell_size)
         self.odometry = Odometry(self.config["protocol"])
-        # the pose the filter was given at the last fused step (the true pose unless
-        # protocol.odometry_* is set; replay records it)
+        # the pose the filter got at the last fused step (true unless protocol.odometry_*)
         self.filter_pose: np.ndarray | None = None
         self.camera = (camera_mask(self.spec, prot["camera_fov"]) if prot["camera_fov"] > 0
                        else None)
@@ -259,8 +255,12 @@ class Pipeline:
         its ``pignistic_prev`` equals ``pignistic``. ``seed``: an integer >= 0.
         ``keep_map``: drive the current map again, all else from ``seed`` (city world).
         """
-        if not isinstance(seed, numbers.Integral) or isinstance(seed, bool) or seed < 0:
-            raise ValueError(f"Pipeline.reset: seed must be an integer >= 0, got {seed!r}")
+        if not isinstance(seed, numbers.Integral) or isinstance(seed, bool) or not (
+                0 <= seed < 2**63):  # (a larger one failed in the shard writer, at its end)
+            raise ValueError(f"Pipeline.reset: seed must be an integer >= 0, got {seed!r} "
+                             "(at most 2**63 - 1)")
+        if not isinstance(keep_map, bool):  # ("no" was true)
+            raise ValueError(f"Pipeline.reset: keep_map must be True or False, got {keep_map!r}")
         if keep_map and self._world is None:
             raise RuntimeError("Pipeline.reset(keep_map=True): reset once without it first")
         if keep_map and "keep_map" not in inspect.signature(self._world.reset).parameters:

@@ -224,3 +224,14 @@ def test_frames_share_betp_read_only_so_no_frame_changes_another():
     g1 = p.step()  # not fused: carries the last fused BetP (computed here, once)
     with pytest.raises(ValueError, match="read-only"):
         g1.pignistic[0, 0, 0] = 1.0
+
+
+def test_reset_refuses_a_seed_past_int64_and_a_keep_map_that_is_no_bool():
+    """Attack 16: seed 2**70 failed only in the shard writer's close; keep_map="no" was
+    taken as true."""
+    p = Pipeline({"grid": {"height": 16, "width": 16}})
+    with pytest.raises(ValueError, match=r"seed must be an integer >= 0, got \d+ \(at most"):
+        p.reset(2**70)
+    p.reset(2**63 - 1)
+    with pytest.raises(ValueError, match="keep_map must be True or False, got 'no'"):
+        p.reset(2, keep_map="no")

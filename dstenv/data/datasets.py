@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import bisect
 import math
+import numbers
 import os
 import warnings
 from collections.abc import Iterator, Mapping, Sequence
@@ -349,6 +350,8 @@ class StreamingDataset(IterableDataset):
         Call it before each epoch's iteration, with ``DataLoader(persistent_workers=False)``
         (the default): persistent workers keep the copy of the dataset they started with,
         so a new epoch never reaches them (make a new ``DataLoader`` per epoch instead)."""
+        if not isinstance(epoch, numbers.Integral) or isinstance(epoch, bool) or epoch < 0:
+            raise ValueError(f"set_epoch: an integer >= 0, got {epoch!r}")  # (1.7 was 1)
         self.epoch = int(epoch)
 
     def __iter__(self) -> Iterator[dict[str, torch.Tensor]]:

@@ -143,7 +143,7 @@ class ShardReader:
         if not self._file:
             raise ValueError(f"{self.path}: reader is closed")
         out: dict[str, np.ndarray] = {}
-        names = list(names)
+        names = [names] if isinstance(names, str) else list(names)  # ("sensor": s, e, ...)
         later = [n for n in names if n in DERIVED_FIELDS] if self.format_version >= 3 else []
         for name in names:
             if name in later:

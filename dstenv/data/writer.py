@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import concurrent.futures as cf
 import json
+import math
 import os
 import re
 from collections.abc import Mapping
@@ -299,6 +300,12 @@ class ShardWriter:
         out["ego_pose"] = np.array(frame.ego_pose, dtype=np.float64)
         _expect(self.path, "ego_pose", out["ego_pose"], (3,))
         out["time"], out["seed"], out["step"] = float(frame.time), int(frame.seed), int(frame.step)
+        if not (np.isfinite(out["ego_pose"]).all() and math.isfinite(out["time"])
+                and 0 <= out["seed"] < 2**63 and 0 <= out["step"] < 2**63):
+            raise ValueError(f"{self.path}: frame {self.n_frames}: ego_pose and time must be "
+                             "finite, seed and step integers in [0, 2**63), got "
+                             f"{out['ego_pose'].tolist()}, {out['time']}, {out['seed']}, "
+                             f"{out['step']}")
         if self.masses:
             if frame.masses is None:
                 raise ValueError(f"{self.path}: masses=True but frame {self.n_frames} has none")

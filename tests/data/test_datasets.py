@@ -315,3 +315,15 @@ def test_training_data_of_shards_names_files_sizes_and_cells(dataset_dir):
     assert ident["cell_size"] == 0.5 and ident["frames"] == 5
     assert [f for f, _ in ident["shards"]] == ["train/shard-00000.h5", "train/shard-00001.h5"]
     assert ident != training_data(ShardDataset(root, split="val"))
+
+
+def test_set_epoch_takes_an_integer_at_least_zero():
+    """Attack 16: set_epoch(1.7) ran as epoch 1; -1 failed later inside numpy."""
+    from dstenv.data import StreamingDataset
+
+    ds = StreamingDataset(seed=0)
+    for bad in (-1, 1.7, "2", True):
+        with pytest.raises(ValueError, match=r"set_epoch: an integer >= 0, got"):
+            ds.set_epoch(bad)
+    ds.set_epoch(3)
+    assert ds.epoch == 3

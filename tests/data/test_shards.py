@@ -333,3 +333,19 @@ def test_one_writer_per_shard_and_each_writer_once(tmp_path, frames, shard_attrs
     with pytest.raises(RuntimeError, match="a ShardWriter is entered once"):
         with w:
             pass
+
+
+def test_records_are_checked_when_added_and_a_name_may_be_one_string(tmp_path, frames,
+                                                                     shard_attrs):
+    """Attack 16: a NaN pose or time was stored; a seed of 2**70 failed at close with an
+    OverflowError naming nothing; get(0, "sensor") read datasets 's', 'e', ..."""
+    frames[0].ego_pose = np.array([np.nan, 0.0, 0.0])
+    with pytest.raises(ValueError, match=r"x\.h5: frame 0: ego_pose and time must be finite"):
+        _write(tmp_path / "x.h5", frames[:1], shard_attrs)
+    frames[1].seed = 2**70
+    with pytest.raises(ValueError, match=r"seed and step integers in \[0, 2\*\*63\)"):
+        _write(tmp_path / "y.h5", frames[1:2], shard_attrs)
+    assert not list(tmp_path.iterdir())
+    path = _write(tmp_path / "z.h5", frames[2:3], shard_attrs)
+    with ShardReader(path) as r:
+        assert list(r.get(0, "sensor")) == ["sensor"]

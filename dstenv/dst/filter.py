@@ -68,9 +68,14 @@ class PerceptionGridFilter:
         *,
         threads: int = 1,
     ) -> None:
+        if (not isinstance(shape, (tuple, list)) or len(shape) != 2 or not all(
+                isinstance(v, (int, np.integer)) and not isinstance(v, bool) and v >= 1
+                for v in shape)):  # (64.7 was 64, 64 an 'int is not iterable')
+            raise ValueError(f"grid shape must be two integers >= 1 (H, W), got {shape!r}")
         h, w = (int(v) for v in shape)
-        if h < 1 or w < 1:
-            raise ValueError(f"grid shape must be positive, got {shape}")
+        if params is not None and not isinstance(params, DSTParams):
+            raise TypeError(f"params: a DSTParams (DSTParams.from_dict(d) for a dict), got "
+                            f"{type(params).__name__}")
         if not cell_size > 0:
             raise ValueError(f"cell_size must be > 0 m, got {cell_size}")
         most = os.cpu_count() or 1

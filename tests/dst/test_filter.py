@@ -334,3 +334,15 @@ def test_in_place_only_for_large_single_thread_grids(monkeypatch):
     assert len(PerceptionGridFilter((big - 1, big - 1))._buf) == 2
     monkeypatch.setattr(filter_module, "IN_PLACE_MIN_CELLS", 0)
     assert len(PerceptionGridFilter((4, 4))._buf) == 1
+
+
+@pytest.mark.parametrize("shape", [(64.7, 64), 64, (0, 4), (True, 4), (4, 4, 4)])
+def test_a_grid_shape_is_two_integers(shape):
+    """Attack 16: (64.7, 64) was truncated to 64; 64 was 'int object is not iterable'."""
+    with pytest.raises(ValueError, match="grid shape must be two integers >= 1"):
+        PerceptionGridFilter(shape)
+
+
+def test_params_as_a_dict_are_named():
+    with pytest.raises(TypeError, match=r"params: a DSTParams \(DSTParams\.from_dict"):
+        PerceptionGridFilter((4, 4), {"alpha": 0.9})

@@ -292,12 +292,13 @@ def output_file(path: str | Path, option: str,
 
 
 def _is_report(path: Path) -> bool:
-    """A text file that a report may replace: JSON, or a CSV table by its name."""
+    """A text file that a report may replace: JSON, or a CSV table (by its name or its
+    header line)."""
     with open(path, "rb") as fh:
         data = fh.read(64 << 20)
     if b"\0" in data[:4096]:
         return False
-    if path.suffix.lower() == ".csv":
+    if path.suffix.lower() == ".csv" or b"," in data.split(b"\n", 1)[0]:  # a CSV header
         return True
     try:
         json.loads(data)

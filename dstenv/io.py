@@ -298,7 +298,8 @@ def _is_report(path: Path) -> bool:
         data = fh.read(64 << 20)
     if b"\0" in data[:4096]:
         return False
-    if path.suffix.lower() == ".csv" or b"," in data.split(b"\n", 1)[0]:  # a CSV header
+    if path.suffix.lower() == ".csv" or (path.suffix.lower() in ("", ".txt")
+                                         and b"," in data.split(b"\n", 1)[0]):  # a header
         return True
     try:
         json.loads(data)

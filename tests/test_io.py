@@ -66,6 +66,11 @@ def test_output_file_never_replaces_a_datasets_file_or_a_binary(tmp_path):
     assert output_file(tmp_path / "old.json", "--json") == tmp_path / "old.json"  # a report
     (tmp_path / "runs.csv").write_text("a,b\n1,2\n")
     assert output_file(tmp_path / "runs.csv", "--csv") == tmp_path / "runs.csv"
+    (tmp_path / "runs.txt").write_text("policy,success\na,1\n")  # a CSV by its header
+    assert output_file(tmp_path / "runs.txt", "--csv") == tmp_path / "runs.txt"
+    (tmp_path / "tool.py").write_text("import os, sys\n")  # a comma, but code
+    with pytest.raises(ValueError, match="exists and is not a report"):
+        output_file(tmp_path / "tool.py", "--json")
     # attack 16: any text file was replaced (a script, a README), and as root a device,
     # a pipe or a link became a plain file (/dev/null did)
     for name in ("script.py", "README.md", "my.toml"):

@@ -235,3 +235,13 @@ def test_reset_refuses_a_seed_past_int64_and_a_keep_map_that_is_no_bool():
     p.reset(2**63 - 1)
     with pytest.raises(ValueError, match="keep_map must be True or False, got 'no'"):
         p.reset(2, keep_map="no")
+
+
+def test_a_meta_action_name_in_the_city_world_is_named():
+    """Attack 16: step("left") said only 'could not convert string to float'."""
+    p = Pipeline({"grid": {"height": 16, "width": 16}})
+    p.reset(1)
+    for bad in ("left", (np.nan, 0.0), (1.0, 2.0, 3.0)):
+        with pytest.raises(ValueError, match=r"ego_action must be finite \(accel, steer\), got"):
+            p.step(bad)
+    p.step((0.5, 0.0))

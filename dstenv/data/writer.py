@@ -28,8 +28,7 @@ from dstenv.data.format import (
 )
 from dstenv.frame import IGNORE_INDEX, Frame
 
-#: grids of codes and their number: SensorState 0..2, MapClass 0..3 (labels: the
-#: class counts check 0..4 and the ignore index)
+#: codes per grid: SensorState 0..2, MapClass 0..3 (labels: checked by class_counts)
 CODE_LIMITS = {"sensor": 3, "gis": 4}
 
 __all__ = ["ShardWriter"]
@@ -57,9 +56,8 @@ class ShardWriter:
             worker process per core gains nothing from them). Only gzip and
             uncompressed shards are encoded here (:mod:`dstenv.data.codec`); lzf
             goes through h5py. With ``threads > 0`` chunks are deflated with zlib
-            whatever ``deflate`` says: ISA-L called from worker threads did not give
-            reproducible bytes (2 of 20 runs of the threaded writer differed), and a
-            shard must be a pure function of its frames.
+            whatever ``deflate`` says: ISA-L from worker threads gave other bytes in 2
+            of 20 runs, and a shard must be a pure function of its frames.
 
     With gzip or no compression every grid chunk is encoded once by
     :func:`dstenv.data.codec.encode_chunk` and written with ``write_direct_chunk``;
@@ -113,7 +111,9 @@ class ShardWriter:
         if compression == "gzip":
             self._filters["compression_opts"] = compression_opts
         self._direct = compression in DIRECT_COMPRESSIONS
-        self._threads = max(int(threads), 0) if self._direct else 0
+        if not isinstance(threads, (int, np.integer)) or isinstance(threads, bool) or threads < 0:
+            raise ValueError(f"threads must be an integer >= 0, got {threads!r}")  # -2 was 0
+        self._threads = int(threads) if self._direct else 0
         # ISA-L only on the calling thread: its output from worker threads varied
         self._codec = (compression, compression_opts, "zlib" if self._threads else deflate)
         self._pool: cf.ThreadPoolExecutor | None = None

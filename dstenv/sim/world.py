@@ -140,7 +140,10 @@ class World:
         if auto:  # IDM, and never further than the free gap ahead (like the traffic agents)
             accel, steer = autopilot_limit(acc, gap, v, dt), self.route_steer()
         else:
-            a = np.asarray(ego_action, np.float64).reshape(-1)
+            try:
+                a = np.asarray(ego_action, np.float64).reshape(-1)
+            except (TypeError, ValueError):  # a meta-action name: the highway world's
+                a = np.full(1, np.nan)
             if a.shape != (2,) or not np.isfinite(a).all():
                 raise ValueError(f"ego_action must be finite (accel, steer), got {ego_action!r}")
             accel = float(np.clip(a[0], -ego_cfg["max_accel"], ego_cfg["max_accel"]))

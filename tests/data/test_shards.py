@@ -349,3 +349,9 @@ def test_records_are_checked_when_added_and_a_name_may_be_one_string(tmp_path, f
     path = _write(tmp_path / "z.h5", frames[2:3], shard_attrs)
     with ShardReader(path) as r:
         assert list(r.get(0, "sensor")) == ["sensor"]
+
+
+@pytest.mark.parametrize("threads", [-2, 1.5, True, "2"])
+def test_writer_threads_are_an_integer_at_least_zero(tmp_path, shard_attrs, threads):
+    with pytest.raises(ValueError, match="threads must be an integer >= 0"):
+        ShardWriter(tmp_path / "a.h5", shard_attrs, threads=threads)

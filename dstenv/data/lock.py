@@ -133,6 +133,8 @@ def dataset_lock(folder: str | Path, force: bool = False) -> Iterator[Path]:
             break
         except FileExistsError:
             owner = _owner(path)
+            if not owner and not path.exists():  # released since our create: try again
+                continue  # (judged stale, the next one's new, still empty lock was removed)
             stale = _stale(path, owner, me)
             live_here = owner.get("host") == me["host"] and not stale
             if force and live_here:  # a live writer here: forcing would mix shards
@@ -147,7 +149,8 @@ def dataset_lock(folder: str | Path, force: bool = False) -> Iterator[Path]:
                     f"{folder} is being written by {who} ({path}); wait for it, use another "
                     "--out, or pass --force-unlock if that process is gone") from None
             with _takeover(folder):
-                if _owner(path) == owner:  # still the lock judged stale, not a new one
+                now = _owner(path)  # still the lock judged stale, not a new one (an
+                if now == owner and (owner or _stale(path, now, me)):  # empty one: by age)
                     path.unlink(missing_ok=True)
     else:  # pragma: no cover - lost a race three times
         raise DatasetLocked(f"{folder}: could not take {path}; another run started just now")

@@ -258,3 +258,37 @@ def test_a_sigterm_python_swallows_is_raised_on_leaving_the_block():
             del o
             done = True
     assert done
+
+
+def test_a_lock_released_while_read_is_no_stale_lock_to_take_over(tmp_path, monkeypatch):
+    """CI caught two holders at once: B failed to create the lock (A held it), A released
+    it before B read it, so B judged the missing lock stale; in its takeover C had just
+    created a new lock, still empty, and B removed it (empty == empty) and took its own."""
+    import os as _os
+
+    import dstenv.data.lock as lock
+
+    d = tmp_path / "d"
+    d.mkdir()
+    path = d / lock.LOCK_NAME
+    path.write_text("")  # A's lock
+    real, calls, c_holds = lock._owner, [], []
+
+    def racing_owner(p):
+        calls.append(p)
+        if len(calls) == 1:  # A releases just before B reads
+            p.unlink()
+            return {}
+        if len(calls) == 2 and not p.exists():  # C creates its lock, not yet written
+            _os.close(_os.open(p, _os.O_CREAT | _os.O_EXCL | _os.O_WRONLY))
+            c_holds.append(True)
+        return real(p)
+
+    monkeypatch.setattr(lock, "_owner", racing_owner)
+    try:
+        with lock.dataset_lock(d):
+            b_holds = True
+    except lock.DatasetLocked:
+        b_holds = False
+    assert not (b_holds and c_holds), "B took the lock C holds"
+    assert not c_holds or path.exists()  # C's lock is still there

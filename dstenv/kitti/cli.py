@@ -181,7 +181,7 @@ def _write_sequence(seq: Any, cfg: dict[str, Any], gis_fn: Any, note: str, path:
     from dstenv.data.manifest import shard_entry
     from dstenv.data.shards import ShardWriter
     from dstenv.dst import CLASSES
-    from dstenv.kitti.sequence import convert_sequence
+    from dstenv.kitti.sequence import convert_sequence, skip_reason
 
     print(f"sequence {seq.name}: {seq.n_frames} frames, DST every {cfg['update_every']}, "
           f"keep every {cfg['stride']} from {cfg['warmup']}, labels {cfg['labels']['rule']}; "
@@ -193,7 +193,7 @@ def _write_sequence(seq: Any, cfg: dict[str, Any], gis_fn: Any, note: str, path:
             for frame in convert_sequence(seq, cfg, gis_fn, skipped):
                 writer.add(frame)
             if writer.n_frames == 0:
-                first = (skipped[0].split(": skipped: ", 1)[-1] if skipped
+                first = (skip_reason(skipped[0]) if skipped
                          else "no frame is kept")
                 raise CLIError(f"sequence {seq.name}: no usable frame ({len(skipped)} "
                                f"skipped; the first: {first}); fix its files or leave it "
@@ -220,7 +220,7 @@ def _render(args: argparse.Namespace) -> int:
     from dstenv.grid import GridSpec
     from dstenv.io import png_path
     from dstenv.kitti.render import render_frame
-    from dstenv.kitti.sequence import KittiSequence, convert_sequence, kitti_config
+    from dstenv.kitti.sequence import KittiSequence, convert_sequence, kitti_config, skip_reason
 
     png_path(args.out)  # before the conversion, not after (under --root is fine)
     over = _overrides(args)
@@ -244,7 +244,7 @@ def _render(args: argparse.Namespace) -> int:
             frame = fr
             break
     if frame is None:
-        why = next((m.split(": skipped: ", 1)[-1] for m in skipped
+        why = next((skip_reason(m) for m in skipped
                     if m.startswith(f"sequence {seq.name} frame {args.frame}: ")), None)
         raise CLIError(f"sequence {seq.name}: frame {args.frame} was skipped: {why}" if why
                        else f"sequence {seq.name}: frame {args.frame} was not converted")

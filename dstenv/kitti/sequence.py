@@ -43,6 +43,7 @@ from dstenv.sensing.cloud import cloud_sensor_grid, default_ray_config
 from dstenv.sensing.ground import CloudError, default_ground_config
 
 __all__ = [
+    "SKIPPED", "skip_reason",
     "FRAME_RATE", "default_config", "kitti_config", "kept_frames",
     "KittiSequence", "convert_sequence",
 ]
@@ -193,6 +194,15 @@ class KittiSequence:
         return moving_flags(self.boxes, self.world_xy, rule, threshold, window)
 
 
+#: what joins a skipped frame's name and its reason in ``convert_sequence``'s messages
+SKIPPED = ": skipped: "
+
+
+def skip_reason(message: str) -> str:
+    """The reason of a ``convert_sequence`` skip message (its file and what is wrong)."""
+    return message.split(SKIPPED, 1)[-1]
+
+
 def convert_sequence(
     seq: KittiSequence,
     config: Mapping[str, Any] | None = None,
@@ -228,7 +238,7 @@ def convert_sequence(
             sensor, plane, _, obstacle, _ = cloud_sensor_grid(
                 points, spec, cfg["ground"], cfg["sensor"])
         except (KittiError, CloudError) as exc:
-            msg = f"sequence {seq.name} frame {f}: skipped: {exc}"
+            msg = f"sequence {seq.name} frame {f}{SKIPPED}{exc}"
             log.warning(msg)
             if skipped is not None:
                 skipped.append(msg)

@@ -29,6 +29,7 @@ from __future__ import annotations
 import bisect
 import math
 import numbers
+import operator
 import os
 import warnings
 from collections.abc import Iterator, Mapping, Sequence
@@ -117,6 +118,8 @@ class ShardDataset(Dataset):
         self.labels = _check_labels(labels)
         if on_error not in ("raise", "skip"):
             raise ValueError(f"on_error must be 'raise' or 'skip', got {on_error!r}")
+        if not isinstance(cache, (bool, np.bool_)):  # ("yes" and "no" were both True)
+            raise TypeError(f"ShardDataset cache must be True or False, got {cache!r}")
         self.inputs, self.on_error, self.split = inputs, on_error, split
         self.files: list[Path] = []
         lengths: list[int] = []
@@ -226,20 +229,29 @@ class ShardDataset(Dataset):
             start = end
         return out
 
+    def _index(self, index: Any) -> int:
+        """``index`` as an int in ``[0, len)``: any integer (numpy, a 0-d torch integer
+        tensor), negative ones from the end, like a list."""
+        n = len(self)
+        try:
+            if isinstance(index, bool):
+                raise TypeError
+            i = operator.index(index)
+        except TypeError:
+            raise TypeError(f"ShardDataset index must be an integer, got {index!r}") from None
+        if not -n <= i < n:  # IndexError ends a plain `for sample in dataset` loop
+            raise IndexError(f"ShardDataset index {i} out of range for {n} frames")
+        return i % n
+
     def locate(self, index: int) -> tuple[Path, int]:
-        """``(shard file, frame index inside it)`` of a dataset index."""
-        if not 0 <= index < len(self):
-            raise IndexError(f"index {index} out of range for {len(self)} frames")
+        """``(shard file, frame index inside it)`` of a dataset index (negative: from
+        the end)."""
+        index = self._index(index)
         k = bisect.bisect_right(self._ends, index)
         return self.files[k], index - (self._ends[k - 1] if k else 0)
 
     def __getitem__(self, index: int) -> dict[str, torch.Tensor]:
-        n = len(self)
-        if not isinstance(index, (int, np.integer)) or isinstance(index, bool):
-            raise TypeError(f"ShardDataset index must be an integer, got {index!r}")
-        if not -n <= index < n:  # IndexError ends a plain `for sample in dataset` loop
-            raise IndexError(f"ShardDataset index {index} out of range for {n} frames")
-        index = int(index) % n
+        index, n = self._index(index), len(self)
         for attempt in range(n):  # a corrupt shard skipped (on_error="skip"): the next frame
             i = (index + attempt) % n
             k = bisect.bisect_right(self._ends, i)

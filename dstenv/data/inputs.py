@@ -109,7 +109,7 @@ def network_input(x: np.ndarray, sensor: np.ndarray, inputs: str,
 def _check_inputs(inputs: str, single_frames: bool = False) -> tuple[str, ...]:
     """The stacked names of ``inputs``; ``single_frames``: refuse inputs that read an
     earlier frame of the drive (frames one at a time, a stream)."""
-    if inputs not in INPUTS:
+    if not isinstance(inputs, str) or inputs not in INPUTS:  # (a list: 'unhashable')
         raise ValueError(f"unknown inputs {inputs!r}; choose from {', '.join(INPUTS)}")
     if single_frames and "past" in INPUTS[inputs]:
         raise ValueError(f"inputs {inputs!r} read an earlier frame of the drive: use stored "
@@ -118,6 +118,6 @@ def _check_inputs(inputs: str, single_frames: bool = False) -> tuple[str, ...]:
 
 
 def _check_labels(labels: str) -> str:
-    if labels not in LABELS:
+    if not isinstance(labels, str) or labels not in LABELS:
         raise ValueError(f"unknown labels {labels!r}; choose from {', '.join(LABELS)}")
     return labels

@@ -387,12 +387,12 @@ class ShardWriter:
 
 
 def quantize_check(p: np.ndarray) -> np.ndarray:
-    """``(5, H, W)`` ``p`` as cell-major ``(H, W, 5)`` float32 (unquantised shards);
-    ValueError if it holds NaN/inf."""
+    """``(5, H, W)`` ``p`` as cell-major ``(H, W, 5)`` float32 clipped to [0, 1], as
+    uint8 shards are (1.7 was kept); ValueError if it holds NaN/inf."""
     p = np.ascontiguousarray(np.moveaxis(np.asarray(p, dtype=np.float32), 0, -1))
     if not np.all(np.isfinite(p)):
         raise ValueError("NaN/inf")
-    return p
+    return np.clip(p, 0.0, 1.0)  # a copy: p may be the caller's
 
 
 def _expect(path: Path, name: str, a: np.ndarray, shape: tuple[int, ...]) -> None:

@@ -269,8 +269,22 @@ def test_indexing_stops_at_the_end_and_a_typo_split_is_named(dataset_dir):
     for bad in (5, -6, 10**6):
         with pytest.raises(IndexError, match="out of range for 5 frames"):
             ds[bad]
-    with pytest.raises(TypeError, match="must be an integer"):
-        ds["0"]
+    for bad in ("0", 1.0, True):
+        with pytest.raises(TypeError, match="must be an integer"):
+            ds[bad]
+    # any integer type (a DataLoader's sampler may hand torch or numpy ones), and locate
+    # counts from the end like indexing
+    assert torch.equal(ds[torch.tensor(4)]["x"], ds[4]["x"])
+    assert torch.equal(ds[np.int16(-1)]["x"], ds[4]["x"])
+    assert ds.locate(-1) == ds.locate(4) and ds.locate(np.int64(0))[1] == 0
+    with pytest.raises(IndexError, match="out of range for 5 frames"):
+        ds.locate(5)
+    with pytest.raises(ValueError, match=r"unknown inputs \['fcn10'\]; choose from"):
+        ShardDataset(root, split="train", inputs=["fcn10"])
+    with pytest.raises(ValueError, match="unknown labels 3; choose from"):
+        ShardDataset(root, split="train", labels=3)
+    with pytest.raises(TypeError, match="cache must be True or False, got 'yes'"):
+        ShardDataset(root, split="train", cache="yes")
     with pytest.raises(ValueError, match=r"no shard of split 'training' .*its splits: train, val"):
         ShardDataset(root, split="training")
     assert len(ShardDataset(root, split="test")) == 0  # a known split may be absent

@@ -40,6 +40,24 @@ def test_float_round_trip_is_exact(tmp_path, frames, shard_attrs):
         assert r[-1].step == 3
 
 
+def test_probabilities_out_of_range_are_clipped_alike_in_both_formats(tmp_path, shard_attrs,
+                                                                     make_frame):
+    import dataclasses
+
+    f = make_frame(np.random.default_rng(0))
+    p = f.pignistic.copy()
+    p[0, 0, 0], p[1, 0, 0] = 1.7, -0.2
+    f = dataclasses.replace(f, pignistic=p)
+    stored = {}
+    for quantize in (False, True):
+        path = _write(tmp_path / f"{quantize}.h5", [f], shard_attrs, quantize=quantize)
+        with ShardReader(path) as r:
+            stored[quantize] = r[0].pignistic
+    assert stored[False][0, 0, 0] == 1.0 and stored[False][1, 0, 0] == 0.0  # was 1.7, -0.2
+    np.testing.assert_allclose(stored[True], stored[False], atol=QUANT_MAX_ERROR + 1e-7)
+    assert p[0, 0, 0] == np.float32(1.7)  # the caller's array is left alone
+
+
 def test_quantised_error_bound(tmp_path, frames, shard_attrs):
     path = _write(tmp_path / "q.h5", frames, shard_attrs, quantize=True)
     assert QUANT_MAX_ERROR == pytest.approx(1 / 510)

@@ -16,11 +16,13 @@ traceback.
 from __future__ import annotations
 
 import argparse
+import difflib
 import importlib
 import os
 import re
 import sys
 from collections.abc import Sequence
+from typing import Any, NoReturn
 
 from dstenv import __version__
 from dstenv.config import CLIError
@@ -56,13 +58,58 @@ def _command_of(argv: Sequence[str]) -> str | None:
     return None
 
 
+class Parser(argparse.ArgumentParser):
+    """argparse with one-line errors: the command's name, the problem, a close option
+    for a typo, and where the usage is (argparse printed the whole usage first, and an
+    unknown option of a subcommand was reported under the top-level usage)."""
+
+    words: list[str] = []
+
+    def parse_known_args(self, args: Any = None, namespace: Any = None) -> Any:  # noqa: D102
+        self.words = [str(a) for a in (sys.argv[1:] if args is None else args)]
+        return super().parse_known_args(args, namespace)
+
+    def error(self, message: str) -> NoReturn:  # noqa: D102 - argparse's hook
+        self.exit(2, f"{self.prog}: error: {message}{typo_hint(self, message)} "
+                     f"(see {self.prog} --help)\n")
+
+
+def typo_hint(parser: Parser, message: str) -> str:
+    """``; did you mean --x?`` for the first option word no option of ``parser``
+    has (from an "unrecognized arguments" message, else from the words it parsed: a
+    misspelt required option is reported as missing first) with a close match."""
+    known = [o for a in parser._actions for o in a.option_strings]  # noqa: SLF001
+    unknown = (message.split(":", 1)[1].split() if message.startswith("unrecognized")
+               else parser.words)
+    for word in unknown:
+        name = word.split("=")[0]
+        if not name.startswith("--") or any(k.startswith(name) for k in known):
+            continue  # (a prefix of an option is argparse's own abbreviation)
+        close = difflib.get_close_matches(name, known, n=1, cutoff=0.7)
+        if close:
+            lead = "" if message.startswith("unrecognized") else f" ({name} is no option)"
+            return f"{lead}; did you mean {close[0]}?"
+    return ""
+
+
+def _chosen(parser: argparse.ArgumentParser, args: argparse.Namespace
+            ) -> argparse.ArgumentParser:
+    """The (sub)parser of the command that ``args`` ran (``dstenv kitti convert``'s)."""
+    for action in parser._actions:  # noqa: SLF001 - argparse keeps subparsers there
+        if isinstance(action, argparse._SubParsersAction):  # noqa: SLF001
+            name = getattr(args, action.dest, None)
+            if name in action.choices:
+                return _chosen(action.choices[name], args)
+    return parser
+
+
 def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     """The argument parser; only ``command``'s module is imported (all when ``"*"``).
 
     Commands whose module is not imported get a placeholder parser that carries
     their one-line help, so ``--help`` lists every command.
     """
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="dstenv",
         description="Dempster-Shafer perception grids: simulate, generate data, benchmark.",
     )
@@ -91,7 +138,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``dstenv`` console script; returns the exit status."""
     argv = list(sys.argv[1:] if argv is None else argv)
     parser = build_parser(_command_of(argv))
-    args = parser.parse_args(argv)
+    args, extra = parser.parse_known_args(argv)
+    if extra:  # reported by the command that was given them, not by dstenv's top level
+        _chosen(parser, args).error(f"unrecognized arguments: {' '.join(extra)}")
     if not getattr(args, "func", None):
         parser.print_help()
         return 0

@@ -18,6 +18,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import stat
 import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -252,14 +253,16 @@ def _nearest_folder(out: Path, option: str, shown: Path | None = None) -> Path:
 
 def _writable(out: Path, option: str, shown: Path | None = None) -> None:
     """A one-line ValueError (naming ``shown``, default ``out``) when no file ``out``
-    can be made: its nearest existing folder is a file, is not writable, or refuses a
+    can be made: its nearest existing folder is a file, is not writable (or marked
+    read-only for everyone: root could write into a shared data folder), or refuses a
     new file (a probe made there and removed at once: root's access() says yes in /proc
     or on a read-only mount)."""
     shown = out if shown is None else shown
     parent = _nearest_folder(out, option, shown)
-    if not os.access(parent, os.W_OK | os.X_OK):
-        raise ValueError(f"{option} {shown}: {parent} is not writable; give a path you can "
-                         "write to")
+    mode = parent.stat().st_mode
+    if not os.access(parent, os.W_OK | os.X_OK) or not mode & 0o222:  # root may, won't
+        raise ValueError(f"{option} {shown}: {parent} is not writable ({stat.filemode(mode)}); "
+                         "give a path you can write to")
     try:
         fd, probe = tempfile.mkstemp(dir=parent, prefix=".dstenv-", suffix=".probe")
     except OSError as exc:

@@ -155,6 +155,27 @@ def test_expected_errors_are_one_line(capsys, tmp_path):
     assert err.startswith("dstenv info: error:") and "\n" not in err and "nothing-here" in err
 
 
+@pytest.mark.parametrize("argv, line", [
+    (["render", "--out", "x.png", "--senario", "dense"], "dstenv render: error: unrecognized "
+     "arguments: --senario dense; did you mean --scenario? (see dstenv render --help)"),
+    (["render", "--senario", "dense", "--outt", "x.png"], "dstenv render: error: the following "
+     "arguments are required: --out (--senario is no option); did you mean --scenario?"),
+    (["generate", "--frame", "10"], "dstenv generate: error: ambiguous option: --frame could "
+     "match --frames, --frames-per-shard (see dstenv generate --help)"),
+    (["kitti", "render", "--root", "r", "--sequence", "3", "--frame", "1", "--out", "x.png",
+      "--zzz"],
+     "dstenv kitti render: error: unrecognized arguments: --zzz (see dstenv kitti render "
+     "--help)"),
+    (["bogus"], "dstenv: error: argument COMMAND: invalid choice: 'bogus'"),
+])
+def test_command_line_mistakes_are_one_line_under_their_command(capsys, argv, line):
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    out, err = capsys.readouterr()
+    assert exc.value.code == 2 and out == "" and err.count("\n") == 1, err
+    assert err.startswith(line), err  # (argparse printed the usage first, the top level's)
+
+
 def test_worker_tracebacks_become_one_line(capsys, monkeypatch):
     import dstenv.cli as cli
 

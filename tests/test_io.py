@@ -119,8 +119,27 @@ def test_output_file_probes_a_folder_access_calls_writable(tmp_path):
     assert output_file(tmp_path / "r.json", "--json") == tmp_path / "r.json"
     assert list(tmp_path.iterdir()) == []  # the probe is removed
     if os.path.isdir("/proc/self") and os.geteuid() == 0:
-        with pytest.raises(ValueError, match="cannot create a file in /proc"):
+        with pytest.raises(ValueError, match=r"/proc is not writable \(dr-xr-xr-x\)"):
             output_file("/proc/x.json", "--json")
+
+
+def test_a_folder_marked_read_only_is_refused_even_to_root(tmp_path):
+    """Newcomer 7: as root, kitti convert wrote beside --root into a shared data folder
+    of mode r-x (root's writes ignore the mode)."""
+    from dstenv.io import output_file, output_folder
+
+    shared = tmp_path / "shared"
+    shared.mkdir()
+    shared.chmod(0o555)
+    try:
+        with pytest.raises(ValueError, match=r"--out .*shared/out: .*shared is not writable "
+                                             r"\(dr-xr-xr-x\); give a path you can write to"):
+            output_folder(shared / "out", "--out")
+        with pytest.raises(ValueError, match=r"shared is not writable"):
+            output_file(shared / "deep" / "r.json", "--json")
+        assert list(shared.iterdir()) == []
+    finally:
+        shared.chmod(0o755)
 
 
 def test_output_folder_keeps_outputs_apart_from_datasets_inputs_and_results(tmp_path):

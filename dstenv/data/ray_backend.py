@@ -10,6 +10,7 @@ local Ray is started with ``--workers`` CPUs.
 from __future__ import annotations
 
 import hashlib
+import importlib.util
 import socket
 import tempfile
 from collections.abc import Callable
@@ -19,6 +20,8 @@ from typing import Any
 from dstenv.io import atomic_write_bytes
 
 __all__ = ["check_ray_address", "run_ray", "shard_bytes"]
+
+NO_RAY = "--ray needs Ray: pip install -e '.[ray]' in the dstenv checkout"
 
 
 def shard_bytes(task: Any) -> tuple[bytes, dict[str, Any]]:
@@ -34,6 +37,11 @@ def shard_bytes(task: Any) -> tuple[bytes, dict[str, Any]]:
         return (Path(tmp) / task.file).read_bytes(), entry
 
 
+def ray_installed() -> bool:
+    """Ray can be imported here (without importing it)."""
+    return importlib.util.find_spec("ray") is not None
+
+
 def check_ray_address(address: str, timeout: float = 3.0) -> None:
     """Before any folder or task exists: a cluster address names a head that answers.
 
@@ -47,6 +55,8 @@ def check_ray_address(address: str, timeout: float = 3.0) -> None:
     """
     from dstenv.data.generate import GenerateError
 
+    if not ray_installed():  # (it was found after the folder and a progress bar)
+        raise GenerateError(NO_RAY)
     if address in ("local", "auto"):
         return
     host, sep, port = address.removeprefix("ray://").rpartition(":")
@@ -82,8 +92,7 @@ def run_ray(todo: list[Any], out: Path, address: str, workers: int,
     except ImportError:
         from dstenv.data.generate import GenerateError
 
-        raise GenerateError("--ray needs Ray: pip install -e '.[ray]' in the dstenv "
-                            "checkout") from None
+        raise GenerateError(NO_RAY) from None
     if not todo:
         return {}
     started = not ray.is_initialized()

@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 import json
 import shlex
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -96,7 +97,8 @@ def run_cli_benchmark(args: argparse.Namespace, split: str = "test", kept: bool 
         split=split,
     )
     out = Path(args.out)
-    print((out / "results.md").read_text())
+    if not args.quiet:  # --quiet: the files' names and the goal's verdict only
+        print((out / "results.md").read_text())
     if kept:
         print(f"wrote {out / 'results.json'}, {out / 'results.md'}, {out / 'figures'}/*.png")
     else:
@@ -183,6 +185,12 @@ def _benchmark(args: argparse.Namespace) -> int:
         results = _with_real(args, results)
     goal = results.get("goal")
     ok = goal is None or (goal["margin_met"] and goal["moving_met"] and goal["static_met"])
+    if goal is not None and (args.check_goal or args.quiet):
+        missed = [name for name in ("margin", "moving", "static") if not goal[f"{name}_met"]]
+        verdict = ("met" if ok else f"NOT met ({', '.join(missed)}; {args.out}/results.md, "
+                   "section Goal)")
+        print(f"goal: {goal['best_learned']} vs {goal['best_baseline']} on the simulated test "
+              f"maps: {verdict}", file=sys.stderr if not ok and args.check_goal else sys.stdout)
     return 0 if ok or not args.check_goal else 1
 
 
@@ -241,5 +249,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="with --kitti: fine-tune the best network on the first N labelled frames "
                    "of each sequence and score every row from frame N+10 on")
     b.add_argument("--check-goal", action="store_true", help="exit 1 if the README goal is not met")
-    b.add_argument("--quiet", action="store_true")
+    b.add_argument("--quiet", action="store_true",
+                   help="no progress and no report on the terminal: the files written and the "
+                   "goal's verdict only (the report is in --out's results.md)")
     b.set_defaults(func=_benchmark)

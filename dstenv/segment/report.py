@@ -238,8 +238,8 @@ def markdown_table(results: dict[str, Any]) -> str:
         if data:
             lines += [
                 f"Test split: {data.get('test_frames', '?')} frames of "
-                f"{data.get('test_episodes', '?')} drives on {data.get('test_maps', '?')} "
-                f"held-out maps (never used in training, tuning or model selection); train "
+                f"{data.get('test_episodes', '?')} drive(s) on {data.get('test_maps', '?')} "
+                f"held-out map(s) (never used in training, tuning or model selection); train "
                 f"{data.get('train_frames', '?')} frames, val {data.get('val_frames', '?')}; "
                 f"grid {data.get('grid_shape', '?')} cells of {data.get('cell_size', '?')} m; "
                 f"DST fused every {data.get('filter_period', 1)} step(s).", ""]

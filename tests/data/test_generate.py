@@ -481,9 +481,21 @@ def test_generate_into_a_kitti_conversion_names_the_tool(tmp_path, fake_pipeline
     ("127.0.0.1:99999", r"expected HOST:PORT of a head started with 'ray start --head'"),
     ("garbage", r"expected HOST:PORT"),
 ])
-def test_a_ray_address_where_no_head_answers_fails_at_once(tmp_path, address, message):
+def test_a_ray_address_where_no_head_answers_fails_at_once(tmp_path, address, message,
+                                                           monkeypatch):
     """Attack 16: ray.init waited minutes on it (ignoring SIGTERM), naming another address."""
+    monkeypatch.setattr("dstenv.data.ray_backend.ray_installed", lambda: True)
     with pytest.raises(gen.GenerateError, match=message):
         gen.generate(_spec(frames=4, split="train"), tmp_path / "o", ray_address=address,
                      progress=False)
     assert not (tmp_path / "o").exists()  # refused before the folder
+
+
+@pytest.mark.parametrize("address", ["local", "127.0.0.1:6379"])
+def test_ray_not_installed_is_named_before_the_folder(tmp_path, address, monkeypatch):
+    """Newcomer 7: a progress bar and an empty folder came first."""
+    monkeypatch.setattr("dstenv.data.ray_backend.ray_installed", lambda: False)
+    with pytest.raises(gen.GenerateError, match=r"--ray needs Ray: pip install -e '\.\[ray\]'"):
+        gen.generate(_spec(frames=4, split="train"), tmp_path / "o", ray_address=address,
+                     progress=False)
+    assert not (tmp_path / "o").exists()

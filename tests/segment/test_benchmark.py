@@ -86,6 +86,11 @@ def test_cli_benchmark_on_existing_data_and_errors(tiny, tmp_path, capsys):
     assert rc == 0
     again = json.loads((tmp_path / "results.json").read_text())
     assert "dst-tuned" not in again["segmenters"]
+    printed = capsys.readouterr().out  # --quiet: the files and the verdict, not the report
+    assert "# Segmenter benchmark" not in printed and "wrote " in printed
+    verdict = re.search(r"^goal: (.+) vs (.+) on the simulated test maps: (met|NOT met \(.*)$",
+                        printed, re.M)
+    assert (verdict is None) == (again["goal"] is None), printed
     # an extra checkpoint of the same model gets its path as label; same weights, same scores
     ckpt = str(out / "models" / "unet-light" / "best.pt")
     extra = again["segmenters"][f"unet-light ({ckpt})"]
@@ -211,3 +216,20 @@ def test_benchmark_on_evaluation_only_data_refuses_late_flags_first(tmp_path, ca
         err = capsys.readouterr().err.strip()
         assert message in err and len(err.splitlines()) == 1
         assert not out.exists()
+
+
+def test_check_goal_says_which_part_of_the_goal_failed(tmp_path, capsys, monkeypatch):
+    """Newcomer 7: it exited 1 with no line saying why (the verdict was mid-report)."""
+    goal = {"best_learned": "unet", "best_baseline": "dst-tuned", "margin_met": True,
+            "moving_met": False, "static_met": True}
+    monkeypatch.setattr("dstenv.segment.bench_cli.run_cli_benchmark",
+                        lambda args: {"goal": goal})
+    assert main(["benchmark", "--preset", "tiny", "--out", str(tmp_path / "o"),
+                 "--check-goal"]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("goal: unet vs dst-tuned on the simulated test maps: NOT met "
+                          "(moving; ") and "results.md, section Goal)" in err
+    goal["moving_met"] = True
+    assert main(["benchmark", "--preset", "tiny", "--out", str(tmp_path / "o"),
+                 "--check-goal"]) == 0
+    assert capsys.readouterr().out.endswith("on the simulated test maps: met\n")

@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -54,9 +55,10 @@ KINDS = ("right", "left", "straight", "uturn", "ring")
 STEP = 0.25  # [m] between box positions along a lane
 OUTLINE = 0.1  # [m] between outline points of the box
 LENGTH, WIDTH = 4.5, 1.9  # [m] the ego (world.ego defaults)
+SHARED = Path(os.environ.get("DSTENV_SHARED_DATA",  # ../shared/data beside the checkout
+                             Path(__file__).resolve().parents[2] / "shared" / "data"))
 OSM = [Path(__file__).resolve().parents[1] / "dstenv/scenarios/small-town.osm",
-       Path("/work/shared/data/osm/kirchberg-small.osm"),
-       Path("/work/shared/data/osm/west-oakland.osm.bz2")]
+       SHARED / "osm/kirchberg-small.osm", SHARED / "osm/west-oakland.osm.bz2"]
 
 
 def world_config(name: str) -> dict:

@@ -17,10 +17,10 @@ on, visible cells, as the main job scores them), four decision rules of the same
 and whether each meets the sim-only goal (static and moving each >= 0.10 IoU over pure
 DST, ``dstenv.segment.results.MARGIN_REAL``), with ``dst-free`` beside them::
 
-    python docs/calibrated_free.py --kitti-data /work/exp/rnv-km/kitti \\
-        --nets /work/exp/rnv-km/nets/no_map_past_kitti_moving \\
-               /work/exp/rnv-km/nets/no_map_past_kitti_moving_seeds_6_11 \\
-               /work/exp/rnv-km/nets/no_map_past_kitti_moving_seeds_12_17 \\
+    python docs/calibrated_free.py --kitti-data runs/rnv-km/kitti \\
+        --nets runs/rnv-km/nets/no_map_past_kitti_moving \\
+               runs/rnv-km/nets/no_map_past_kitti_moving_seeds_6_11 \\
+               runs/rnv-km/nets/no_map_past_kitti_moving_seeds_12_17 \\
         --out docs/calibrated-free.json
 """
 

@@ -9,7 +9,7 @@ not static) and interior, the sensor state at t-1 moved into the frame of t by t
 filter's own nearest-neighbour warp (:func:`dstenv.dst.reference.source_cells` with
 :func:`dstenv.grid.relative_pose`) against the state at t::
 
-    python docs/edge_flicker.py --kitti-root /work/shared/data/kitti-tracking \\
+    python docs/edge_flicker.py --kitti-root KITTI \\
         --drives 6 --out docs/edge-flicker.json [--lidar '{"hdl64": {...}}']
         [--world '{"map": {...}}'] [--icp] [--chained]
 

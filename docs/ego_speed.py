@@ -6,7 +6,7 @@ shows up as DST moving evidence at its edges, and grows with the ego's speed. A
 network trained on drives at one speed meets another on KITTI. This script measures
 (issue 14, "KITTI's parked cars carry moving evidence")::
 
-    python docs/ego_speed.py --run RUN --kitti-root /work/shared/data/kitti-tracking \\
+    python docs/ego_speed.py --run RUN --kitti-root KITTI \\
         --out docs/ego-speed.json
 
 - ``sim``: the ego's speed under the autopilot in the benchmark's world (``dense``;

@@ -12,10 +12,10 @@ folder; frames from ``--from-step`` on, visible cells) beside its members under 
 rule (``calibrated + free``) and ``dst`` / ``dst-free``; a row meets the sim-only goal when
 static and moving are each >= 0.10 IoU over pure DST::
 
-    python docs/ensemble_free.py --kitti-data /work/exp/rnv-km/kitti \\
-        --nets /work/exp/rnv-km/nets/no_map_past_kitti_moving \\
-               /work/exp/rnv-km/nets/no_map_past_kitti_moving_seeds_6_11 \\
-               /work/exp/rnv-km/nets/no_map_past_kitti_moving_seeds_12_17 \\
+    python docs/ensemble_free.py --kitti-data runs/rnv-km/kitti \\
+        --nets runs/rnv-km/nets/no_map_past_kitti_moving \\
+               runs/rnv-km/nets/no_map_past_kitti_moving_seeds_6_11 \\
+               runs/rnv-km/nets/no_map_past_kitti_moving_seeds_12_17 \\
         --out docs/ensemble-free.json
 """
 

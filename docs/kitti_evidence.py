@@ -6,7 +6,7 @@ simulated no-map drives of the benchmark's world (``dense``, 3-D LIDAR, 128 x 12
 cells of 0.33 m, as ``dstenv benchmark --preset cpu``), the figures that tell one
 world from the other::
 
-    python docs/kitti_evidence.py --kitti-root /work/shared/data/kitti-tracking \\
+    python docs/kitti_evidence.py --kitti-root KITTI \\
         --drives 120 --out docs/kitti-evidence.json
 
 Region: KITTI labels only its left camera's field of view, and DontCare regions are

@@ -9,8 +9,8 @@
    track), and the DST presets, ``dst-tuned`` and the networks of a main job's KITTI
    section are scored on both conversions, visible cells, from step 20 on, as there::
 
-    python docs/kitti_pose_check.py --kitti /work/shared/data/kitti-tracking \\
-        --results /work/runs/cpu33/results.json --work /tmp/pose --out docs/kitti-pose-check.json
+    python docs/kitti_pose_check.py --kitti KITTI \\
+        --results runs/cpu33/results.json --work /tmp/pose --out docs/kitti-pose-check.json
 
 ``--results`` names the run whose checkpoints and ``dst-tuned`` parameters are used
 (without patched poses the conversion here is byte for byte the main job's); about 2

@@ -8,7 +8,8 @@ b160de0). First it counts where the two differ (the fifth round's float32 road a
 may, by rounding; issue 13 allows 0.1 % of cells and points, planes within 1e-4): the
 sensor grids, ground and obstacle masks and planes of the bench world's sweeps (4 seeds,
 with and without yaw rate; each version's own sweep through its own road) and of every
-KITTI scan of ``/work/shared/data`` if present. Then it times both, minimum and median CPU time::
+KITTI scan of the shared data (``../shared/data``, or
+``$DSTENV_SHARED_DATA``) if present. Then it times both, minimum and median CPU time::
 
     mkdir -p /tmp/old && git archive OLD dstenv | tar -x -C /tmp/old   # OLD: a commit
     cd /tmp/old && mv dstenv dstenv_old
@@ -24,8 +25,10 @@ if __name__ == "__main__" and {"-h", "--help"} & set(sys.argv[1:]):  # usage: th
     raise SystemExit(0)
 
 import glob
+import os
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -84,7 +87,9 @@ for seed in range(4):
 report("bench-world sweeps (4 seeds x 2 yaw rates)", sims)
 kitti = dict(sims, **dict.fromkeys(sims, 0))
 kitti["max |plane diff|"] = 0.0
-scans = sorted(glob.glob("/work/shared/data/kitti-tracking/training/velodyne/*/*.bin"))
+shared = os.environ.get("DSTENV_SHARED_DATA",  # ../shared/data beside the checkout
+                        str(Path(__file__).resolve().parents[2] / "shared" / "data"))
+scans = sorted(glob.glob(f"{shared}/kitti-tracking/training/velodyne/*/*.bin"))
 for path in scans:
     scan = np.fromfile(path, np.float32).reshape(-1, 4)
     count_diffs(kitti, cloud_sensor_grid(scan, spec), old_road(scan, spec))

@@ -8,7 +8,7 @@ beside the whole calls. ``docs/realism-lidar.md`` (speed section) quotes it::
 
     cd /tmp && PYTHONPATH=/path/to/dstenv python /path/to/dstenv/docs/lidar_stage_profile.py 60
     cd /tmp && PYTHONPATH=/path/to/dstenv python /path/to/dstenv/docs/lidar_stage_profile.py 60 \\
-        --kitti /work/shared/data/kitti-tracking/training/velodyne/0003/000000.bin
+        --kitti KITTI/training/velodyne/0003/000000.bin
 
 The stage calls mirror the two functions; if they change, change this too (the sums
 are printed beside the real calls to show a drift).

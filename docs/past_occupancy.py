@@ -10,7 +10,7 @@ scan, frames ``--past``..39; simulated ``dense`` drives without a map at KITTI's
 speed, the ``fast`` variant of ``docs/ego_speed.py``, 256 x 256 cells), the share
 whose warped past cell was occupied, free and unknown, and pure DST's argmax::
 
-    python docs/past_occupancy.py --kitti-root /work/shared/data/kitti-tracking \\
+    python docs/past_occupancy.py --kitti-root KITTI \\
         --drives 10 --out docs/past-occupancy.json
 
 If the cue separates the classes in both sources alike, an input channel with it (the

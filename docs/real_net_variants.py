@@ -6,7 +6,7 @@ fine-tuning frames, never scored: :func:`dstenv.segment.real.start_scores`) and
 **scored** on frames 20-39 over visible cells with
 :func:`dstenv.segment.benchmark.run_benchmark`, as the main job's KITTI section::
 
-    python docs/real_net_variants.py --kitti /work/shared/data/kitti-tracking \\
+    python docs/real_net_variants.py --kitti KITTI \\
         --work /tmp/rnv --out docs/real-net-variants.json
 
 The variants draw the ``cpu`` preset's map seeds (600 frames unless a variant says

@@ -12,7 +12,7 @@ The figures are those of the scenarios as shipped by the dstenv that is imported
 
 * ``grid``: the ``default`` scenario at 256 x 256 cells of 0.33 m: unknown / free /
   occupied shares of the sensor grid by distance from the ego, and the class shares
-  of the labels (the figures of ``/work/shared/docs/realism-targets.md``);
+  of the labels (the figures of `the project's realism targets`);
 * ``bench``: the ``dense`` scenario at the benchmark's settings (128 x 128, a frame
   every 10 steps, 12 drives):
   - ``map_only``: a segmenter that reads only the GIS grid (``MAP_TO_CLASS[gis]``),

@@ -11,7 +11,7 @@ just behind the cell (the rim only partly covered); a large margin or none means
 sweep had no obstacle return of the car in that direction at all. It also says whether
 the cell of t-k lay inside that sweep's own static label::
 
-    python docs/rim_history.py --kitti-root /work/shared/data/kitti-tracking \\
+    python docs/rim_history.py --kitti-root KITTI \\
         --drives 10 --out docs/rim-history.json [--lidar '{"hdl64": {...}}'] [--icp]
 """
 

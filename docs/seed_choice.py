@@ -23,9 +23,9 @@ KITTI). This script measures, for every seed of one or more ``real_net`` work fo
 The rule of step 3 was written down before the seeds 6-11 of the confirmation were
 trained (docs/benchmark.md, "Choosing a seed on simulated drives")::
 
-    python docs/seed_choice.py --kitti-data /work/exp/rnv-km/kitti \\
-        --nets /work/exp/rnv-km/nets/no_map_past_kitti_moving \\
-               /work/exp/rnv-km/nets/no_map_past_kitti_moving_seeds_6_11 \\
+    python docs/seed_choice.py --kitti-data runs/rnv-km/kitti \\
+        --nets runs/rnv-km/nets/no_map_past_kitti_moving \\
+               runs/rnv-km/nets/no_map_past_kitti_moving_seeds_6_11 \\
         --out docs/seed-choice.json
 """
 

@@ -10,7 +10,8 @@ binomial test on the discordant pairs)::
         --b benchmarks/results/rl/eval-ppo-route-s0-450k.csv
 
 Each file must hold one policy (or name it with ``--policy-a`` / ``--policy-b``); only
-seeds present in both are compared, and the count is printed.
+seeds present in both are compared, and the count is printed. Files that record their
+env (the id, ``--env-config`` and time limit in every row) must agree on it.
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from rl_common import cli, opt, parse_args
+from rl_common import ENV_COLUMNS, cli, opt, parse_args
 
 OUTCOMES = ("success", "collision", "off_road")
 
@@ -81,6 +82,38 @@ def read_episodes(path: str, policy: str = "") -> tuple[str, dict[int, dict[str,
     return policy, out
 
 
+def read_env(path: str, policy: str) -> tuple[str, ...] | None:
+    """The env ``policy``'s episodes in ``path`` were driven in (the CSV's
+    :data:`rl_common.ENV_COLUMNS`), or None for a file written before they existed.
+
+    Raises:
+        ValueError: the policy's rows name more than one env.
+    """
+    with Path(path).open(newline="", encoding="utf-8-sig") as fh:
+        rows = [r for r in csv.DictReader(fh) if r.get("policy") == policy]
+    if not rows or not set(ENV_COLUMNS) <= set(rows[0]):
+        return None
+    envs = {tuple(r[k] for k in ENV_COLUMNS) for r in rows}
+    if len(envs) > 1:
+        raise ValueError(f"{path}: the episodes of {policy!r} come from {len(envs)} envs")
+    return envs.pop()
+
+
+def check_same_env(a: tuple[str, ...] | None, b: tuple[str, ...] | None) -> str:
+    """Refuse two files scored in different envs (a paired test of other worlds); the
+    note to print when a file does not say (``""``: both agree)."""
+    if a is None or b is None:
+        return ("note: " + ("A" if a is None else "B") + " does not record its env (an older "
+                "CSV): check that both were scored with the same --env-id, "
+                "--env-config and --max-episode-steps")
+    for k, x, y in zip(ENV_COLUMNS, a, b):
+        if x != y:
+            raise ValueError(f"A and B were scored in different envs ({k}: {x} vs {y}); "
+                             "compare drivers evaluated with the same --env-id, --env-config "
+                             "and --max-episode-steps")
+    return ""
+
+
 def mcnemar_p(only_a: int, only_b: int) -> float:
     """Exact two-sided McNemar p-value: under "no difference" each discordant episode
     goes either way with probability 1/2 (1.0 when there is none)."""
@@ -114,6 +147,9 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
         raise ValueError("--a and --b: two evaluate.py --csv files are needed")
     name_a, a = read_episodes(args.a, args.policy_a)
     name_b, b = read_episodes(args.b, args.policy_b)
+    note = check_same_env(read_env(args.a, name_a), read_env(args.b, name_b))
+    if note:
+        print(note)
     res = compare(a, b)
     dropped = len(a) + len(b) - 2 * res["episodes"]
     print(f"A = {name_a} ({args.a})\nB = {name_b} ({args.b})\n"

@@ -14,11 +14,13 @@ as a horizontal line. Run::
 from __future__ import annotations
 
 import csv
+import json
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from dstenv.io import png_path
 from rl_common import cli, opt, parse_args
 
 RATES = ("success", "collision", "off_road")
@@ -74,8 +76,50 @@ def reference_rates(paths: list[str]) -> dict[str, dict[str, float]]:
             for k in RATES:
                 d[k].append(float(r[k] in ("True", "1")))
     names = [n for n, _ in acc]
-    return {(name if names.count(name) == 1 else f"{name} ({Path(p).stem})"):
+    stems = [Path(p).stem for p in dict.fromkeys(p for _, p in acc)]
+    tag = (lambda p: Path(p).stem) if len(set(stems)) == len(stems) else str  # a/eval, b/eval
+    return {(name if names.count(name) == 1 else f"{name} ({tag(p)})"):
             {k: float(np.mean(v)) for k, v in d.items()} for (name, p), d in acc.items()}
+
+
+#: a run's arguments that do not change what it learns (seeds of one recipe may differ)
+NOT_RECIPE = {"seed", "out", "verbose", "tensorboard", "checkpoint_every", "keep_checkpoints",
+              "torch_threads", "vec_env"}
+#: those that say which env it learnt in: seeds of other envs are never one curve
+ENV_ARGS = ("env_id", "env_config", "max_episode_steps", "map_pool")
+
+
+def check_runs(runs: list[str]) -> None:
+    """Refuse a run given twice and runs of other envs as the seeds of one curve (their
+    ``model.json``); print a note for other differences of the recipe.
+
+    Raises:
+        ValueError: one line naming the runs and the argument.
+    """
+    seen: dict[Path, str] = {}
+    for d in runs:
+        key = Path(d).resolve()
+        if key in seen:
+            raise ValueError(f"--runs: {d} is given twice (as {seen[key]}): one seed, counted "
+                             "as two")
+        seen[key] = d
+    metas = {}
+    for d in runs:
+        try:
+            metas[d] = json.loads((Path(d) / "model.json").read_text())["args"]
+        except (OSError, ValueError, KeyError, TypeError):
+            continue  # a run without its first checkpoint yet: nothing to compare
+    first = next(iter(metas), None)
+    for d, args in metas.items():
+        for k in sorted(set(args) | set(metas[first])):
+            a, b = metas[first].get(k), args.get(k)
+            if a == b or k in NOT_RECIPE:
+                continue
+            if k in ENV_ARGS:
+                raise ValueError(f"--runs: {first} and {d} learnt in other envs (--"
+                                 f"{k.replace('_', '-')} {a!r} vs {b!r}); plot each env's "
+                                 "seeds on their own")
+            print(f"note: {first} and {d} differ in --{k.replace('_', '-')} ({a!r} vs {b!r})")
 
 
 def plot(args: Args) -> Path:
@@ -87,6 +131,8 @@ def plot(args: Args) -> Path:
 
     if not args.runs:
         raise ValueError("--runs: give at least one run directory")
+    png_path(args.out, "--out")  # a .png name (a folder or 'c10' was written as c10.png)
+    check_runs(args.runs)
     last = []
     for d in args.runs:
         with open(Path(d) / "episodes.csv") as fh:

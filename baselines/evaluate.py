@@ -78,6 +78,10 @@ class Args(EnvArgs):
                           "actions (rows '<policy> + shield <name>')")
 
 
+#: what a ppo_grid.py sidecar holds (and the results table reads)
+SIDECAR_KEYS = ("args", "timesteps", "wall_time_s")
+
+
 class PPOPolicy:
     """A trained PPO policy: ``model.pt`` (state_dict) and its ``model.json`` sidecar."""
 
@@ -94,9 +98,12 @@ class PPOPolicy:
         try:
             self.meta: dict[str, Any] = json.loads(sidecar.read_text())
             extractor = self.meta["args"]["extractor"]
+            missing = [k for k in SIDECAR_KEYS if k not in self.meta]
         except (ValueError, KeyError, TypeError):
-            raise ValueError(f"{sidecar}: not the model.json of a ppo_grid.py run (bad JSON "
-                             "or no 'args'); keep the pair that ppo_grid.py wrote") from None
+            missing = ["args"]
+        if missing:  # (no 'wall_time_s' failed after every episode had run)
+            raise ValueError(f"{sidecar}: not the model.json of a ppo_grid.py run (bad JSON, "
+                             f"or no {missing[0]!r}); keep the pair that ppo_grid.py wrote")
         self.deterministic = deterministic
         self.temperature = float(temperature)
         # a warm start saved before PPO took a step is the imitation policy alone
@@ -270,6 +277,7 @@ def run(args: Args, command: str) -> str:
     rows: list[tuple[str, dict[str, float], dict[str, Any] | None]] = []
     episodes: list[tuple[str, list[EpisodeResult]]] = []
     output_file(args.csv, "--csv")
+    _check_jobs(args)
     for name in args.policies:  # names, then every checkpoint (file, sidecar, weights,
         if name != "random" and name not in DRIVERS:  # temperature): before any episode
             raise ValueError(f"--policies: unknown policy {name!r}; known: {', '.join(POLICIES)}")
@@ -285,6 +293,7 @@ def run(args: Args, command: str) -> str:
         _readme_parts(args.readme)
     ppo = {path: PPOPolicy(path, args.deterministic, args.temperature)
            for path in args.checkpoints}
+    _unique_names(list(ppo.values()))
     jobs: list[tuple[Any, Any, bool]] = [(name, None, False) for name in refs]
     jobs += [(None, path, False) for path in args.checkpoints]
     if args.shield:
@@ -324,8 +333,35 @@ def run(args: Args, command: str) -> str:
     if args.write_readme:
         write_readme(args.readme, block)
     if args.csv:
-        write_results_csv(args.csv, episodes)
+        write_results_csv(args.csv, episodes, args)
     return block
+
+
+def _check_jobs(args: Args) -> None:
+    """Refuse, before any episode, an evaluation of nothing (an empty ``$CKPT`` after
+    ``--checkpoints`` replaced the CSV with a header), a checkpoint given twice, and a
+    ``--shield`` with no policy to hold back."""
+    if not args.policies and not args.checkpoints:
+        raise ValueError("nothing to evaluate: give --policies NAMES and/or --checkpoints "
+                         "FILES")
+    seen: dict[Path, str] = {}
+    for path in args.checkpoints:
+        key = Path(path).resolve()
+        if key in seen:
+            raise ValueError(f"--checkpoints: {path} is given twice (as {seen[key]})")
+        seen[key] = path
+    if args.shield and not args.checkpoints and set(args.policies) <= {"autopilot"}:
+        raise ValueError("--shield: no policy to hold back (the autopilot drives the world's "
+                         "own controls); add --policies or --checkpoints")
+
+
+def _unique_names(policies: list[PPOPolicy]) -> None:
+    """Two checkpoints of one name (``x/s0/model.pt`` and ``y/s0/model.pt``) get their
+    paths in the name: the table, the CSV and compare.py tell them apart."""
+    names = [p.name for p in policies]
+    for p in policies:
+        if names.count(p.name) > 1:
+            p.name = f"{p.name} [{p.path}]"
 
 
 def main(argv: list[str] | None = None) -> str:

@@ -59,6 +59,7 @@ from extractors import GridCNN
 from imitation import warm_start, warm_start_steps_per_round
 from rl_common import EnvArgs, atomic_write_bytes, atomic_write_text, machine_info, make_env, opt
 from rl_common import check_env_args, check_ranges, cli, parse_args, to_argv
+from runfolder import claim
 from rule_based import TEACHERS
 
 EXTRACTORS = ("grid-cnn", "route-cnn", "combined")
@@ -317,13 +318,10 @@ def load(path: str | Path, env: gym.Env, state: Any = None) -> tuple[PPO, dict[s
     try:
         model.policy.load_state_dict(state)
     except RuntimeError as exc:
-        raise ValueError(f"{path}: weights do not fit the env's spaces {env.observation_space}"
-                         f" / {env.action_space} ({str(exc).splitlines()[0]})") from None
+        raise ValueError(f"{path}: its weights do not fit the network {sidecar.name} describes "
+                         f"(extractor {args.extractor}; {str(exc).splitlines()[0]}); keep the "
+                         "pair ppo_grid.py wrote") from None
     return model, meta
-
-
-#: the files a run writes into ``--out`` (their presence: a run is there)
-RUN_FILES = ("model.pt", "model.json", "episodes.csv", "progress.csv")
 
 
 def train(args: Args) -> tuple[PPO, dict[str, Any]]:
@@ -335,10 +333,6 @@ def train(args: Args) -> tuple[PPO, dict[str, Any]]:
     check_ranges([(f"--{k.replace('_', '-')}", getattr(a, k), lo) for k, lo in lows.items()]
                  + [("--gamma", a.gamma, 0.0, 1.0), ("--gae-lambda", a.gae_lambda, 0.0, 1.0)])
     check_env_args(args)
-    taken = [n for n in RUN_FILES if (Path(args.out) / n).exists()]
-    if taken:  # a finished or interrupted run would be overwritten in silence
-        raise ValueError(f"--out {args.out}: holds a training run ({taken[0]}); choose another "
-                         "--out, or remove it to start over")
     if args.residual and args.warm_start:
         raise ValueError("--residual with --warm-start: the residual policy starts as the "
                          "rule driver already; use one of the two")
@@ -355,14 +349,17 @@ def train(args: Args) -> tuple[PPO, dict[str, Any]]:
     if args.tensorboard and importlib.util.find_spec("tensorboard") is None:
         raise ValueError("--tensorboard needs the tensorboard package: pip install -e "
                          "'.[tensorboard]'")
+    with claim(args.out) as out:  # one run per folder, held while it trains
+        return _train(args, out)
+
+
+def _train(args: Args, out: Path) -> tuple[PPO, dict[str, Any]]:
     torch.set_num_threads(args.torch_threads)
-    out = Path(args.out)
     env = make_vec_env(args)
     if args.norm_reward:
         env = VecNormalize(env, norm_obs=False, norm_reward=True, gamma=args.gamma)
     try:
         model = build_model(args, env)
-        out.mkdir(parents=True, exist_ok=True)  # after the flags' checks: none left empty
         formats = ["stdout", "csv"] if args.verbose else ["csv"]
         model.set_logger(configure(str(out), formats + (["tensorboard"] if args.tensorboard
                                                         else [])))

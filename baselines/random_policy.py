@@ -14,7 +14,7 @@ from typing import Any
 import gymnasium as gym
 
 from rl_common import EnvArgs, EpisodeResult, evaluate_policy, make_env, opt, parse_args
-from rl_common import cli, report_run
+from rl_common import cli, output_file, report_run
 
 
 @dataclass
@@ -52,8 +52,9 @@ def run(args: Args) -> tuple[str, list[EpisodeResult]]:
 def main(argv: list[str] | None = None) -> dict[str, float]:
     """Command-line entry point; returns the summary (:func:`rl_common.summarize`)."""
     args = parse_args(Args, argv)
+    output_file(args.csv, "--csv")  # before the episodes
     name, results = run(args)
-    return report_run(name, results, args.csv)
+    return report_run(name, results, args)
 
 
 if __name__ == "__main__":

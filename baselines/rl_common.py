@@ -36,12 +36,13 @@ import numpy as np
 import dstenv  # noqa: F401  (registers the DSTGrid-* ids)
 from dstenv.io import atomic_write_bytes, atomic_write_text
 from dstenv.io import output_file as check_output_file
+from runfolder import check_not_run_file
 
 __all__ = [
     "opt", "parse_args", "to_argv", "EnvArgs", "env_config", "check_env_args", "make_env",
     "output_file", "Policy",
     "EpisodeResult", "run_episode", "summarize", "report_run",
-    "evaluate_policy", "write_results_csv",
+    "evaluate_policy", "write_results_csv", "ENV_COLUMNS", "env_columns",
     "atomic_write_bytes", "atomic_write_text", "machine_info", "cli",
 ]
 
@@ -145,9 +146,16 @@ def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def output_file(path: str, flag: str) -> None:
-    """:func:`dstenv.io.output_file` of an optional output (``""``: none)."""
+def output_file(path: str, flag: str, suffix: str = ".csv") -> None:
+    """:func:`dstenv.io.output_file` of an optional output (``""``: none) that is no file
+    of a training run (:func:`runfolder.check_not_run_file`) and whose name does not
+    promise another format than its ``suffix`` (``--csv r.json`` replaced a JSON file)."""
     if path:
+        check_not_run_file(path, flag)
+        other = {".csv": ".json", ".json": ".csv"}.get(suffix)
+        if Path(path).suffix.lower() == other:
+            raise ValueError(f"{flag} {path}: the file is {suffix[1:].upper()}; give a name "
+                             f"ending in {suffix}")
         check_output_file(path, flag)
 
 
@@ -177,6 +185,11 @@ def check_env_args(args: EnvArgs) -> None:
     if args.max_episode_steps < 0:
         raise ValueError(f"--max-episode-steps {args.max_episode_steps}: must be at least 0 "
                          "(0: the registration's)")
+    world = env_config(args).get("world")
+    if isinstance(world, dict) and isinstance(world.get("map"), dict) and "pool" in world["map"]:
+        raise ValueError("--env-config world.map.pool: the drivers are scored and tuned on a "
+                         "fresh map per seed (a pool would replay training maps); ppo_grid.py "
+                         "takes its training maps as --map-pool")
 
 
 def make_env(args: EnvArgs, overrides: dict[str, Any] | None = None, monitor: bool = False,
@@ -290,25 +303,40 @@ def evaluate_policy(env: gym.Env, policy: Policy, seeds: Sequence[int],
     return results
 
 
-def write_results_csv(path: str | Path,
-                      runs: Sequence[tuple[str, Sequence[EpisodeResult]]]) -> None:
-    """Write the episodes of ``(policy name, results)`` pairs as one CSV (atomically)."""
+#: the env of an episode, in every row of a results CSV (compare.py pairs only alike)
+ENV_COLUMNS = ("env_id", "env_config", "max_episode_steps")
+
+
+def env_columns(args: EnvArgs) -> list[Any]:
+    """:data:`ENV_COLUMNS` of ``args``: the id, the ``--env-config`` as canonical JSON
+    (keys sorted, no spaces; ``{}`` for none) and the time limit (0: the registration's)."""
+    return [args.env_id, json.dumps(env_config(args), sort_keys=True, separators=(",", ":")),
+            args.max_episode_steps]
+
+
+def write_results_csv(path: str | Path, runs: Sequence[tuple[str, Sequence[EpisodeResult]]],
+                      env: EnvArgs) -> None:
+    """Write the episodes of ``(policy name, results)`` pairs, all driven in ``env``'s
+    environment, as one CSV (atomically)."""
     import io
 
     buf = io.StringIO()
     writer = csv.writer(buf)
-    writer.writerow(["policy"] + [f.name for f in dataclasses.fields(EpisodeResult)])
+    writer.writerow(["policy"] + [f.name for f in dataclasses.fields(EpisodeResult)]
+                    + list(ENV_COLUMNS))
+    where = env_columns(env)
     for name, results in runs:
-        writer.writerows([name, *dataclasses.astuple(r)] for r in results)
+        writer.writerows([name, *dataclasses.astuple(r), *where] for r in results)
     atomic_write_text(path, buf.getvalue())
 
 
-def report_run(name: str, results: list[EpisodeResult], csv: str = "") -> dict[str, float]:
-    """Print one policy's summary, optionally write its episodes to ``csv``; return it."""
+def report_run(name: str, results: list[EpisodeResult], args: Any) -> dict[str, float]:
+    """Print one policy's summary; with ``args.csv`` also write its episodes there
+    (``args``: the script's arguments, an :class:`EnvArgs`); return the summary."""
     summary = summarize(results)
     print(name, {k: round(v, 3) for k, v in summary.items()})
-    if csv:
-        write_results_csv(csv, [(name, results)])
+    if args.csv:
+        write_results_csv(args.csv, [(name, results)], args)
     return summary
 
 

@@ -170,7 +170,7 @@ def run(args: Args) -> dict[str, Any]:
 def main(argv: list[str] | None = None) -> dict[str, Any]:
     """Command-line entry point; returns the search record."""
     args = parse_args(Args, argv)
-    output_file(args.out, "--out")
+    output_file(args.out, "--out", ".json")
     record = run(args)
     best = record["best"]
     print(f"best: {json.dumps(best['params'])} (success {best['summary']['success']:.2f}, "

@@ -79,3 +79,27 @@ def test_a_binary_file_is_named(tmp_path) -> None:
     path.write_bytes(bytes(range(256)) * 4)
     with pytest.raises(ValueError, match="bin.csv: not a CSV text file"):
         compare.read_episodes(str(path))
+
+
+def test_files_scored_in_other_envs_are_not_paired(tmp_path, capsys) -> None:
+    """Attack 18: a McNemar table of two drivers scored in different env configs (every
+    row now records the env; a file without it gets a note)."""
+    from rl_common import EnvArgs, EpisodeResult, write_results_csv
+
+    ep = EpisodeResult(seed=10000, episode_return=1.0, length=10, collision=False, off_road=False,
+                       arrived=True, progress=50.0, success=True)
+    a, b, c = tmp_path / "a.csv", tmp_path / "b.csv", tmp_path / "c.csv"
+    write_results_csv(a, [("grid", [ep])], EnvArgs())
+    write_results_csv(b, [("grid", [ep])], EnvArgs(env_config='{"action": {"repeat": 3}}'))
+    write_results_csv(c, [("ppo", [ep])], EnvArgs(env_config=' { } '))
+    header, row = a.read_text().splitlines()
+    assert header.endswith(",env_id,env_config,max_episode_steps")
+    assert row.endswith(",DSTGrid-Occluded-v0,{},0")
+    assert b.read_text().splitlines()[1].endswith(',"{""action"":{""repeat"":3}}",0')
+    with pytest.raises(ValueError, match=r"A and B were scored in different envs \(env_config: "
+                                         r"\{\} vs \{\"action\":\{\"repeat\":3\}\}\)"):
+        compare.main(["--a", str(a), "--b", str(b)])
+    assert compare.main(["--a", str(a), "--b", str(c)])["episodes"] == 1  # the same env
+    old = RESULTS / "eval-grid-r3.csv"  # written before the env columns
+    compare.main(["--a", str(old), "--b", str(c)])
+    assert "note: A does not record its env" in capsys.readouterr().out

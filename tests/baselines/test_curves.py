@@ -62,3 +62,31 @@ def test_references_of_several_files_are_never_pooled(tmp_path) -> None:
     run = _run(tmp_path / "r", [])
     with pytest.raises(ValueError, match="has no finished episode yet"):
         curves.main(["--runs", str(run), "--out", str(tmp_path / "c.png")])
+
+
+def test_a_run_given_twice_or_runs_of_other_envs_are_not_one_curve(tmp_path, capsys) -> None:
+    """Attack 18: 'min..max over 2 seeds' of one run; action.repeat 1 and 3 pooled."""
+    import json
+
+    import pytest
+
+    rows = [(t, 1, 0, 0) for t in range(10, 300, 10)]
+    a, b, c = (_run(tmp_path / n, rows) for n in ("a", "b", "c"))
+    base = {"env_id": "DSTGrid-Occluded-v0", "env_config": "", "max_episode_steps": 0,
+            "map_pool": 50, "seed": 0, "learning_rate": 3e-4}
+    for run, extra in ((a, {}), (b, {"seed": 1, "learning_rate": 1e-3}),
+                       (c, {"seed": 2, "env_config": '{"action": {"repeat": 3}}'})):
+        (run / "model.json").write_text(json.dumps({"args": {**base, **extra}}))
+    out = str(tmp_path / "c.png")
+    with pytest.raises(ValueError, match=r"--runs: .*a is given twice"):
+        curves.main(["--runs", str(a), str(a), "--bin", "100", "--out", out])
+    with pytest.raises(ValueError, match=r"learnt in other envs \(--env-config '' vs "):
+        curves.main(["--runs", str(a), str(c), "--bin", "100", "--out", out])
+    curves.main(["--runs", str(a), str(b), "--bin", "100", "--out", out])  # seeds: a note
+    assert "differ in --learning-rate (0.0003 vs 0.001)" in capsys.readouterr().out
+    for other in (tmp_path / "x", tmp_path / "y"):  # two files of one stem: their paths
+        other.mkdir()
+        (other / "eval.csv").write_text("policy,seed,collision,off_road,success\n"
+                                        f"grid,1,{other.name == 'x'},False,True\n")
+    refs = curves.reference_rates([str(tmp_path / "x/eval.csv"), str(tmp_path / "y/eval.csv")])
+    assert sorted(refs) == [f"grid ({tmp_path}/x/eval.csv)", f"grid ({tmp_path}/y/eval.csv)"]

@@ -205,3 +205,35 @@ def test_default_policies_that_cannot_drive_the_env_are_left_out_with_a_note(cap
     assert "| random |" in block and "autopilot" in block and "rule-based" not in block
     with pytest.raises(ValueError, match="not action.type 'continuous'"):  # named: refused
         evaluate.main([*flags, "--policies", "grid"])
+
+
+def test_checkpoints_are_told_apart_and_a_sidecar_must_be_whole(tmp_path) -> None:
+    """Attack 18: two checkpoints named alike were one row (and one curves.py line); the
+    same file twice ran twice; a sidecar without 'wall_time_s' failed after the episodes."""
+    import json
+    import shutil
+    from pathlib import Path
+
+    import pytest
+
+    repo = Path(__file__).resolve().parents[2] / "baselines" / "checkpoints"
+    src = repo / "dagger_occluded_route_s0_100k"
+    paths = []
+    for top in ("x", "y"):
+        (tmp_path / top / "s0").mkdir(parents=True)
+        for ext in (".pt", ".json"):
+            shutil.copyfile(src.with_suffix(ext), tmp_path / top / "s0" / f"model{ext}")
+        paths.append(tmp_path / top / "s0" / "model.pt")
+    policies = [evaluate.PPOPolicy(p) for p in paths]
+    evaluate._unique_names(policies)
+    assert [p.name for p in policies] == [f"DAgger route-cnn (s0) [{p}]" for p in paths]
+    with pytest.raises(ValueError, match=r"--checkpoints: .*x/s0/\.\./s0/model\.pt is given "
+                                         r"twice"):
+        evaluate.main(["--policies", "--checkpoints", str(paths[0]),
+                       str(tmp_path / "x/s0/../s0/model.pt")])
+    meta = json.loads((tmp_path / "x/s0/model.json").read_text())
+    del meta["wall_time_s"]
+    (tmp_path / "x/s0/model.json").write_text(json.dumps(meta))
+    with pytest.raises(ValueError, match=r"model\.json: not the model\.json of a ppo_grid\.py "
+                                         r"run \(bad JSON, or no 'wall_time_s'\)"):
+        evaluate.PPOPolicy(paths[0])

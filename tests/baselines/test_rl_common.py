@@ -122,6 +122,20 @@ def test_atomic_write_leaves_no_temp_file(tmp_path) -> None:
     ("compare.py", ["--a", "nope.csv", "--b", "out/b.csv"], "nope.csv: no such file"),
     ("random_policy.py", ["--env-config", "[1]"], "--env-config: expected a JSON object"),
     ("curves.py", ["--runs", "no-such-run", "--out", "c.png"], "no-such-run"),
+    ("curves.py", ["--runs", "r", "--out", "c10"], "--out c10: the picture is a PNG"),
+    # attack 18: these were accepted
+    ("evaluate.py", ["--policies", "--csv", "out/none.csv"],
+     "nothing to evaluate: give --policies NAMES and/or --checkpoints FILES"),
+    ("evaluate.py", ["--policies", "autopilot", "--shield", "grid"],
+     "--shield: no policy to hold back"),
+    ("evaluate.py", ["--policies", "random", "--csv", "out/r.json"],
+     "--csv out/r.json: the file is CSV; give a name ending in .csv"),
+    ("evaluate.py", ["--policies", "random", "--env-config", '{"world": {"map": {"pool": 3}}}'],
+     "--env-config world.map.pool: the drivers are scored and tuned on a fresh map per seed"),
+    ("ppo_grid.py", ["--env-config", '{"world": {"map": {"pool": 3}}}', "--out", "out"],
+     "takes its training maps as --map-pool"),
+    ("random_policy.py", ["--csv", "."], "--csv .: is a directory"),  # (after the episodes)
+    ("rule_based.py", ["--csv", "out/x.json"], "the file is CSV"),
 ])
 def test_scripts_report_bad_input_in_one_line(tmp_path, script, argv, message) -> None:
     """Each baseline script turns an expected error into one line and exit status 2,
@@ -152,3 +166,44 @@ def test_ppo_grid_refuses_an_out_holding_a_run(tmp_path) -> None:
     assert proc.returncode == 2 and "holds a training run (episodes.csv)" in proc.stderr
     assert (run / "episodes.csv").read_text() == "timesteps\n"
 
+
+
+def test_no_output_replaces_a_file_of_a_training_run(tmp_path) -> None:
+    """Attack 18: --csv runs/x/model.json replaced the sidecar (the checkpoint was then
+    unusable), --csv runs/x/episodes.csv the learning curve."""
+    import pytest
+    from rl_common import output_file
+
+    run = tmp_path / "run"
+    run.mkdir()
+    for name in ("model.pt", "model.json", "episodes.csv", "model_64.json"):
+        (run / name).write_text("{}" if name.endswith(".json") else "x\n")
+    for name in ("model.json", "episodes.csv", "progress.csv", "model_64.json", "model_9.pt"):
+        suffix = ".json" if name.endswith(".json") else ".csv"
+        with pytest.raises(ValueError, match=rf"--csv .*run/{name}: is a file of the training "
+                                             r"run in .*run; give another file name"):
+            output_file(str(run / name), "--csv", suffix)
+    output_file(str(run / "eval.csv"), "--csv")  # a report of its own beside the run: fine
+    output_file(str(tmp_path / "episodes.csv"), "--csv")  # no run there
+
+
+def test_a_run_folder_is_claimed_by_one_training_at_a_time(tmp_path) -> None:
+    """Attack 18: two trainings into one --out both 'succeeded' and one run was lost;
+    removing the four run files let a new run overwrite kept checkpoints."""
+    import pytest
+    from runfolder import claim
+
+    from dstenv.data.lock import DatasetLocked
+
+    with claim(tmp_path / "r") as out:
+        with pytest.raises(DatasetLocked, match=r"is being written by pid \d+"):
+            with claim(out):
+                pass
+        (out / "model_64.pt").write_bytes(b"x")
+    with pytest.raises(ValueError, match=r"holds a training run \(model_64\.pt\)"):
+        with claim(tmp_path / "r"):
+            pass
+    with pytest.raises(RuntimeError):  # a run that fails before writing leaves no folder
+        with claim(tmp_path / "s"):
+            raise RuntimeError("boom")
+    assert not (tmp_path / "s").exists()

@@ -262,3 +262,17 @@ def test_wrong_argument_kinds_are_named():
         with pytest.raises(ValueError, match="expected 2 real numbers"):
             env.step(bad)
     env.step(np.array([True, False]))  # bools and ints are numbers
+
+
+def test_a_first_reset_refused_for_its_options_leaves_a_usable_env():
+    """Attack 18: gymnasium's passive checker marked the first reset checked before it
+    ran, so after a refused one every step failed ('cannot unpack non-iterable NoneType')."""
+    import gymnasium as gym
+
+    env = gym.make("DSTGrid-Highway-v0", config={"grid": {"height": 40, "width": 40}})
+    with pytest.raises(ConfigError, match="reset options: a dict of the one key 'config'"):
+        env.reset(seed=1, options={"bogus": 1})
+    env.reset(seed=1)
+    obs, reward, *_ = env.step(1)
+    assert env.observation_space.contains(obs) and np.isfinite(reward)
+    env.close()

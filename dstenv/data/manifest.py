@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import posixpath
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
@@ -221,9 +222,10 @@ def _check_entries(manifest: dict[str, Any], path: Path) -> None:
             raise ManifestError(f"{path}: shard entry {i} ({e['file']}): a negative count, a "
                                 f"grid shape that is not two sizes or {n_classes} class counts "
                                 f"expected ({fix})")
-        if e["file"] in seen:
+        name = posixpath.normpath(e["file"])  # ("train/./a.h5" and "val/../train/a.h5")
+        if name in seen:
             raise ManifestError(f"{path}: {e['file']} is listed twice ({fix})")
-        seen.add(e["file"])
+        seen.add(name)
     try:
         derived = build_manifest(shards)
     except ManifestError as exc:
@@ -317,6 +319,10 @@ def load_manifest(root: str | Path, verify: str = "attrs") -> dict[str, Any]:
                 if "attrs_sha256" in e and attrs_sha256(r.attrs) != e["attrs_sha256"]:
                     raise ManifestError(f"{path}: {e['file']} was made with other settings or "
                                         f"seeds than the manifest lists ({hint})")
+                if r.attrs.get("split", e["split"]) != e["split"]:  # (an edited split)
+                    raise ManifestError(f"{path}: {e['file']} is a shard of split "
+                                        f"{r.attrs.get('split')!r}, the manifest says "
+                                        f"{e['split']!r} ({hint})")
                 counts = [int(c) for c in r.class_counts()]
                 if counts != e["class_counts"]:
                     raise ManifestError(f"{path}: {e['file']} holds class counts {counts}, the "

@@ -4,6 +4,7 @@ shard file, or a list of them; and the check that two shards belong to one datas
 
 from __future__ import annotations
 
+import os
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -48,9 +49,11 @@ def resolve_files(root_or_files: str | Path | Sequence[str | Path], split: str |
         raise ValueError(f"ShardDataset: a dataset folder, a shard file or a non-empty list "
                          f"of shard files, got {root_or_files!r}")
     files = [Path(p) for p in root_or_files]
-    if len(set(files)) != len(files):
-        raise ValueError(f"ShardDataset: {next(p for p in files if files.count(p) > 1)} is "
-                         "listed twice (its frames would count twice)")
+    real = [os.path.realpath(p) for p in files]  # (another spelling of one file counted)
+    if len(set(real)) != len(real):
+        twice = next(p for p, r in zip(files, real) if real.count(r) > 1)
+        raise ValueError(f"ShardDataset: {twice} is listed twice (its frames would count "
+                         "twice)")
     return [(p, None) for p in files]
 
 

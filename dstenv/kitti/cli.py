@@ -265,9 +265,9 @@ def _evaluate(args: argparse.Namespace) -> int:
     import shutil
     import tempfile
 
-    from dstenv.segment.bench_cli import run_cli_benchmark
-
     from dstenv.config import CLIError
+    from dstenv.io import atomic_write_bytes, output_file
+    from dstenv.segment.bench_cli import run_cli_benchmark
 
     if args.batch_size < 1:
         raise CLIError(f"--batch-size must be >= 1, got {args.batch_size}")
@@ -275,19 +275,28 @@ def _evaluate(args: argparse.Namespace) -> int:
         if value is not None and not value.strip():  # an unset variable, not "no --out"
             raise CLIError(f"{flag}: empty; leave it out or give a path")
     if args.json:
-        from dstenv.io import output_file
-
         output_file(args.json, "--json")  # before the scoring, not after
     tmp = None if args.out else tempfile.mkdtemp(prefix="dstenv-kitti-eval-")
     bench = argparse.Namespace(
         preset=None, protocol=None, out=args.out or tmp, data=args.data,
-        checkpoint=args.checkpoint, quiet=True,
+        checkpoint=args.checkpoint, quiet=True, show_report=True,
         set=[f"eval_batch_size={args.batch_size}", "device=\"cpu\"", *(args.set or [])],
     )
     try:
-        run_cli_benchmark(bench, split=args.split, kept=tmp is None)
-        if args.json:
-            shutil.copyfile(Path(bench.out) / "results.json", args.json)
+        try:
+            run_cli_benchmark(bench, split=args.split, kept=tmp is None)
+        except OSError as exc:  # (it named a scratch file that was then deleted)
+            if tmp is None:
+                raise
+            raise CLIError(f"the report's scratch folder {tmp} (removed) could not be "
+                           f"written ({exc.strerror or exc}); give --out DIR on a disk with "
+                           "room") from None
+        if args.json:  # atomically: a full disk left a cut JSON in place of the old one
+            try:
+                atomic_write_bytes(args.json, (Path(bench.out) / "results.json").read_bytes())
+            except OSError as exc:
+                raise CLIError(f"--json {args.json}: cannot write it ({exc.strerror or exc}); "
+                               "the file there is unchanged") from None
             print(f"wrote {args.json}")
     finally:
         if tmp:

@@ -97,8 +97,8 @@ def run_cli_benchmark(args: argparse.Namespace, split: str = "test", kept: bool 
         split=split,
     )
     out = Path(args.out)
-    if not args.quiet:  # --quiet: the files' names and the goal's verdict only
-        print((out / "results.md").read_text())
+    if getattr(args, "show_report", not args.quiet):  # benchmark --quiet: the files and
+        print((out / "results.md").read_text())  # the verdict (kitti evaluate: the report)
     if kept:
         print(f"wrote {out / 'results.json'}, {out / 'results.md'}, {out / 'figures'}/*.png")
     else:

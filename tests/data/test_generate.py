@@ -202,6 +202,11 @@ def test_manifest_mismatch_is_reported(tmp_path):
     (lambda m: m["splits"]["val"]["class_counts"].__setitem__(0, 1),
      r"'splits.val.class_counts' is \[1, "),
     (lambda m: m["shards"].append(dict(m["shards"][0])), r"val/shard-00000\.h5 is listed twice"),
+    # attack 17: another spelling of the same file was read twice
+    (lambda m: m["shards"].append(dict(m["shards"][0], file="val/./shard-00000.h5")),
+     r"val/\./shard-00000\.h5 is listed twice"),
+    (lambda m: m["shards"].append(dict(m["shards"][0], file="train/../val/shard-00000.h5")),
+     r"is listed twice"),
 ])
 def test_an_edited_manifest_is_one_line(tmp_path, edit, message):
     import json
@@ -499,3 +504,22 @@ def test_ray_not_installed_is_named_before_the_folder(tmp_path, address, monkeyp
         gen.generate(_spec(frames=4, split="train"), tmp_path / "o", ray_address=address,
                      progress=False)
     assert not (tmp_path / "o").exists()
+
+
+def test_a_split_edited_in_the_manifest_is_refused(tmp_path):
+    """Attack 17: an entry moved to another split by hand (totals made consistent) put its
+    frames in no split of ShardDataset and in another in dstenv info."""
+    import json
+
+    from dstenv.data.manifest import build_manifest
+
+    gen.generate(_spec(frames=8, split="val"), tmp_path, progress=False)
+    path = tmp_path / "manifest.json"
+    m = json.loads(path.read_text())
+    m["shards"][0]["split"] = "test"
+    m.update({k: v for k, v in build_manifest(m["shards"]).items() if k != "shards"})
+    path.write_text(json.dumps(m))
+    load_manifest(tmp_path, verify="size")  # consistent with itself
+    with pytest.raises(ManifestError, match=r"val/shard-00000\.h5 is a shard of split 'val', "
+                                            r"the manifest says 'test'"):
+        load_manifest(tmp_path)

@@ -30,7 +30,9 @@ def test_empty_or_repeated_inputs_are_refused(dataset, tmp_path):
     for bad, message in ((tmp_path / "empty", r"empty: no manifest\.json and no shard files"),
                          ([], "a non-empty list of shard files, got \\[\\]"),
                          (5, "got 5"),
-                         ([one, one], r"shard-00000\.h5 is listed twice")):
+                         ([one, one], r"shard-00000\.h5 is listed twice"),
+                         ([one, one.parent / ".." / "train" / one.name],  # another spelling
+                          r"shard-00000\.h5 is listed twice")):
         with pytest.raises(ValueError, match=message):
             ShardDataset(bad)
     with pytest.raises(FileNotFoundError, match="no such dataset directory"):

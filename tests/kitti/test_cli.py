@@ -162,6 +162,27 @@ def test_render_and_evaluate(tiny_root, tmp_path, capsys):
     assert "the report is not kept: add --out DIR" in text
     res = json.loads(js.read_text())["segmenters"]["dst (default)"]
     assert set(res) >= {"observed", "all", "visible"}
+    # attack 17: a full disk cut the old --json file to a broken JSON (copied in place)
+    import errno
+
+    import dstenv.io
+
+    before = js.read_bytes()
+
+    real = dstenv.io.atomic_write_bytes
+
+    def full(path, data, *a, **k):  # the disk fills at the --json file
+        if str(path) == str(js):
+            raise OSError(errno.ENOSPC, "No space left on device", str(path))
+        return real(path, data, *a, **k)
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(dstenv.io, "atomic_write_bytes", full)
+        assert main(["kitti", "evaluate", "--data", str(out), "--json", str(js)]) == 2
+    err = capsys.readouterr().err
+    assert f"--json {js}: cannot write it (No space left on device); the file there is " \
+           "unchanged" in err
+    assert js.read_bytes() == before
 
 
 @pytest.mark.parametrize("osm", ["dangling.osm"])

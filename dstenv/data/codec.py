@@ -36,7 +36,8 @@ import numpy as np
 
 from dstenv.dst import SensorState
 
-__all__ = ["fletcher32", "encode_chunk", "quantize", "quantize_cells", "class_counts", "same_bytes",
+__all__ = ["fletcher32", "encode_chunk", "quantize", "quantize_cells", "quantize_check",
+           "class_counts", "same_bytes",
            "observed_is", "DIRECT_COMPRESSIONS", "DEFLATE_ENGINES"]
 
 #: compressions whose chunks :func:`encode_chunk` can produce (lzf lives inside h5py only)
@@ -223,6 +224,15 @@ def quantize_cells(p: np.ndarray, scale: int, out: np.ndarray | None = None) -> 
     if not _quantize_cells(flat, flat.view(np.uint32), np.float32(scale), out.reshape(-1)):
         raise ValueError("probabilities hold NaN/inf")
     return out
+
+
+def quantize_check(p: np.ndarray) -> np.ndarray:
+    """``(5, H, W)`` ``p`` as cell-major ``(H, W, 5)`` float32 clipped to [0, 1], as
+    uint8 shards are (1.7 was kept); ValueError if it holds NaN/inf."""
+    p = np.ascontiguousarray(np.moveaxis(np.asarray(p, dtype=np.float32), 0, -1))
+    if not np.all(np.isfinite(p)):
+        raise ValueError("NaN/inf")
+    return np.clip(p, 0.0, 1.0)  # a copy: p may be the caller's
 
 
 @nb.njit(cache=True, nogil=True)

@@ -122,6 +122,7 @@ class ShardDataset(Dataset):
             raise TypeError(f"ShardDataset cache must be True or False, got {cache!r}")
         self.inputs, self.on_error, self.split = inputs, on_error, split
         self.files: list[Path] = []
+        self._stamps: list[tuple[int, ...]] = []  # each file as it was read here
         lengths: list[int] = []
         #: ``(5,) int64`` labelled cells per class over the kept shards (loss weights)
         self.class_counts = np.zeros(N_CLASSES, dtype=np.int64)
@@ -154,6 +155,7 @@ class ShardDataset(Dataset):
             first = first or mine
             same_dataset(first, mine, folder)
             self.files.append(path)
+            self._stamps.append(_stamp(path))
             lengths.append(n)
             self.class_counts += counts
         #: ``(H, W)`` cells and cell size [m] of the kept shards (``None`` without any)
@@ -215,7 +217,12 @@ class ShardDataset(Dataset):
         if self._pid != os.getpid():  # forked into a worker: never reuse the parent's handles
             self._readers, self._pid = {}, os.getpid()
         if k not in self._readers:
-            self._readers[k] = ShardReader(self.files[k])
+            reader = ShardReader(self.files[k])
+            if _stamp(self.files[k]) != self._stamps[k]:  # (replaced under a running train,
+                reader.close()  # its frames were read as if they were the ones counted)
+                raise ShardError(f"{self.files[k]}: changed since this dataset was opened "
+                                 "(another run rewrote it?); open the dataset again")
+            self._readers[k] = reader
         return self._readers[k]
 
     def no_map_indices(self) -> list[int]:
@@ -378,3 +385,9 @@ class StreamingDataset(IterableDataset):
             if self.max_frames is not None and n >= self.max_frames:
                 return
             yield frame_to_sample(frame, self.inputs, self.labels)
+
+
+def _stamp(path: Path) -> tuple[int, ...]:
+    """A file's identity on disk: device, inode, size, modification time [ns]."""
+    st = os.stat(path)
+    return st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns

@@ -289,12 +289,13 @@ def _generate(spec: GenerateSpec, out: Path, workers: int, ray_address: str | No
     except BrokenProcessPool:
         n = len(scan_shards(out))
         raise GenerateError(f"a worker process died (killed by the system: out of memory?); "
-                            f"{n} finished shards kept in {out}; rerun the same command to "
-                            "resume, with fewer --workers if memory is short") from None
+                            f"{n} finished shard{'' if n == 1 else 's'} kept in {out}; rerun "
+                            "the same command to resume, with fewer --workers if memory is "
+                            "short") from None
     except (OSError, ShardError) as exc:
         n = len(scan_shards(out))
-        raise GenerateError(f"{exc}; {n} finished shards kept in {out}, rerun the same command "
-                            "to resume") from None
+        raise GenerateError(f"{exc}; {n} finished shard{'' if n == 1 else 's'} kept in {out}, "
+                            "rerun the same command to resume") from None
     finally:
         bar.close()
     done.update(results)

@@ -18,8 +18,9 @@ import numpy as np
 from dstenv import __version__
 from dstenv.data.codec import (
     DEFLATE_ENGINES, DIRECT_COMPRESSIONS, class_counts, encode_chunk, observed_is,
-    quantize_cells, same_bytes,
+    quantize_cells, quantize_check, same_bytes,
 )
+from dstenv.data import h5image
 from dstenv.io import fsync_dir
 from dstenv.data.format import (
     BUFFER_BYTES, BUFFER_FRAMES, FORMAT, FORMAT_VERSION, GRID_FIELDS, N_CLASSES, N_MASSES,
@@ -123,6 +124,7 @@ class ShardWriter:
         self._qbufs: list[np.ndarray] = []
         self._last_chunk: Any = None  # its encoded chunk (bytes or Future)
         self._file: h5py.File | None = None
+        self._fd: int | None = None  # the locked .partial file of an in-memory shard
         self._closed = False  # entered and left: a writer writes one shard once
         self._shape: tuple[int, int] | None = None
         self._datasets: dict[str, h5py.Dataset] = {}
@@ -136,8 +138,11 @@ class ShardWriter:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         if self._file is not None or self._closed:
             raise RuntimeError(f"{self.path}: a ShardWriter is entered once; make a new one")
-        try:
-            self._file = h5py.File(self.tmp_path, "w", track_order=False)
+        try:  # in memory, written at close (h5image: a full disk crashed HDF5), but with
+            if self.masses:  # masses (~100x larger) through HDF5's own file
+                self._file = h5py.File(self.tmp_path, "w", track_order=False)
+            else:
+                self._file, self._fd = h5image.create(self.tmp_path)
         except OSError as exc:  # h5py's text named neither the file nor the cause
             busy = "lock" in str(exc) or "already open" in str(exc)
             raise OSError(exc.errno, f"{self.path}: cannot create {self.tmp_path.name}: " + (
@@ -365,10 +370,14 @@ class ShardWriter:
             self._flush(f)
             self._finish()
             self._write_attrs(f)
-            f.flush()
-            os.fsync(f.id.get_vfd_handle())
-            f.close()
-            os.replace(self.tmp_path, self.path)
+            if self._fd is not None:
+                fd, self._fd = self._fd, None
+                h5image.commit(f, fd, self.tmp_path, self.path)
+            else:
+                f.flush()
+                os.fsync(f.id.get_vfd_handle())
+                f.close()
+                os.replace(self.tmp_path, self.path)
         except (OSError, RuntimeError) as exc:
             self._discard(f)
             raise self._write_error(exc) from None
@@ -379,20 +388,8 @@ class ShardWriter:
 
     def _discard(self, f: h5py.File) -> None:
         """Close (ignoring HDF5 errors after a failed write) and delete the partial file."""
-        try:
-            f.close()
-        except (OSError, RuntimeError):
-            pass
-        self.tmp_path.unlink(missing_ok=True)
-
-
-def quantize_check(p: np.ndarray) -> np.ndarray:
-    """``(5, H, W)`` ``p`` as cell-major ``(H, W, 5)`` float32 clipped to [0, 1], as
-    uint8 shards are (1.7 was kept); ValueError if it holds NaN/inf."""
-    p = np.ascontiguousarray(np.moveaxis(np.asarray(p, dtype=np.float32), 0, -1))
-    if not np.all(np.isfinite(p)):
-        raise ValueError("NaN/inf")
-    return np.clip(p, 0.0, 1.0)  # a copy: p may be the caller's
+        fd, self._fd = self._fd, None
+        h5image.discard(f, fd, self.tmp_path)
 
 
 def _expect(path: Path, name: str, a: np.ndarray, shape: tuple[int, ...]) -> None:

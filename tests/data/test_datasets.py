@@ -341,3 +341,21 @@ def test_set_epoch_takes_an_integer_at_least_zero():
             ds.set_epoch(bad)
     ds.set_epoch(3)
     assert ds.epoch == 3
+
+
+def test_a_shard_replaced_after_the_dataset_was_opened_is_refused(dataset_dir, tmp_path):
+    """Attack 17: shards replaced under a running train were read as the ones counted."""
+    import os
+    import pickle
+    import shutil
+
+    root, _ = dataset_dir
+    ds = ShardDataset(root, split="train")
+    first, k = ds.locate(0)
+    copy = tmp_path / "other.h5"
+    shutil.copyfile(first, copy)
+    os.replace(copy, first)  # the same bytes, another file (a rewrite)
+    worker = pickle.loads(pickle.dumps(ds))  # as a DataLoader worker opens it
+    with pytest.raises(ShardError, match=r"changed since this dataset was opened"):
+        worker[0]
+    assert len(ShardDataset(root, split="train")[0]["x"])  # opened again: fine

@@ -373,3 +373,28 @@ def test_records_are_checked_when_added_and_a_name_may_be_one_string(tmp_path, f
 def test_writer_threads_are_an_integer_at_least_zero(tmp_path, shard_attrs, threads):
     with pytest.raises(ValueError, match="threads must be an integer >= 0"):
         ShardWriter(tmp_path / "a.h5", shard_attrs, threads=threads)
+
+
+def test_a_shard_is_built_in_memory_with_the_bytes_hdf5_writes(tmp_path, frames, shard_attrs,
+                                                               monkeypatch):
+    """Attack 17: a full disk failed HDF5's flush, and freeing the shard's datasets then
+    crashed the process (segmentation fault). The shard is now built in memory and
+    written with os.write: the same bytes, and a full disk is a plain OSError."""
+    import errno
+
+    import dstenv.data.h5image as h5image
+
+    mem = _write(tmp_path / "mem.h5", frames, shard_attrs)
+    with monkeypatch.context() as mp:  # HDF5's own file, as before (and for masses)
+        mp.setattr(h5image, "create", lambda tmp: (h5py.File(tmp, "w", track_order=False),
+                                                   None))
+        disk = _write(tmp_path / "disk.h5", frames, shard_attrs)
+    assert mem.read_bytes() == disk.read_bytes()
+
+    def full(fd, data):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(h5image.os, "write", full)
+    with pytest.raises(OSError, match=r"full\.h5: cannot write shard: No space left on device"):
+        _write(tmp_path / "full.h5", frames, shard_attrs)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["disk.h5", "mem.h5"]  # no .partial

@@ -144,8 +144,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 0
+    from dstenv.data.lifeline import sigterm_as_interrupt
+
     try:
-        return int(args.func(args) or 0)
+        with sigterm_as_interrupt():  # every command: SIGTERM (docker stop, SLURM) cleans up
+            return int(args.func(args) or 0)  # like Ctrl-C (a kill left locks, partials)
     except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM where a command turned it into one
         terminated = type(exc).__name__ == "Terminated"
         kept = ("; finished work is kept, rerun the same command to resume"

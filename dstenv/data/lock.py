@@ -169,7 +169,10 @@ def dataset_lock(folder: str | Path, force: bool = False) -> Iterator[Path]:
     finally:
         os.close(fd)
         if _owner(path).get("pid") == me["pid"]:
-            path.unlink(missing_ok=True)
+            # a folder made read-only meanwhile: the lock stays (stale once this process
+            # is gone) rather than its PermissionError hiding the run's own error
+            with contextlib.suppress(OSError):
+                path.unlink(missing_ok=True)
 
 
 def writer_of(folder: str | Path) -> str | None:

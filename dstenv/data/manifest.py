@@ -279,11 +279,12 @@ def load_manifest(root: str | Path, verify: str = "attrs") -> dict[str, Any]:
         manifest = json.loads(path.read_text(encoding="utf-8"), object_pairs_hook=_unique_keys)
     except FileNotFoundError:
         raise ManifestError(f"{path}: no manifest (not a dataset directory?)") from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise ManifestError(f"{path}: unreadable manifest: {exc}") from None
     except _DuplicateKey as exc:
         raise ManifestError(f"{path}: key {exc} appears twice in one object; the manifest was "
                             "edited: delete it and rerun the command that made the dataset"
+                            ) from None
+    except (OSError, ValueError) as exc:  # bad JSON or UTF-8, an integer of 5000 digits
+        raise ManifestError(f"{path}: unreadable manifest: {' '.join(str(exc).split())}"
                             ) from None
     if not isinstance(manifest, dict) or manifest.get("format") != MANIFEST_FORMAT:
         raise ManifestError(f"{path}: not a dstenv manifest")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import errno
 import json
 from collections.abc import Iterable, Sequence
 from pathlib import Path
@@ -43,6 +44,10 @@ class ShardReader:
             # 16 MiB chunk cache: one 256x256 masses chunk is 8 MiB
             self._file = h5py.File(self.path, "r", rdcc_nbytes=16 << 20)
         except OSError as exc:
+            if exc.errno == errno.EACCES or "errno = 13," in str(exc):  # not a corrupt file
+                raise PermissionError(errno.EACCES, "permission denied; fix the file's "
+                                      "permissions (it is not read as corrupt)",
+                                      str(self.path)) from None
             raise ShardError(f"{self.path}: not a readable HDF5 file (truncated or corrupt?): "
                              f"{short_error(exc)}") from None
         try:

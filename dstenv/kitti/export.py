@@ -246,7 +246,11 @@ def export_drive(config: Mapping[str, Any], seed: int, frames: int, out: str | P
         c, s = np.cos(ego[2]), np.sin(ego[2])
         velo = np.array([ego[0] + c * mount[0] - s * mount[1],
                          ego[1] + s * mount[0] + c * mount[1], ego[2]])
-        cloud.points.astype("<f4").tofile(stage / "velodyne" / f"{f:06d}.bin")
+        scan = stage / "velodyne" / f"{f:06d}.bin"
+        try:  # (ndarray.tofile on a full disk said only "496944 requested and 316416 written")
+            scan.write_bytes(cloud.points.astype("<f4").tobytes())
+        except OSError as exc:
+            raise OSError(exc.errno, exc.strerror or str(exc), str(scan)) from None
         on_agent = cloud.surface == SURFACES.index("agent")
         returns = np.bincount(cloud.index[on_agent], minlength=len(world.agents))
         labels += label_rows(f, world.agents, velo, calib, returns,

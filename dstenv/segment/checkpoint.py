@@ -18,8 +18,10 @@ An ensemble (:class:`~dstenv.segment.segmenters.EnsembleSegmenter`, written by
 
 from __future__ import annotations
 
+import errno
 import hashlib
 import json
+import shutil
 import zipfile
 from pathlib import Path
 from typing import Any
@@ -47,9 +49,15 @@ def save_checkpoint(path: str | Path, payload: dict[str, Any]) -> Path:
         with atomic_path(path) as tmp:
             torch.save({"format": FORMAT, "version": _VERSION, **payload}, tmp)
     except RuntimeError as exc:  # torch's zip writer reports a full disk this way
+        try:  # (its text, "[enforce fail at inline_container.cc:672] . unexpected pos",
+            free = shutil.disk_usage(path.parent).free  # named no cause)
+        except OSError:
+            free = -1
+        if 0 <= free < 64 << 20:
+            raise OSError(errno.ENOSPC, f"cannot write the checkpoint: the disk is full "
+                          f"({free >> 10} KiB free)", str(path)) from None
         first = (str(exc).strip().splitlines() or ["write failed"])[0]
-        raise OSError(f"{path}: cannot write the checkpoint ({first}); is the disk full?"
-                      ) from None
+        raise OSError(f"{path}: cannot write the checkpoint ({first})") from None
     return path
 
 

@@ -322,8 +322,10 @@ def write_report(
         preds: segmenter label -> ``{(seed, episode, step): (H, W) prediction}``.
     """
     figs = out / "figures"
-    write_json(out / "results.json", results)
-    atomic_write_text(out / "results.md", markdown_table(results))
+    # the figures first, results.json last: a report cut short (a full disk) is never one
+    # that looks finished without its figures (a rerun writes it whole)
+    for name in ("results.json", "results.md"):
+        (out / name).unlink(missing_ok=True)
     for scope in ("observed", "visible", "all"):
         plot_confusions(results, figs / f"confusion_{scope}.png", scope)
     if results["histories"]:
@@ -349,3 +351,5 @@ def write_report(
         })
     if examples:
         plot_examples(examples, figs / "examples.png")
+    atomic_write_text(out / "results.md", markdown_table(results))
+    write_json(out / "results.json", results)

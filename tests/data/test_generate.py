@@ -523,3 +523,17 @@ def test_a_split_edited_in_the_manifest_is_refused(tmp_path):
     with pytest.raises(ManifestError, match=r"val/shard-00000\.h5 is a shard of split 'val', "
                                             r"the manifest says 'test'"):
         load_manifest(tmp_path)
+
+
+def test_a_manifest_number_python_cannot_read_names_the_file(tmp_path):
+    """Attack 17: an integer of 5000 digits gave Python's message without the file."""
+    import sys
+
+    if not hasattr(sys, "get_int_max_str_digits"):
+        pytest.skip("this Python reads integers of any length")
+    gen.generate(_spec(frames=8, split="val"), tmp_path, progress=False)
+    path = tmp_path / "manifest.json"
+    path.write_text(path.read_text().replace('"frames": 8', '"frames": ' + "9" * 5000, 1))
+    with pytest.raises(ManifestError, match=r"manifest\.json: unreadable manifest: Exceeds the "
+                                            r"limit \(4300 digits\)"):
+        load_manifest(tmp_path)

@@ -292,3 +292,30 @@ def test_a_lock_released_while_read_is_no_stale_lock_to_take_over(tmp_path, monk
         b_holds = False
     assert not (b_holds and c_holds), "B took the lock C holds"
     assert not c_holds or path.exists()  # C's lock is still there
+
+
+def test_sigterm_of_any_command_cleans_up_like_ctrl_c(tmp_path):
+    """Attack 17: only generate handled SIGTERM; train (and kitti convert, benchmark) died
+    at once (exit -15, no message) and left their folder's lock behind."""
+    from dstenv.cli import main
+    from dstenv.data.lock import LOCK_NAME
+
+    data = tmp_path / "d"
+    assert main(["generate", "--frames", "12", "--grid", "32", "--episode-length", "30",
+                 "--frames-per-shard", "4", "--quiet", "--out", str(data)]) == 0
+    out = tmp_path / "t"
+    proc = subprocess.Popen([sys.executable, "-m", "dstenv.cli", "train", "--data", str(data),
+                             "--out", str(out), "--epochs", "100000", "--batch-size", "2",
+                             "--num-workers", "0", "--quiet"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    while not (out / LOCK_NAME).exists() and proc.poll() is None:
+        assert time.monotonic() < deadline, "train never took its folder's lock"
+        time.sleep(0.1)
+    time.sleep(1.0)
+    os.kill(proc.pid, signal.SIGTERM)
+    proc.wait(timeout=60)
+    err = proc.stderr.read()
+    assert proc.returncode == 143, err
+    assert "dstenv: terminated; finished work is kept" in err
+    assert not (out / LOCK_NAME).exists()  # released, as after Ctrl-C

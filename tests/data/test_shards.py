@@ -398,3 +398,20 @@ def test_a_shard_is_built_in_memory_with_the_bytes_hdf5_writes(tmp_path, frames,
     with pytest.raises(OSError, match=r"full\.h5: cannot write shard: No space left on device"):
         _write(tmp_path / "full.h5", frames, shard_attrs)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["disk.h5", "mem.h5"]  # no .partial
+
+
+def test_an_unreadable_shard_is_no_corrupt_one(tmp_path, frames, shard_attrs, monkeypatch):
+    """Attack 17: a shard without read permission was named corrupt, and a generate
+    rerun set the intact file aside as .corrupt and made it again."""
+    import dstenv.data.reader as reader
+
+    path = _write(tmp_path / "s.h5", frames, shard_attrs)
+
+    def denied(*a, **k):
+        raise OSError(13, "Unable to synchronously open file (file open failed: errno = 13, "
+                          "error message = 'Permission denied')")
+
+    monkeypatch.setattr(reader.h5py, "File", denied)
+    with pytest.raises(PermissionError, match="permission denied; fix the file's permissions"):
+        ShardReader(path)
+    assert not isinstance(PermissionError(), ShardError)  # so resume never sets it aside

@@ -19,7 +19,7 @@ import re
 from collections.abc import Iterator
 from pathlib import Path
 
-from dstenv.data.lock import LOCK_NAME, dataset_lock
+from dstenv.data.lock import LOCK_NAME, DatasetLocked, dataset_lock
 
 __all__ = ["RUN_FILES", "run_files", "claim", "check_not_run_file"]
 
@@ -53,7 +53,15 @@ def claim(folder: str | Path, flag: str = "--out") -> Iterator[Path]:
     _check_empty(folder, flag)  # before the lock: no folder is made for a refused run
     made = not folder.exists()
     try:
-        with dataset_lock(folder):
+        try:
+            lock = dataset_lock(folder)
+            lock.__enter__()
+        except DatasetLocked:  # its text names generate's --force-unlock
+            raise DatasetLocked(f"{flag} {folder}: another run holds it (its lock "
+                                f"{folder / LOCK_NAME}); wait for it, use another {flag}, "
+                                "or delete that lock file if its process is gone") from None
+        with contextlib.ExitStack() as stack:
+            stack.push(lock)
             _check_empty(folder, flag)  # again: a run may have finished there meanwhile
             yield folder
     except BaseException:

@@ -46,6 +46,9 @@ def create(tmp_path: Path) -> tuple[h5py.File, int]:
                 raise OSError(errno.EBUSY, "already open by another writer") from None
             except OSError:  # a file system without flock: the shard's name is the lock
                 pass
+            st = os.fstat(fd)  # locked, but renamed to the shard meanwhile: not ours
+            if not os.path.exists(tmp_path) or os.stat(tmp_path).st_ino != st.st_ino:
+                raise OSError(errno.EBUSY, "already open by another writer")
         os.ftruncate(fd, 0)
         # the name is HDF5's identity of an open file: a second writer of this path in
         # this process is refused ("already open") like one in another process
@@ -74,11 +77,11 @@ def commit(f: h5py.File, fd: int, tmp_path: Path, path: Path) -> None:
         while image:
             image = image[os.write(fd, image):]
         os.fsync(fd)
-    except BaseException:
+        os.replace(tmp_path, path)  # renamed while still locked: no second writer can take
+    except BaseException:  # the .partial name in between (attack 19)
         discard(None, fd, tmp_path)
         raise
     os.close(fd)
-    os.replace(tmp_path, path)
 
 
 def discard(f: h5py.File | None, fd: int | None, tmp_path: Path) -> None:

@@ -323,7 +323,8 @@ def load_manifest(root: str | Path, verify: str = "attrs") -> dict[str, Any]:
                 if r.attrs.get("split", e["split"]) != e["split"]:  # (an edited split)
                     raise ManifestError(f"{path}: {e['file']} is a shard of split "
                                         f"{r.attrs.get('split')!r}, the manifest says "
-                                        f"{e['split']!r} ({hint})")
+                                        f"{e['split']!r} (the manifest was edited; delete "
+                                        "it and rerun the command that made the dataset)")
                 counts = [int(c) for c in r.class_counts()]
                 if counts != e["class_counts"]:
                     raise ManifestError(f"{path}: {e['file']} holds class counts {counts}, the "

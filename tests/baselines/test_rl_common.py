@@ -196,7 +196,9 @@ def test_a_run_folder_is_claimed_by_one_training_at_a_time(tmp_path) -> None:
     from dstenv.data.lock import DatasetLocked
 
     with claim(tmp_path / "r") as out:
-        with pytest.raises(DatasetLocked, match=r"is being written by pid \d+"):
+        with pytest.raises(DatasetLocked, match=r"another run holds it \(its lock .*\.dstenv"
+                                                r"\.lock\); wait for it, use another --out, "
+                                                r"or delete that lock file"):
             with claim(out):
                 pass
         (out / "model_64.pt").write_bytes(b"x")

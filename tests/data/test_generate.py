@@ -521,7 +521,7 @@ def test_a_split_edited_in_the_manifest_is_refused(tmp_path):
     path.write_text(json.dumps(m))
     load_manifest(tmp_path, verify="size")  # consistent with itself
     with pytest.raises(ManifestError, match=r"val/shard-00000\.h5 is a shard of split 'val', "
-                                            r"the manifest says 'test'"):
+                                            r"the manifest says 'test' \(the manifest was edited"):
         load_manifest(tmp_path)
 
 

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from dstenv.io import png_path
-from rl_common import cli, opt, parse_args
+from rl_common import check_once, cli, opt, parse_args
 
 RATES = ("success", "collision", "off_road")
 
@@ -96,13 +96,7 @@ def check_runs(runs: list[str]) -> None:
     Raises:
         ValueError: one line naming the runs and the argument.
     """
-    seen: dict[Path, str] = {}
-    for d in runs:
-        key = Path(d).resolve()
-        if key in seen:
-            raise ValueError(f"--runs: {d} is given twice (as {seen[key]}): one seed, counted "
-                             "as two")
-        seen[key] = d
+    check_once(runs, "--runs", ": one seed, counted as two")
     metas = {}
     for d in runs:
         try:

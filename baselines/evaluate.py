@@ -38,6 +38,7 @@ import numpy as np
 from random_policy import RandomPolicy
 from rl_common import EnvArgs, EpisodeResult, atomic_write_text, evaluate_policy, machine_info
 from rl_common import (
+    check_once,
     cli,
     make_env,
     opt,
@@ -344,12 +345,7 @@ def _check_jobs(args: Args) -> None:
     if not args.policies and not args.checkpoints:
         raise ValueError("nothing to evaluate: give --policies NAMES and/or --checkpoints "
                          "FILES")
-    seen: dict[Path, str] = {}
-    for path in args.checkpoints:
-        key = Path(path).resolve()
-        if key in seen:
-            raise ValueError(f"--checkpoints: {path} is given twice (as {seen[key]})")
-        seen[key] = path
+    check_once(args.checkpoints, "--checkpoints")
     if args.shield and not args.checkpoints and set(args.policies) <= {"autopilot"}:
         raise ValueError("--shield: no policy to hold back (the autopilot drives the world's "
                          "own controls); add --policies or --checkpoints")

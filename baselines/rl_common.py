@@ -40,7 +40,7 @@ from runfolder import check_not_run_file
 
 __all__ = [
     "opt", "parse_args", "to_argv", "EnvArgs", "env_config", "check_env_args", "make_env",
-    "output_file", "Policy",
+    "output_file", "check_once", "Policy",
     "EpisodeResult", "run_episode", "summarize", "report_run",
     "evaluate_policy", "write_results_csv", "ENV_COLUMNS", "env_columns",
     "atomic_write_bytes", "atomic_write_text", "machine_info", "cli",
@@ -157,6 +157,20 @@ def output_file(path: str, flag: str, suffix: str = ".csv") -> None:
             raise ValueError(f"{flag} {path}: the file is {suffix[1:].upper()}; give a name "
                              f"ending in {suffix}")
         check_output_file(path, flag)
+
+
+def check_once(paths: Sequence[str], flag: str, why: str = "") -> None:
+    """Refuse a path given twice under any spelling (``./x``, ``a/../x``, a symlink).
+
+    Raises:
+        ValueError: ``FLAG PATH is given twice (as OTHER)`` and ``why``.
+    """
+    seen: dict[Path, str] = {}
+    for path in paths:
+        key = Path(path).resolve()
+        if key in seen:
+            raise ValueError(f"{flag}: {path} is given twice (as {seen[key]}){why}")
+        seen[key] = path
 
 
 def check_ranges(items: Sequence[tuple]) -> None:

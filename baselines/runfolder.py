@@ -53,15 +53,13 @@ def claim(folder: str | Path, flag: str = "--out") -> Iterator[Path]:
     _check_empty(folder, flag)  # before the lock: no folder is made for a refused run
     made = not folder.exists()
     try:
-        try:
-            lock = dataset_lock(folder)
-            lock.__enter__()
-        except DatasetLocked:  # its text names generate's --force-unlock
-            raise DatasetLocked(f"{flag} {folder}: another run holds it (its lock "
-                                f"{folder / LOCK_NAME}); wait for it, use another {flag}, "
-                                "or delete that lock file if its process is gone") from None
         with contextlib.ExitStack() as stack:
-            stack.push(lock)
+            try:
+                stack.enter_context(dataset_lock(folder))
+            except DatasetLocked:  # its text names generate's --force-unlock
+                raise DatasetLocked(f"{flag} {folder}: another run holds it (its lock "
+                                    f"{folder / LOCK_NAME}); wait for it, use another {flag}, "
+                                    "or delete that lock file if its process is gone") from None
             _check_empty(folder, flag)  # again: a run may have finished there meanwhile
             yield folder
     except BaseException:
